@@ -1,0 +1,52 @@
+"""The ``adaptenv`` command line.
+
+Each module in this package owns one group of commands and exposes ``register(app, bench)``;
+they are discovered here, so adding a command never means editing this file. Commands keep heavy
+imports inside their functions so that ``adaptenv --help`` stays fast. Errors adaptenv raises on
+purpose (:class:`~adaptenv.errors.AdaptenvError`) are printed as one line, without a traceback.
+"""
+
+from __future__ import annotations
+
+import importlib
+import pkgutil
+import sys
+
+import typer
+from rich.console import Console
+
+from adaptenv.errors import AdaptenvError
+
+app = typer.Typer(
+    name="adaptenv",
+    help="Closed-loop, adaptive environment generation for embodied navigation agents.",
+    no_args_is_help=True,
+    add_completion=False,
+    pretty_exceptions_enable=False,
+)
+bench = typer.Typer(help="Benchmarks: each prints a table, or one JSON object with --json.",
+                    no_args_is_help=True)
+app.add_typer(bench, name="bench")
+
+err_console = Console(stderr=True)
+
+
+def _register_all() -> None:
+    for mod in sorted(pkgutil.iter_modules(__path__), key=lambda m: m.name):
+        if not mod.name.startswith("_"):
+            importlib.import_module(f"{__name__}.{mod.name}").register(app, bench)
+
+
+_register_all()
+
+
+def main() -> None:
+    """Console entry point: run the app, turning adaptenv errors into one red line and exit code 1."""
+    try:
+        app()
+    except AdaptenvError as exc:
+        err_console.print(f"[bold red]error:[/] {exc}", highlight=False, soft_wrap=True)
+        sys.exit(1)
+    except KeyboardInterrupt:
+        err_console.print("[yellow]interrupted[/]")
+        sys.exit(130)

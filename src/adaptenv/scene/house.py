@@ -1,0 +1,253 @@
+"""The ProcTHOR house document as typed, editable data that round-trips losslessly.
+
+Every model keeps keys it does not declare (``extra="allow"``) and is written back with
+``exclude_unset``, so ``save_house(load_house(p), q)`` reproduces the original document as parsed
+JSON. Coordinates are meters with y up; yaw is ``rotation.y`` in degrees (0 faces +z, 90 faces +x).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from collections.abc import Iterator
+from pathlib import Path
+from typing import Any
+
+from pydantic import BaseModel, ConfigDict, Field, ValidationError
+
+from adaptenv.errors import HouseError, Problem
+
+SCHEMA_VERSION = "1.0.0"
+AGENT_POSE_KINDS = ("default", "arm", "locobot", "stretch")
+
+
+class _Model(BaseModel):
+    model_config = ConfigDict(extra="allow", populate_by_name=True)
+
+
+class Vec3(_Model):
+    """A point or Euler rotation ``{x, y, z}``."""
+
+    x: float = 0.0
+    y: float = 0.0
+    z: float = 0.0
+
+
+class Room(_Model):
+    """A room: id ``room|N``, a type, and its rectilinear floor polygon (implicitly closed)."""
+
+    id: str
+    roomType: str
+    floorPolygon: list[Vec3]
+
+
+class Wall(_Model):
+    """One side of a wall: id ``wall|room|minX|minZ|maxX|maxZ``; ``empty`` walls are open."""
+
+    id: str
+    roomId: str
+    polygon: list[Vec3]
+    empty: bool | None = None
+
+
+class Opening(_Model):
+    """A door or window cut into ``wall0`` (and its twin ``wall1``); hole in wall0-local coordinates."""
+
+    id: str
+    assetId: str
+    room0: str
+    room1: str
+    wall0: str
+    wall1: str
+    holePolygon: list[Vec3]
+    assetPosition: Vec3 | None = None
+    openable: bool | None = None
+    openness: float | None = None
+
+
+class HouseObject(_Model):
+    """A placed asset; ``children`` rest on it and carry absolute world positions."""
+
+    id: str
+    assetId: str
+    position: Vec3
+    rotation: Vec3 = Field(default_factory=Vec3)
+    kinematic: bool | None = None
+    children: list[HouseObject] = Field(default_factory=list)
+
+    @property
+    def yaw(self) -> float:
+        """Yaw in degrees, in [0, 360)."""
+        return self.rotation.y % 360.0
+
+
+class AgentPose(_Model):
+    """Where the agent starts: position (y = camera height), yaw in ``rotation.y``."""
+
+    position: Vec3
+    rotation: Vec3 = Field(default_factory=Vec3)
+    horizon: float | None = None
+    standing: bool | None = None
+
+
+class Metadata(_Model):
+    """House metadata; AI2-THOR reads ``agentPoses``, older readers ``agent``."""
+
+    agent: AgentPose | None = None
+    agentPoses: dict[str, AgentPose] | None = None
+    schema_: str | None = Field(default=None, alias="schema")
+    roomSpecId: str | None = None
+
+
+class House(_Model):
+    """A whole ProcTHOR house; ``proceduralParameters`` is passed through untouched."""
+
+    rooms: list[Room]
+    walls: list[Wall] = Field(default_factory=list)
+    doors: list[Opening] = Field(default_factory=list)
+    windows: list[Opening] = Field(default_factory=list)
+    objects: list[HouseObject] = Field(default_factory=list)
+    proceduralParameters: dict[str, Any] = Field(default_factory=dict)
+    metadata: Metadata = Field(default_factory=Metadata)
+
+    def to_dict(self) -> dict[str, Any]:
+        """The house as a JSON-ready dict, unknown keys included."""
+        return self.model_dump(mode="json", by_alias=True, exclude_unset=True)
+
+    def iter_objects(self) -> Iterator[tuple[HouseObject, HouseObject | None]]:
+        """Every object with its parent (None for top-level objects), parents first."""
+        for obj in self.objects:
+            yield obj, None
+            for child in obj.children:
+                yield child, obj
+
+    def object_by_id(self, object_id: str) -> HouseObject:
+        """The object (top-level or child) with this id; KeyError if there is none."""
+        for obj, _ in self.iter_objects():
+            if obj.id == object_id:
+                return obj
+        raise KeyError(object_id)
+
+    def agent_pose(self) -> tuple[float, float, float] | None:
+        """The start pose (x, z, yaw degrees) from metadata, preferring ``agentPoses.default``."""
+        pose = None
+        if self.metadata.agentPoses and "default" in self.metadata.agentPoses:
+            pose = self.metadata.agentPoses["default"]
+        elif self.metadata.agent is not None:
+            pose = self.metadata.agent
+        if pose is None:
+            return None
+        return pose.position.x, pose.position.z, pose.rotation.y % 360.0
+
+    def set_agent_pose(self, x: float, z: float, yaw: float) -> None:
+        """Write the start pose to both ``metadata.agent`` and every ``metadata.agentPoses`` kind."""
+        def pose(standing: bool | None) -> AgentPose:
+            return AgentPose(position=Vec3(x=x, y=0.95, z=z), rotation=Vec3(x=0.0, y=yaw % 360.0, z=0.0),
+                             horizon=30.0, standing=standing)
+
+        self.metadata.agent = pose(True)
+        self.metadata.agentPoses = {k: pose(None if k == "locobot" else True) for k in AGENT_POSE_KINDS}
+        if self.metadata.schema_ is None:
+            self.metadata.schema_ = SCHEMA_VERSION
+
+
+def move_object(obj: HouseObject, dx: float, dz: float, dyaw: float = 0.0) -> None:
+    """Move an object rigidly in the floor plane, children included (they keep absolute positions).
+
+    The object turns by ``dyaw`` degrees about its own centre, then shifts by (dx, dz).
+    """
+    cx, cz = obj.position.x, obj.position.z
+    t = math.radians(dyaw)
+    cos_t, sin_t = math.cos(t), math.sin(t)
+    for child in obj.children:
+        rx, rz = child.position.x - cx, child.position.z - cz
+        # Yaw turns +z toward +x, so a point (x, z) maps to (x cos + z sin, -x sin + z cos).
+        child.position = Vec3(**{**child.position.model_dump(), "x": cx + rx * cos_t + rz * sin_t + dx,
+                                 "z": cz - rx * sin_t + rz * cos_t + dz})
+        if dyaw:
+            child.rotation = Vec3(**{**child.rotation.model_dump(), "y": (child.rotation.y + dyaw) % 360.0})
+    obj.position = Vec3(**{**obj.position.model_dump(), "x": cx + dx, "z": cz + dz})
+    if dyaw:
+        obj.rotation = Vec3(**{**obj.rotation.model_dump(), "y": (obj.rotation.y + dyaw) % 360.0})
+
+
+def json_path(loc: tuple[Any, ...] | list[Any]) -> str:
+    """Format a location tuple such as ``('doors', 2, 'wall0')`` as ``doors[2].wall0``."""
+    out = ""
+    for part in loc:
+        if isinstance(part, int):
+            out += f"[{part}]"
+        else:
+            out += f".{part}" if out else str(part)
+    return out or "$"
+
+
+def _problems_from_validation(err: ValidationError, file: str | None) -> list[Problem]:
+    problems = []
+    for e in err.errors():
+        loc = tuple(p for p in e["loc"] if not (isinstance(p, str) and p in ("function-after",)))
+        msg = e["msg"][0].lower() + e["msg"][1:]
+        if e["type"] == "missing":
+            text = f"the required key '{loc[-1]}' is missing; add it as the ProcTHOR format requires"
+            loc = loc[:-1]
+        else:
+            text = f"the value {e.get('input')!r} is invalid ({msg}); fix it to match the ProcTHOR format"
+        problems.append(Problem(json_path(loc), text, file))
+    return problems
+
+
+def parse_house(doc: Any, file: str | None = None) -> House:
+    """Build a House from a parsed JSON document; HouseError lists every structural problem."""
+    if not isinstance(doc, dict):
+        raise HouseError([Problem("$", f"the document is a JSON {type(doc).__name__}, not an object; "
+                                  "a house is a JSON object with 'rooms', 'walls', 'doors', ...", file)])
+    try:
+        return House.model_validate(doc)
+    except ValidationError as err:
+        raise HouseError(_problems_from_validation(err, file)) from None
+
+
+def read_house_document(path: str | Path) -> Any:
+    """Read a JSON file, turning unreadable or non-JSON content into a HouseError."""
+    p = Path(path)
+    try:
+        text = p.read_text(encoding="utf-8")
+    except FileNotFoundError:
+        raise HouseError([Problem("$", "the file does not exist; check the path", str(p))]) from None
+    except (OSError, UnicodeDecodeError) as exc:
+        raise HouseError([Problem("$", f"the file cannot be read ({exc}); check it is a UTF-8 JSON file", str(p))]) from None
+    try:
+        return json.loads(text)
+    except json.JSONDecodeError as exc:
+        raise HouseError([Problem("$", f"the file is not valid JSON ({exc.msg} at line {exc.lineno}, "
+                                  f"column {exc.colno}); fix the syntax", str(p))]) from None
+
+
+def load_house(path: str | Path, *, validate: bool = True) -> House:
+    """Load a ProcTHOR house JSON file.
+
+    Args:
+        path: the house file.
+        validate: also run the semantic checks of :func:`adaptenv.scene.validate.validate_house`
+            (wall ids, door walls, asset ids, polygons, objects inside rooms).
+
+    Raises:
+        HouseError: with one sentence per problem naming the file and JSON path.
+    """
+    doc = read_house_document(path)
+    house = parse_house(doc, str(path))
+    if validate:
+        from adaptenv.scene.validate import validate_house
+
+        problems = validate_house(house, file=str(path))
+        if problems:
+            raise HouseError(problems)
+    return house
+
+
+def save_house(house: House, path: str | Path) -> Path:
+    """Write a house as JSON (unknown keys preserved); creates parent folders. Returns the path."""
+    p = Path(path)
+    p.parent.mkdir(parents=True, exist_ok=True)
+    p.write_text(json.dumps(house.to_dict(), indent=1), encoding="utf-8")
+    return p

@@ -1,0 +1,102 @@
+"""The record an episode leaves behind: poses, actions, outcomes, and what was visible at each step.
+
+Trajectories serialize to JSON and back (``Trajectory.save`` / ``Trajectory.load``); the renderer
+draws them and the analysis step F reads them.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+from pydantic import BaseModel, Field
+
+from adaptenv.errors import AdaptenvError
+
+
+class Pose(BaseModel):
+    """Agent pose: position (m) in the floor plane and yaw (degrees, 0 faces +z, 90 faces +x)."""
+
+    x: float
+    z: float
+    yaw: float
+
+
+class Step(BaseModel):
+    """One step: the action taken from ``pose`` and what followed."""
+
+    pose: Pose
+    """Pose before the action."""
+    action: str
+    """One of ``adaptenv.sim.spec.ACTIONS``."""
+    moved: bool = True
+    """False when a move was blocked (a collision)."""
+    visible: list[str] = Field(default_factory=list)
+    """Ids of target instances visible (within range, in view, unoccluded) from ``pose``."""
+    clearance: float | None = None
+    """Distance (m) from the agent's centre to the nearest obstacle at ``pose``."""
+    geodesic: float | None = None
+    """Geodesic distance (m) from ``pose`` to the target's success region."""
+
+
+class EpisodeMetrics(BaseModel):
+    """Per-episode figures (SPOC's ObjectNav metrics plus collisions and clearance)."""
+
+    success: bool
+    spl: float
+    sel: float
+    episode_length: int
+    path_length: float
+    final_geodesic: float | None
+    collisions: int
+    min_clearance: float | None
+    rooms_visited: int
+    first_sight_step: int | None
+    optimal_path_length: float | None
+    expert_episode_length: int | None = None
+    solvable: bool = True
+
+
+class Trajectory(BaseModel):
+    """A whole ObjectNav episode in one house."""
+
+    house: str
+    """Name or path of the house the episode ran in."""
+    target_type: str
+    target_ids: list[str] = Field(default_factory=list)
+    """Ids of every instance of the target type in the house."""
+    target_positions: list[tuple[float, float]] = Field(default_factory=list)
+    """(x, z) of each target instance, aligned with ``target_ids``."""
+    start: Pose
+    steps: list[Step] = Field(default_factory=list)
+    final_pose: Pose | None = None
+    policy: str = ""
+    seed: int | None = None
+    metrics: EpisodeMetrics | None = None
+
+    @property
+    def poses(self) -> list[Pose]:
+        """Every pose visited, start to end."""
+        out = [s.pose for s in self.steps]
+        if self.final_pose is not None:
+            out.append(self.final_pose)
+        return out or [self.start]
+
+    def save(self, path: str | Path) -> Path:
+        p = Path(path)
+        p.parent.mkdir(parents=True, exist_ok=True)
+        p.write_text(self.model_dump_json(indent=1), encoding="utf-8")
+        return p
+
+    @classmethod
+    def load(cls, path: str | Path) -> Trajectory:
+        """Read a trajectory JSON file; a malformed file raises one clear AdaptenvError."""
+        p = Path(path)
+        try:
+            return cls.model_validate(json.loads(p.read_text(encoding="utf-8")))
+        except FileNotFoundError:
+            raise AdaptenvError(f"{p}: no such trajectory file; check the path") from None
+        except (json.JSONDecodeError, ValueError) as exc:
+            first = str(exc).splitlines()[0]
+            raise AdaptenvError(f"{p}: not a valid adaptenv trajectory ({first}); write it with "
+                                "`adaptenv rollout ... -o traj.json`") from None
