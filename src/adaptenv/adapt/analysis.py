@@ -1,0 +1,272 @@
+"""Trajectory analysis F: outcome, concerns and abstract suggestions, as typed data.
+
+The paper's F reads a top-down trajectory image and returns {outcome, concerns, suggestions}.
+:class:`Analysis` is that result; :func:`analyze_trajectory` is the built-in, deterministic F that
+computes it from the trajectory, the scene geometry and the geodesic distance field. The LLM
+analyzer (``adapt/llm_agents.py``) returns the same type. Suggestions say *what* should change
+(narrow a passage, occlude the target, lengthen the route, add clutter), never *how*: turning
+them into object moves is the generator's job.
+"""
+
+from __future__ import annotations
+
+import math
+from collections import Counter
+from typing import Literal
+
+import numpy as np
+from pydantic import BaseModel, Field
+
+from adaptenv.scene.occupancy import LABEL_DOOR, LABEL_OBJECT0, LABEL_WINDOW
+from adaptenv.sim.spec import AGENT_RADIUS, MAX_STEPS, MOVE_STEP
+from adaptenv.sim.trajectory import Trajectory
+from adaptenv.sim.world import NavWorld
+
+FailureMode = Literal["timeout", "ended_too_far", "ended_without_sight", "stuck", "looping", "never_saw_target"]
+ConcernKind = Literal["collision", "close_proximity", "narrow_clearance", "detour", "revisit", "oscillation",
+                      "late_sight", "premature_end"]
+SuggestionKind = Literal["narrow_passage", "occlude_target", "lengthen_route", "add_clutter"]
+
+#: An agent edge closer than this (m) to an obstacle is "close proximity".
+PROXIMITY_MARGIN = 0.10
+#: A passage is narrow when the clearance at the agent's centre is below this (m).
+NARROW_CLEARANCE = AGENT_RADIUS + 0.25
+#: Poses are binned into cells of this size (m) to count revisits.
+REVISIT_CELL = 0.4
+
+
+class GridPoint(BaseModel):
+    """A location on the normalized 100x100 grid (x right, y up)."""
+
+    x: float
+    y: float
+
+
+class Outcome(BaseModel):
+    """Did the agent succeed, and if not, how did it fail."""
+
+    success: bool
+    failure_mode: FailureMode | None = None
+    summary: str
+    steps: int
+    spl: float | None = None
+
+
+class Concern(BaseModel):
+    """A behavioural issue observed during the episode, located in grid coordinates and steps."""
+
+    id: str
+    kind: ConcernKind
+    severity: float = Field(ge=0.0, le=1.0)
+    description: str
+    steps: list[int] = Field(default_factory=list)
+    """Step indices where it occurred (a range is given by its first and last step)."""
+    where: GridPoint | None = None
+    objects: list[str] = Field(default_factory=list)
+    """Ids of the objects involved (nearest obstacles), if any."""
+
+
+class Suggestion(BaseModel):
+    """An abstract change to the environment (what, not how), tied to the concerns it addresses."""
+
+    id: str
+    kind: SuggestionKind
+    description: str
+    addresses: list[str] = Field(default_factory=list)
+    """Ids of the concerns this suggestion answers."""
+    priority: float = Field(default=0.5, ge=0.0, le=1.0)
+
+
+class Analysis(BaseModel):
+    """The paper's analysis a = F(tau): outcome, concerns and suggestions."""
+
+    task: str
+    outcome: Outcome
+    concerns: list[Concern] = Field(default_factory=list)
+    suggestions: list[Suggestion] = Field(default_factory=list)
+    source: str = "builtin"
+
+    def to_text(self) -> str:
+        """A compact plain-text rendering, used in the generator's prompt and in reports."""
+        lines = [f"Task: {self.task}", f"Outcome: {'success' if self.outcome.success else 'failure'}"
+                 + (f" ({self.outcome.failure_mode})" if self.outcome.failure_mode else "")
+                 + f". {self.outcome.summary}", "Concerns:"]
+        for c in self.concerns or []:
+            where = f" near grid ({c.where.x:.0f}, {c.where.y:.0f})" if c.where else ""
+            objs = f"; objects: {', '.join(c.objects)}" if c.objects else ""
+            lines.append(f"- [{c.id}] {c.kind} (severity {c.severity:.2f}){where}: {c.description}{objs}")
+        if not self.concerns:
+            lines.append("- none")
+        lines.append("Suggestions:")
+        for s in self.suggestions or []:
+            lines.append(f"- [{s.id}] {s.kind}: {s.description} (addresses {', '.join(s.addresses) or 'general difficulty'})")
+        return "\n".join(lines)
+
+
+def _nearest_obstacle(world: NavWorld, x: float, z: float) -> str | None:
+    """Id of the obstacle nearest to a point: an object id, 'door', 'window' or 'wall'."""
+    g = world.grid
+    row, col = g.to_cell(x, z)
+    if not g.in_bounds(row, col):
+        return None
+    label = int(g.nearest_label[row, col])
+    if label >= LABEL_OBJECT0:
+        return g.object_ids[label - LABEL_OBJECT0]
+    return {LABEL_DOOR: "door", LABEL_WINDOW: "window"}.get(label, "wall")
+
+
+def _runs(indices: list[int], gap: int = 3) -> list[list[int]]:
+    """Group sorted step indices into runs whose members are at most ``gap`` apart."""
+    runs: list[list[int]] = []
+    for i in indices:
+        if runs and i - runs[-1][-1] <= gap:
+            runs[-1].append(i)
+        else:
+            runs.append([i])
+    return runs
+
+
+def _clearances(world: NavWorld, traj: Trajectory) -> np.ndarray:
+    xs = np.array([s.pose.x for s in traj.steps])
+    zs = np.array([s.pose.z for s in traj.steps])
+    return world.grid.clearance_at(xs, zs).astype(float)
+
+
+def _failure_mode(traj: Trajectory, collisions: int, revisit_ratio: float) -> FailureMode:
+    m = traj.metrics
+    ended = bool(traj.steps) and traj.steps[-1].action == "end"
+    if ended:
+        near = m is not None and m.final_geodesic is not None and m.final_geodesic <= 0.05
+        return "ended_without_sight" if near else "ended_too_far"
+    if m is not None and m.first_sight_step is None:
+        return "never_saw_target"
+    tail = traj.steps[-100:]
+    tail_moves = [s for s in tail if s.action in ("m", "b")]
+    if tail_moves and sum(not s.moved for s in tail_moves) / len(tail_moves) > 0.4:
+        return "stuck"
+    if revisit_ratio > 0.5:
+        return "looping"
+    return "timeout"
+
+
+def analyze_trajectory(traj: Trajectory, world: NavWorld) -> Analysis:
+    """The built-in F: derive outcome, concerns and suggestions from a recorded episode.
+
+    Deterministic: the same trajectory and world always give the same analysis.
+    """
+    grid = world.geometry.grid
+    m = traj.metrics
+    n = len(traj.steps)
+    task = f"Find a {traj.target_type} (ObjectNav) in house {traj.house}."
+
+    def gp(x: float, z: float) -> GridPoint:
+        gx, gy = grid.point(x, z)
+        return GridPoint(x=round(gx, 1), y=round(gy, 1))
+
+    concerns: list[Concern] = []
+
+    def add(kind: ConcernKind, severity: float, text: str, steps: list[int], objects: list[str]) -> Concern:
+        where = None
+        if steps:
+            mid = traj.steps[steps[len(steps) // 2]].pose
+            where = gp(mid.x, mid.z)
+        c = Concern(id=f"c{len(concerns) + 1}", kind=kind, severity=float(np.clip(severity, 0, 1)), description=text,
+                    steps=[steps[0], steps[-1]] if steps else [], where=where, objects=objects)
+        concerns.append(c)
+        return c
+
+    # Collisions: blocked moves, grouped into episodes of bumping.
+    blocked = [i for i, s in enumerate(traj.steps) if s.action in ("m", "b") and not s.moved]
+    for run in _runs(blocked):
+        objs = sorted({o for i in run if (o := _nearest_obstacle(world, traj.steps[i].pose.x, traj.steps[i].pose.z))})
+        add("collision", min(1.0, 0.3 + 0.1 * len(run)), f"{len(run)} blocked move(s) against {', '.join(objs) or 'an obstacle'}",
+            run, objs)
+
+    # Proximity and narrow clearances along the path.
+    clear = _clearances(world, traj) if n else np.zeros(0)
+    close = [i for i in range(n) if clear[i] < AGENT_RADIUS + PROXIMITY_MARGIN]
+    for run in _runs(close):
+        objs = sorted({o for i in run if (o := _nearest_obstacle(world, traj.steps[i].pose.x, traj.steps[i].pose.z))})
+        gap = float(clear[run].min() - AGENT_RADIUS)
+        add("close_proximity", 1.0 - gap / PROXIMITY_MARGIN, f"the agent's edge came within {max(gap, 0) * 100:.0f} cm of "
+            f"{', '.join(objs) or 'an obstacle'}", run, objs)
+    narrow = [i for i in range(n) if AGENT_RADIUS + PROXIMITY_MARGIN <= clear[i] < NARROW_CLEARANCE
+              and traj.steps[i].action == "m"]
+    for run in _runs(narrow, gap=2):
+        if len(run) < 2:
+            continue
+        objs = sorted({o for i in run if (o := _nearest_obstacle(world, traj.steps[i].pose.x, traj.steps[i].pose.z))})
+        add("narrow_clearance", 0.3 + 0.05 * len(run), f"the route passes a narrow gap ({clear[run].min():.2f} m "
+            f"clearance) between {', '.join(objs) or 'obstacles'}", run, objs)
+
+    # Detour against the geodesic optimum.
+    if m is not None and m.optimal_path_length and m.path_length > 0:
+        ratio = m.path_length / max(m.optimal_path_length, MOVE_STEP)
+        if ratio > 1.5:
+            add("detour", min(1.0, (ratio - 1.0) / 3.0), f"the path ({m.path_length:.1f} m) is {ratio:.1f}x the "
+                f"shortest route ({m.optimal_path_length:.1f} m)", [0, n - 1] if n else [], [])
+
+    # Revisits and oscillation.
+    cells = [(math.floor(s.pose.x / REVISIT_CELL), math.floor(s.pose.z / REVISIT_CELL)) for s in traj.steps
+             if s.action in ("m", "b") and s.moved]
+    counts = Counter(cells)
+    revisits = sum(c - 1 for c in counts.values() if c > 1)
+    revisit_ratio = revisits / max(len(cells), 1)
+    if revisits >= 5 and revisit_ratio > 0.25:
+        hot, hits = counts.most_common(1)[0]
+        steps_hot = [i for i, s in enumerate(traj.steps)
+                     if (math.floor(s.pose.x / REVISIT_CELL), math.floor(s.pose.z / REVISIT_CELL)) == hot]
+        add("revisit", min(1.0, revisit_ratio), f"{revisits} revisits of places already seen; one spot visited "
+            f"{hits} times", steps_hot, [])
+    turns = [s.action for s in traj.steps if s.action in ("l", "r", "ls", "rs")]
+    flips = sum(1 for a, b in zip(turns, turns[1:], strict=False) if a[0] != b[0])
+    if len(turns) > 20 and flips / len(turns) > 0.4:
+        add("oscillation", min(1.0, flips / len(turns)), f"the agent alternated left and right turns {flips} times",
+            [i for i, s in enumerate(traj.steps) if s.action in ("l", "r", "ls", "rs")], [])
+
+    # When the target was first seen.
+    if m is not None and n:
+        if m.first_sight_step is None:
+            add("late_sight", 1.0, "the agent never had the target in sight", [], list(traj.target_ids))
+        elif m.first_sight_step > 0.5 * n and m.first_sight_step > 20:
+            add("late_sight", m.first_sight_step / n, f"the target was first seen at step {m.first_sight_step} of {n}",
+                [m.first_sight_step], list(traj.target_ids))
+        if not m.success and traj.steps[-1].action == "end":
+            add("premature_end", 0.8, "the agent stopped before the target was in view within 2 m", [n - 1], [])
+
+    failure = None if (m is not None and m.success) else _failure_mode(traj, len(blocked), revisit_ratio)
+    if m is not None and m.success:
+        summary = f"reached the {traj.target_type} in {n} steps (SPL {m.spl:.2f}, {m.collisions} collisions)"
+    else:
+        summary = f"did not find the {traj.target_type} within {n} steps ({failure})"
+    outcome = Outcome(success=bool(m and m.success), failure_mode=failure, summary=summary, steps=n,
+                      spl=m.spl if m else None)
+    return Analysis(task=task, outcome=outcome, concerns=concerns, suggestions=_suggest(concerns, outcome, traj))
+
+
+def _suggest(concerns: list[Concern], outcome: Outcome, traj: Trajectory) -> list[Suggestion]:
+    """Map concerns to abstract environment changes that train the weakness they reveal."""
+    by_kind: dict[str, list[str]] = {}
+    for c in concerns:
+        by_kind.setdefault(c.kind, []).append(c.id)
+    out: list[Suggestion] = []
+
+    def add(kind: SuggestionKind, text: str, kinds: tuple[str, ...], priority: float) -> None:
+        ids = [cid for k in kinds for cid in by_kind.get(k, [])]
+        out.append(Suggestion(id=f"s{len(out) + 1}", kind=kind, description=text, addresses=ids, priority=priority))
+
+    tight = ("collision", "close_proximity", "narrow_clearance")
+    if any(k in by_kind for k in tight):
+        add("narrow_passage", "narrow the passages the agent relies on so it must pass close obstacles with care",
+            tight, 0.9)
+    if outcome.success or "late_sight" not in by_kind:
+        add("occlude_target", f"hide the {traj.target_type} from the agent's approach so it must search longer",
+            ("late_sight",), 0.7 if outcome.success else 0.5)
+    add("lengthen_route", "make the shortest route to the target longer, e.g. by closing the direct way",
+        ("detour", "revisit", "oscillation"), 0.6 if outcome.success else 0.4)
+    add("add_clutter", "add clutter along the agent's path so free space is less obvious",
+        ("collision", "close_proximity", "revisit", "oscillation"), 0.5)
+    if outcome.success and outcome.steps < MAX_STEPS // 6:
+        for s in out:
+            s.priority = min(1.0, s.priority + 0.1)
+    return sorted(out, key=lambda s: -s.priority)
