@@ -1,0 +1,70 @@
+"""``adaptenv validate``: list every problem of one or more house files (and ``adaptenv bench validate``)."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import typer
+
+from adaptenv.cli._common import JSON_OPTION
+
+HOUSES_ARGUMENT = typer.Argument(..., metavar="HOUSE.json", help="House files to check.", show_default=False)
+HOUSE_ARGUMENT = typer.Argument(..., metavar="HOUSE.json", help="A house file to validate repeatedly.")
+VALIDATE_JSON_OPTION = typer.Option(False, "--json", help="Print the problems as one JSON object.")
+
+
+def validate(
+    houses: list[Path] = HOUSES_ARGUMENT,
+    as_json: bool = VALIDATE_JSON_OPTION,
+) -> None:
+    """Check ProcTHOR house files; print every problem and exit 1 if there is any."""
+    from adaptenv.scene.validate import validate_house_file
+
+    problems = [p for path in houses for p in validate_house_file(path)]
+    bad_files = len({p.file for p in problems})
+    if as_json:
+        doc = {"files": [str(p) for p in houses], "valid": not problems,
+               "problems": [{"file": p.file, "path": p.path, "message": p.message} for p in problems]}
+        typer.echo(json.dumps(doc, indent=1))
+    else:
+        for p in problems:
+            typer.echo(str(p))
+        n = len(houses)
+        if problems:
+            typer.echo(f"{len(problems)} problem{'s' if len(problems) != 1 else ''} in {bad_files} of {n} "
+                       f"file{'s' if n != 1 else ''}")
+        else:
+            typer.echo(f"{n} file{'s' if n != 1 else ''} valid")
+    if problems:
+        raise typer.Exit(1)
+
+
+def bench_validate(
+    house: Path = HOUSE_ARGUMENT,
+    repeats: int = typer.Option(20, "--repeats", min=1, help="Timed runs (the median is reported)."),
+    as_json: bool = JSON_OPTION,
+) -> None:
+    """Time house validation and scene-graph construction on one house."""
+    from adaptenv.bench import emit, median_time
+    from adaptenv.cli._common import existing_file
+    from adaptenv.scene.geometry import SceneGeometry
+    from adaptenv.scene.graph import build_scene_graph
+    from adaptenv.scene.house import load_house
+    from adaptenv.scene.validate import validate_house
+
+    h = load_house(existing_file(house, "house file"))
+    geometry = SceneGeometry.from_house(h)
+    graph = build_scene_graph(h, geometry)
+    figures = {
+        "objects": len(graph.nodes),
+        "relations": len(graph.relations),
+        "validate_ms": 1000 * median_time(lambda: validate_house(h), repeats),
+        "scene_graph_ms": 1000 * median_time(lambda: build_scene_graph(h, geometry), repeats),
+    }
+    emit(f"validate {house.name}", figures, as_json)
+
+
+def register(app: typer.Typer, bench: typer.Typer) -> None:
+    app.command("validate")(validate)
+    bench.command("validate")(bench_validate)
