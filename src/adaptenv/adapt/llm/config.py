@@ -1,0 +1,104 @@
+"""LLMConfig: which server and model F and G talk to, and how patiently; the API key never leaves it."""
+
+from __future__ import annotations
+
+import json
+import os
+from pathlib import Path
+from typing import Literal
+
+from pydantic import BaseModel, ConfigDict, Field, SecretStr, ValidationError
+
+from adaptenv.errors import ConfigError
+
+Provider = Literal["openai", "openai-compatible"]
+
+#: Base URL of the real OpenAI API (used when ``provider="openai"`` and no base_url is set).
+OPENAI_BASE_URL = "https://api.openai.com/v1"
+#: Key sent to OpenAI-compatible servers that do not check one (vLLM/Ollama/llama.cpp by default).
+PLACEHOLDER_KEY = "not-needed"
+COMPATIBLE_KEY_ENV = "ADAPTENV_LLM_API_KEY"
+
+
+class LLMConfig(BaseModel):
+    """Connection and sampling settings of one LLM backend (saved with a run; the key is never saved)."""
+
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+    provider: Provider = Field("openai", description="'openai' (Responses API) or 'openai-compatible' "
+                               "(Chat Completions at base_url: vLLM, Ollama, llama.cpp).")
+    model: str = Field("gpt-4.1-mini", min_length=1, description="Model name as the server knows it "
+                       "(the paper used gpt-4.1-mini).")
+    base_url: str | None = Field(None, description="Server URL ending in /v1; required for "
+                                 "'openai-compatible', defaults to the OpenAI API for 'openai'.")
+    api_key_env: str | None = Field(None, min_length=1, description="Environment variable holding the "
+                                    "API key; default OPENAI_API_KEY for 'openai' and ADAPTENV_LLM_API_KEY "
+                                    "for 'openai-compatible', so an OpenAI key is never sent to another server.")
+    api_key: SecretStr | None = Field(None, exclude=True, repr=False, description="API key given "
+                                      "directly (prefer api_key_env); never written anywhere.")
+    timeout_s: float = Field(60.0, gt=0, description="Timeout of one HTTP request, in seconds.")
+    max_retries: int = Field(3, ge=0, le=10, description="Retries after a 429, 5xx, timeout or "
+                             "connection error (exponential backoff with jitter).")
+    backoff_base_s: float = Field(1.0, ge=0, description="First backoff delay in seconds; doubles per retry.")
+    backoff_max_s: float = Field(30.0, ge=0, description="Upper bound of one backoff delay, in seconds.")
+    temperature: float | None = Field(0.0, ge=0, le=2, description="Sampling temperature; None leaves "
+                                      "the server default (needed by reasoning models).")
+    max_output_tokens: int | None = Field(None, gt=0, description="Cap on generated tokens; None for "
+                                          "the server default.")
+    image_detail: Literal["auto", "low", "high"] = Field("auto", description="Vision detail level of "
+                                                         "the Responses API image parts.")
+    structured_output: Literal["auto", "json_schema", "json_object"] = Field(
+        "auto", description="Chat Completions structured output: json_schema (parse), json_object "
+        "(JSON mode + local validation) or auto (json_schema, falling back once the server rejects it).")
+    cache_dir: Path | None = Field(None, description="Directory of the response cache (JSON files); "
+                                   "None disables caching.")
+    seed: int = Field(0, description="Seed of the backoff jitter generator.")
+
+    def key_env(self) -> str:
+        """The environment variable the API key is read from."""
+        if self.api_key_env:
+            return self.api_key_env
+        return "OPENAI_API_KEY" if self.provider == "openai" else COMPATIBLE_KEY_ENV
+
+    def resolved_base_url(self) -> str:
+        """The base URL requests go to; raises ConfigError when a compatible server has none."""
+        if self.base_url:
+            return self.base_url.rstrip("/")
+        if self.provider == "openai-compatible":
+            raise ConfigError("the LLM config field base_url is empty but provider 'openai-compatible' "
+                              "needs it: set base_url, e.g. http://localhost:11434/v1 for Ollama")
+        return OPENAI_BASE_URL
+
+
+def resolve_api_key(config: LLMConfig) -> str:
+    """The API key from the config value or the environment; a placeholder for compatible servers.
+
+    Raises ConfigError (without any key material) when the real OpenAI provider has no key.
+    """
+    if config.api_key is not None and config.api_key.get_secret_value():
+        return config.api_key.get_secret_value()
+    from_env = os.environ.get(config.key_env(), "")
+    if from_env:
+        return from_env
+    if config.provider == "openai-compatible":
+        return PLACEHOLDER_KEY
+    raise ConfigError(f"the LLM provider 'openai' needs an API key but the environment variable "
+                      f"{config.key_env()} is not set: export it (field api_key_env names the "
+                      f"variable), or use provider 'openai-compatible' with base_url for a local server")
+
+
+def load_llm_config(path: str | Path) -> LLMConfig:
+    """Read an LLMConfig from a JSON file; errors name the file and the field."""
+    path = Path(path)
+    try:
+        data = json.loads(path.read_text(encoding="utf-8"))
+    except OSError as exc:
+        raise ConfigError(f"{path}: cannot read the LLM config ({exc.strerror}); check the path") from None
+    except json.JSONDecodeError as exc:
+        raise ConfigError(f"{path}: the LLM config is not valid JSON (line {exc.lineno}); fix the syntax") from None
+    try:
+        return LLMConfig.model_validate(data)
+    except ValidationError as exc:
+        err = exc.errors(include_url=False, include_input=False)[0]
+        field = ".".join(str(p) for p in err["loc"]) or "(top level)"
+        raise ConfigError(f"{path}: LLM config field {field}: {err['msg']}; fix that value") from None
