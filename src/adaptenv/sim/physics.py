@@ -36,12 +36,19 @@ class PackedGrids:
 
     @classmethod
     def from_worlds(cls, worlds) -> PackedGrids:
-        """Pack the ``grid.clearance`` of each NavWorld (or anything with a ``.grid``)."""
+        """Pack the ``grid.clearance`` of each NavWorld (or anything with a ``.grid``).
+
+        One world's float32 raster is used in place (a flat view, no copy); several are concatenated.
+        """
         grids = [w.grid for w in worlds]
         sizes = [g.clearance.size for g in grids]
         offset = np.concatenate([[0], np.cumsum(sizes)[:-1]]).astype(np.int64)
+        if len(grids) == 1:
+            clearance = np.ascontiguousarray(grids[0].clearance, dtype=np.float32).reshape(-1)
+        else:
+            clearance = np.concatenate([g.clearance.ravel() for g in grids]).astype(np.float32)
         return cls(
-            np.concatenate([g.clearance.ravel() for g in grids]).astype(np.float32),
+            clearance,
             offset,
             np.array([g.shape[0] for g in grids], dtype=np.int64),
             np.array([g.shape[1] for g in grids], dtype=np.int64),
@@ -60,30 +67,28 @@ def _clearance(clear, off, h, w, x0, z0, res, x, z):
     return clear[off + row * w + col]
 
 
+@numba.njit(cache=True, inline="always")
+def _move_one(clear, off, h, w, x0, z0, res, x, z, yaw, dyaw, d, radius):
+    """One agent's action: returns the new (x, z, yaw, moved); a blocked move keeps (x, z)."""
+    if d == 0.0:
+        return x, z, (yaw + dyaw) % 360.0, True
+    t = math.radians(yaw)
+    dx, dz = d * math.sin(t), d * math.cos(t)
+    n_sub = max(1, int(math.ceil(abs(d) / (0.5 * min(res, radius)))))
+    for k in range(1, n_sub + 1):
+        f = k / n_sub
+        if _clearance(clear, off, h, w, x0, z0, res, x + f * dx, z + f * dz) < radius:
+            return x, z, yaw, False
+    return x + dx, z + dz, yaw, True
+
+
 @numba.njit(cache=True)
 def _step(clear, offs, hs, ws, x0s, z0s, ress, env, x, z, yaw, actions, radius, yaw_delta, move_delta, moved):
     for i in range(x.shape[0]):
         a = actions[i]
-        d = move_delta[a]
-        if d == 0.0:
-            yaw[i] = (yaw[i] + yaw_delta[a]) % 360.0
-            moved[i] = True
-            continue
         e = env[i]
-        res = ress[e]
-        t = math.radians(yaw[i])
-        dx, dz = d * math.sin(t), d * math.cos(t)
-        n_sub = max(1, int(math.ceil(abs(d) / (0.5 * min(res, radius)))))
-        ok = True
-        for k in range(1, n_sub + 1):
-            f = k / n_sub
-            if _clearance(clear, offs[e], hs[e], ws[e], x0s[e], z0s[e], res, x[i] + f * dx, z[i] + f * dz) < radius:
-                ok = False
-                break
-        if ok:
-            x[i] += dx
-            z[i] += dz
-        moved[i] = ok
+        x[i], z[i], yaw[i], moved[i] = _move_one(clear, offs[e], hs[e], ws[e], x0s[e], z0s[e], ress[e],
+                                                 x[i], z[i], yaw[i], yaw_delta[a], move_delta[a], radius)
 
 
 def step_poses(grids: PackedGrids, env: np.ndarray, x: np.ndarray, z: np.ndarray, yaw: np.ndarray,

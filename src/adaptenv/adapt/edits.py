@@ -1,0 +1,144 @@
+"""Edit records: what a generator asked for, what placement achieved, and whether validation kept it.
+
+An :class:`Edit` is the paper's tool call (``object_id``, x/y displacement in normalized grid
+units, ``rotation``) plus its outcome. ``rotation`` is the object's requested new *absolute* yaw
+in degrees (0 faces world +z / "up" on the map, 90 faces +x / "right"), not a delta; None keeps
+the yaw. Grid units follow :class:`~adaptenv.scene.grid.NormalizedGrid`: +dx is right (world +x),
++dy is up (world +z).
+
+An :class:`EditLog` round-trips through JSON, and :func:`apply_edit` / :func:`replay` rebuild an
+edited scene from its parent by replaying the *achieved* moves (never re-running placement).
+
+Example:
+    >>> log = EditLog.from_json(path.read_text())  # doctest: +SKIP
+    >>> child = replay(parent, log)  # doctest: +SKIP
+"""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+from typing import Literal
+
+from pydantic import BaseModel, ConfigDict, Field
+
+from adaptenv.errors import AdaptenvError
+from adaptenv.scene.house import House, move_object
+
+StopReason = Literal["reached", "blocked_by_object", "blocked_by_wall", "left_room", "rotation_blocked",
+                     "invalid"]
+
+
+class Edit(BaseModel):
+    """One requested change of one object and its outcome (meters are world x/z, units the 0..100 grid)."""
+
+    model_config = ConfigDict(frozen=True)
+
+    object_id: str
+    dx_units: float = 0.0
+    """Requested move right (+) / left (-) in grid units."""
+    dy_units: float = 0.0
+    """Requested move up (+, world +z) / down (-) in grid units."""
+    rotation: float | None = None
+    """Requested new absolute yaw in degrees [0, 360); None keeps the current yaw."""
+    achieved_dx: float = 0.0
+    """Achieved move along world x, m."""
+    achieved_dz: float = 0.0
+    """Achieved move along world z, m."""
+    achieved_dx_units: float = 0.0
+    achieved_dy_units: float = 0.0
+    yaw_before: float = 0.0
+    yaw_after: float = 0.0
+    stop_reason: StopReason = "reached"
+    """The first limit met: the translation's stop, else ``rotation_blocked``, else ``reached``."""
+    blocked_by: str | None = None
+    """Object id, wall id or door/window/open-wall id that stopped the move."""
+    steps: int = 0
+    """Number of placement steps (delta each) moved."""
+    accepted: bool = True
+    """False when validation rejected the placed result (the scene was left unchanged)."""
+    problems: list[str] = Field(default_factory=list)
+    """Why validation rejected it (one sentence per problem)."""
+    source: str = "manual"
+    """Name of the generator that proposed the edit."""
+    intent: str = ""
+    """Free-text intent (e.g. the LLM's reason, the suggestion it implements)."""
+
+    @property
+    def changed(self) -> bool:
+        """Whether replaying this edit changes the scene."""
+        return self.accepted and (self.achieved_dx != 0.0 or self.achieved_dz != 0.0 or _yaw_delta(self) != 0.0)
+
+
+def _yaw_delta(edit: Edit) -> float:
+    d = (edit.yaw_after - edit.yaw_before) % 360.0
+    return 0.0 if min(d, 360.0 - d) < 1e-9 else d
+
+
+class EditLog(BaseModel):
+    """Every edit tried on a scene, in order (rejected ones included, marked ``accepted=False``)."""
+
+    edits: list[Edit] = Field(default_factory=list)
+
+    def append(self, edit: Edit) -> None:
+        self.edits.append(edit)
+
+    def __len__(self) -> int:
+        return len(self.edits)
+
+    def __iter__(self):  # type: ignore[override]
+        return iter(self.edits)
+
+    @property
+    def accepted(self) -> list[Edit]:
+        return [e for e in self.edits if e.accepted]
+
+    def to_json(self, indent: int | None = 1) -> str:
+        return self.model_dump_json(indent=indent)
+
+    @classmethod
+    def from_json(cls, text: str) -> EditLog:
+        return cls.model_validate_json(text)
+
+    def save(self, path: str | Path) -> Path:
+        p = Path(path)
+        p.parent.mkdir(parents=True, exist_ok=True)
+        p.write_text(self.to_json(), encoding="utf-8")
+        return p
+
+    @classmethod
+    def load(cls, path: str | Path) -> EditLog:
+        p = Path(path)
+        try:
+            return cls.from_json(p.read_text(encoding="utf-8"))
+        except FileNotFoundError:
+            raise AdaptenvError(f"{p}: no such edit log; check the path") from None
+        except ValueError as exc:
+            raise AdaptenvError(f"{p}: not a valid edit log ({str(exc).splitlines()[0]}); "
+                                "write it with EditLog.save") from None
+
+
+def apply_edit(house: House, edit: Edit, *, in_place: bool = False) -> House:
+    """The house with an edit's achieved move replayed (children move rigidly); a copy unless ``in_place``.
+
+    Rejected edits change nothing. Raises AdaptenvError when the object is not a top-level object.
+    """
+    out = house if in_place else house.model_copy(deep=True)
+    if not edit.accepted:
+        return out
+    for obj in out.objects:
+        if obj.id == edit.object_id:
+            dyaw = _yaw_delta(edit)
+            if math.isfinite(dyaw):
+                move_object(obj, edit.achieved_dx, edit.achieved_dz, dyaw)
+            return out
+    raise AdaptenvError(f"edit of {edit.object_id!r}: the house has no top-level object with this id; "
+                        "replay the edit on the house it was made on")
+
+
+def replay(house: House, log: EditLog | list[Edit]) -> House:
+    """A copy of ``house`` with every accepted edit of the log applied in order."""
+    out = house.model_copy(deep=True)
+    for edit in log:
+        apply_edit(out, edit, in_place=True)
+    return out

@@ -1,0 +1,68 @@
+"""``adaptenv render``: a house (and optionally an episode) as a top-down PNG; ``adaptenv bench render``."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import typer
+
+from adaptenv.cli._common import JSON_OPTION
+
+HOUSE_ARGUMENT = typer.Argument(..., metavar="HOUSE.json", help="House JSON file (ProcTHOR format).",
+                                show_default=False)
+OUT_OPTION = typer.Option(Path("map.png"), "-o", "--out", help="Image file to write (PNG).")
+TRAJECTORY_OPTION = typer.Option(None, "--trajectory", "-t", metavar="TRAJ.json",
+                                 help="Trajectory JSON to draw on the map (path, collisions, targets).")
+GRID_OPTION = typer.Option(False, "--grid", help="Draw the paper's normalized 0..100 grid with ticks.")
+SIZE_OPTION = typer.Option(1024, "--size", min=256, max=8192, help="Longer side of the image in pixels.")
+NO_LABELS_OPTION = typer.Option(False, "--no-labels", help="Leave out object ids and room names.")
+TITLE_OPTION = typer.Option(None, "--title", help="A bold line above the map.")
+HIGHLIGHT_OPTION = typer.Option([], "--highlight", metavar="ID[=COLOUR]",
+                                help="Fill this object with a colour (default deepskyblue); repeatable.")
+BENCH_HOUSE_OPTION = typer.Option(None, "--house", help="House to render (default: the real test house).")
+
+
+def render(
+    house: Path = HOUSE_ARGUMENT,
+    out: Path = OUT_OPTION,
+    trajectory: Path | None = TRAJECTORY_OPTION,
+    grid: bool = GRID_OPTION,
+    size: int = SIZE_OPTION,
+    no_labels: bool = NO_LABELS_OPTION,
+    title: str | None = TITLE_OPTION,
+    highlight: list[str] = HIGHLIGHT_OPTION,
+) -> None:
+    """Render a house top-down (rooms, walls, doors, furniture with ids), optionally with an episode."""
+    from rich.console import Console
+
+    from adaptenv.render.topdown import render_to_file
+    from adaptenv.scene.house import load_house
+    from adaptenv.sim.trajectory import Trajectory
+
+    h = load_house(house)
+    traj = Trajectory.load(trajectory) if trajectory is not None else None
+    colours = {}
+    for item in highlight:
+        oid, _, colour = item.partition("=")
+        colours[oid] = colour or "deepskyblue"
+    path = render_to_file(h, out, trajectory=traj, grid=grid, size=size, labels=not no_labels, title=title,
+                          highlight=colours or None)
+    Console().print(f"wrote [bold]{path}[/]")
+
+
+def bench_render(
+    house: Path | None = BENCH_HOUSE_OPTION,
+    size: int = SIZE_OPTION,
+    as_json: bool = JSON_OPTION,
+) -> None:
+    """Median render time of a 10-room house at 1024 px: plain, with grid, and with a 600-step episode."""
+    from adaptenv.bench import emit
+    from adaptenv.bench.render import REAL_HOUSE, run
+
+    figures = run(house or REAL_HOUSE, size=size)
+    emit("render: top-down map (median ms)", figures, as_json, notes=["target: under 50 ms at 1024 px"])
+
+
+def register(app: typer.Typer, bench: typer.Typer) -> None:
+    app.command("render")(render)
+    bench.command("render")(bench_render)

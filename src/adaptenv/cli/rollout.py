@@ -1,0 +1,88 @@
+"""``adaptenv rollout``: run one ObjectNav episode in a house; ``adaptenv bench expert``."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import typer
+
+from adaptenv.cli._common import JSON_OPTION, existing_file
+
+POLICIES = ("expert", "random")
+_HOUSE = typer.Argument(..., help="A ProcTHOR house JSON file.")
+_OUT = typer.Option(Path("traj.json"), "-o", "--out", help="Where to write the trajectory JSON.")
+_RENDER = typer.Option(None, "--render", help="Also draw the trajectory top-down to this PNG.")
+
+
+def resolve_policy(name: str, seed: int | None = None):
+    """The policy called ``name`` (one place to extend, e.g. with checkpoints later)."""
+    from adaptenv.errors import ConfigError
+    from adaptenv.sim.rollout import expert_policy, random_policy
+
+    if name == "expert":
+        return expert_policy()
+    if name == "random":
+        return random_policy(0 if seed is None else seed + 1)
+    raise ConfigError(f"--policy {name!r} is not a known policy; use one of {', '.join(POLICIES)}")
+
+
+def rollout(
+    house: Path = _HOUSE,
+    policy: str = typer.Option("expert", "--policy", help=f"Who acts: {' or '.join(POLICIES)}."),
+    target: str | None = typer.Option(None, "--target", help="Target object type (default: drawn among the solvable ones)."),
+    seed: int = typer.Option(0, "--seed", help="Seed of the episode draw (and of the random policy)."),
+    use_house_start: bool = typer.Option(False, "--use-house-start", help="Start at the house's metadata agent pose."),
+    max_steps: int | None = typer.Option(None, "--max-steps", min=1, help="Step limit (default: spec.MAX_STEPS = 600)."),
+    out: Path = _OUT,
+    render: Path | None = _RENDER,
+) -> None:
+    """Run one episode, print its metrics and write the trajectory (optionally a top-down image)."""
+    from rich.console import Console
+    from rich.table import Table
+
+    from adaptenv.scene.house import load_house
+    from adaptenv.sim.rollout import run_episode
+    from adaptenv.sim.spec import MAX_STEPS
+    from adaptenv.sim.task import sample_episode
+    from adaptenv.sim.world import compile_world
+
+    existing_file(house, "house file")
+    house_model = load_house(house)
+    world = compile_world(house_model, name=str(house))
+    pol = resolve_policy(policy, seed)
+    episode = sample_episode(world, seed, target_type=target, use_house_start=use_house_start)
+    traj = run_episode(world, episode, pol, max_steps=max_steps or MAX_STEPS, policy_name=policy)
+    traj.save(out)
+    table = Table(title=f"{policy} looking for {traj.target_type} in {house.name}")
+    table.add_column("metric")
+    table.add_column("value", justify="right")
+    for key, value in traj.metrics.model_dump().items():
+        table.add_row(key, f"{value:.3f}" if isinstance(value, float) else str(value))
+    console = Console()
+    console.print(table)
+    console.print(f"wrote the trajectory to [bold]{out}[/]")
+    if render is not None:
+        from adaptenv.render.topdown import render_house
+
+        render.parent.mkdir(parents=True, exist_ok=True)
+        render_house(house_model, trajectory=traj).save(render)
+        console.print(f"wrote the top-down image to [bold]{render}[/]")
+
+
+def bench_expert(
+    episodes: int = typer.Option(500, "--episodes", min=1, help="Episodes to run."),
+    houses: int = typer.Option(50, "--houses", min=1, help="Procedural houses to spread them over."),
+    seed: int = typer.Option(0, "--seed", help="Root seed."),
+    as_json: bool = JSON_OPTION,
+) -> None:
+    """Shortest-path expert: success rate, SPL, labels/s and unsolvable episodes on generated houses."""
+    from adaptenv.bench import emit
+    from adaptenv.bench.expert import run
+
+    figures, notes = run(episodes=episodes, n_houses=houses, seed=seed)
+    emit("expert", figures, as_json, notes)
+
+
+def register(app: typer.Typer, bench: typer.Typer) -> None:
+    app.command("rollout")(rollout)
+    bench.command("expert")(bench_expert)

@@ -1,0 +1,423 @@
+"""BatchSim: B ObjectNav episodes stepped at once, in one compiled loop, houses mixed freely.
+
+Physics (``physics``), the scan (``scan``) and the geodesic-distance lookup behind the reward run
+in a single numba kernel over agents (``prange`` over 2+ cores for large batches); per-agent state
+lives in NumPy arrays. Only the rare agents that issue ``end`` go through Python, to be judged by
+``task.is_success``.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from functools import cache
+
+import numba
+import numpy as np
+
+from adaptenv.errors import AdaptenvError
+from adaptenv.sim import geodesic, metrics, task
+from adaptenv.sim.physics import _MOVE_DELTA, _YAW_DELTA, PackedGrids, _move_one
+from adaptenv.sim.scan import RAY_COS, RAY_SIN, _scan_one, pack_semantic
+from adaptenv.sim.spec import (
+    AGENT_RADIUS,
+    END,
+    MAX_RANGE,
+    MAX_STEPS,
+    N_ACTIONS,
+    N_RAYS,
+    NO_ACTION,
+    ROTATE_LARGE,
+    SUCCESS_DISTANCE,
+    class_id,
+)
+
+STEP_PENALTY = -0.01
+"""Reward added at every step (SPOC's RL shaping)."""
+SUCCESS_REWARD = 10.0
+"""Reward added when ``end`` is issued with a target in sight within SUCCESS_DISTANCE."""
+PARALLEL_MIN_BATCH = 64
+"""Batches at least this large use the multi-threaded kernel; smaller ones avoid its start-up cost."""
+
+
+@numba.njit(cache=True)
+def _field_at(dist, off, h, w, x0, z0, res, x, z):
+    """A distance field at a point: its cell, or (when that is inf) the best 3x3 neighbour plus the
+    distance to its centre, as ``geodesic.field_at`` reads it."""
+    col = int(math.floor((x - x0) / res))
+    row = int(math.floor((z - z0) / res))
+    if 0 <= row < h and 0 <= col < w:
+        v = dist[off + row * w + col]
+        if v < math.inf:
+            return v
+    best = math.inf
+    for dr in range(-1, 2):
+        for dc in range(-1, 2):
+            rr, cc = row + dr, col + dc
+            if 0 <= rr < h and 0 <= cc < w:
+                v = dist[off + rr * w + cc]
+                if v < math.inf:
+                    best = min(best, v + math.hypot(x0 + (cc + 0.5) * res - x, z0 + (rr + 0.5) * res - z))
+    return best
+
+
+@numba.njit(cache=True)
+def _agent_step(i, stepping, clear, sem, dist, offs, hs, ws, x0s, z0s, ress,
+                env, doff, x, z, yaw, steps, collisions, prev_action, path, geo, best, moved, done,
+                actions, radius, yaw_delta, move_delta, ray_cos, ray_sin, max_range, max_steps,
+                reward, terminated, truncated, depth, classes):
+    """Agent i: act (when ``stepping`` and not done), book-keep the reward, then look and measure."""
+    e = env[i]
+    off, h, w, x0, z0, res = offs[e], hs[e], ws[e], x0s[e], z0s[e], ress[e]
+    act = stepping and not done[i]
+    a = actions[i] if act else 0
+    if act:
+        nx, nz, nyaw, ok = _move_one(clear, off, h, w, x0, z0, res, x[i], z[i], yaw[i], yaw_delta[a],
+                                     move_delta[a], radius)
+        x[i], z[i], yaw[i], moved[i] = nx, nz, nyaw, ok
+        if ok:
+            path[i] += abs(move_delta[a])
+        else:
+            collisions[i] += 1
+        steps[i] += 1
+        prev_action[i] = a
+    d = _field_at(dist, doff[i], h, w, x0, z0, res, x[i], z[i])
+    geo[i] = d
+    if act:
+        gain = 0.0
+        if d < math.inf and best[i] < math.inf and best[i] > d:
+            gain = best[i] - d
+        reward[i] = STEP_PENALTY + gain
+        terminated[i] = a == END
+        truncated[i] = a != END and steps[i] >= max_steps
+        done[i] = terminated[i] or truncated[i]
+    else:
+        reward[i] = 0.0
+        terminated[i] = False
+        truncated[i] = False
+    if d < best[i]:
+        best[i] = d
+    _scan_one(clear, sem, off, h, w, x0, z0, res, x[i], z[i], yaw[i], ray_cos, ray_sin, max_range, depth, classes,
+              i)
+
+
+@numba.njit(cache=True)
+def _run_serial(idx, stepping, clear, sem, dist, offs, hs, ws, x0s, z0s, ress,
+                env, doff, x, z, yaw, steps, collisions, prev_action, path, geo, best, moved, done,
+                actions, radius, yaw_delta, move_delta, ray_cos, ray_sin, max_range, max_steps,
+                reward, terminated, truncated, depth, classes):
+    for k in range(idx.shape[0]):
+        _agent_step(idx[k], stepping, clear, sem, dist, offs, hs, ws, x0s, z0s, ress,
+                    env, doff, x, z, yaw, steps, collisions, prev_action, path, geo, best, moved, done,
+                    actions, radius, yaw_delta, move_delta, ray_cos, ray_sin, max_range, max_steps,
+                    reward, terminated, truncated, depth, classes)
+
+
+@numba.njit(cache=True, parallel=True)
+def _run_parallel(idx, stepping, clear, sem, dist, offs, hs, ws, x0s, z0s, ress,
+                  env, doff, x, z, yaw, steps, collisions, prev_action, path, geo, best, moved, done,
+                  actions, radius, yaw_delta, move_delta, ray_cos, ray_sin, max_range, max_steps,
+                  reward, terminated, truncated, depth, classes):
+    for k in numba.prange(idx.shape[0]):
+        _agent_step(idx[k], stepping, clear, sem, dist, offs, hs, ws, x0s, z0s, ress,
+                    env, doff, x, z, yaw, steps, collisions, prev_action, path, geo, best, moved, done,
+                    actions, radius, yaw_delta, move_delta, ray_cos, ray_sin, max_range, max_steps,
+                    reward, terminated, truncated, depth, classes)
+
+
+@numba.njit(cache=True)
+def _any_within(pts, x, z, d2):
+    """Whether some point of ``pts`` (P, 2) lies within squared distance d2 of (x, z)."""
+    for p in range(pts.shape[0]):  # noqa: SIM110  (numba compiles no generator expressions)
+        if (pts[p, 0] - x) ** 2 + (pts[p, 1] - z) ** 2 <= d2:
+            return True
+    return False
+
+
+@cache
+def _class_of(target_type: str) -> int:
+    """``spec.class_id`` with a readable error for unknown types (memoized: it is on the reset path)."""
+    try:
+        return class_id(target_type)
+    except ValueError:
+        raise ValueError(f"unknown target type {target_type!r}; use an object type of the asset catalog") from None
+
+
+class BatchSim:
+    """B ObjectNav agents in a list of houses, stepped together; no auto-reset.
+
+    Reward (SPOC's RL shaping), per step of an active agent::
+
+        r = -0.01 + max(0, best - d) + 10 * success
+
+    where ``d`` is the geodesic distance to the target's success region after the action
+    (``geodesic.distance_field`` of the agent's house and target type, computed once per pair and
+    read at the agent's cell as ``geodesic.geodesic_distance`` reads it) and ``best`` the smallest ``d`` seen so
+    far in the episode (so moving back and forth earns nothing; an unreachable start, d = inf, earns
+    no shaping). ``end`` terminates the episode (success judged by ``task.is_success``);
+    reaching ``max_steps`` truncates it. A finished agent is frozen (its actions are ignored, its
+    reward is 0 and it reports terminated/truncated only once) until the caller gives it a new
+    episode with :meth:`reset_at`.
+
+    Pose arrays ``x``, ``z``, ``yaw`` (float64, metres/degrees) and ``moved`` are public and
+    updated in place each step, so a caller can record trajectories by copying them.
+
+    Example::
+
+        sim = BatchSim(worlds)
+        obs, info = sim.reset(episodes, env_idx)
+        obs, reward, terminated, truncated, info = sim.step(actions)
+        done = np.flatnonzero(terminated | truncated)
+        sim.reset_at(done, [new_episode(i) for i in done])
+    """
+
+    def __init__(self, worlds: Sequence, *, max_steps: int = MAX_STEPS, radius: float = AGENT_RADIUS,
+                 max_range: float = MAX_RANGE, parallel: bool | None = None) -> None:
+        if not worlds:
+            raise ValueError("BatchSim needs at least one NavWorld")
+        self.worlds = list(worlds)
+        self.grids = PackedGrids.from_worlds(self.worlds)
+        self.semantic = pack_semantic(self.worlds)
+        self.max_steps = int(max_steps)
+        self.radius = float(radius)
+        self.max_range = float(max_range)
+        self.parallel = parallel
+        """Multi-threaded kernel: True, False, or None for batches of at least PARALLEL_MIN_BATCH."""
+        self._dist = np.zeros(0, dtype=np.float32)
+        self._field_offset: dict[tuple[int, str], int] = {}
+        self._targets: dict[tuple[int, str], np.ndarray] = {}
+        self._allocate(0)
+
+    # -- state ---------------------------------------------------------------------------------
+
+    def _allocate(self, n: int) -> None:
+        self.num_agents = n
+        self.env = np.zeros(n, dtype=np.int64)
+        self.x = np.zeros(n, dtype=np.float64)
+        self.z = np.zeros(n, dtype=np.float64)
+        self.yaw = np.zeros(n, dtype=np.float64)
+        self.moved = np.ones(n, dtype=np.bool_)
+        self.steps = np.zeros(n, dtype=np.int64)
+        self.prev_action = np.full(n, NO_ACTION, dtype=np.int64)
+        self.collisions = np.zeros(n, dtype=np.int64)
+        self.path_length = np.zeros(n, dtype=np.float64)
+        self.geodesic = np.full(n, np.inf, dtype=np.float64)
+        self.best = np.full(n, np.inf, dtype=np.float64)
+        self.start_geodesic = np.full(n, np.inf, dtype=np.float64)
+        self.target = np.zeros(n, dtype=np.int64)
+        self.success = np.zeros(n, dtype=np.bool_)
+        self.done = np.ones(n, dtype=np.bool_)
+        self.target_types: list[str] = [""] * n
+        self._doff = np.zeros(n, dtype=np.int64)
+        self._depth = np.ones((n, N_RAYS), dtype=np.float32)
+        self._classes = np.zeros((n, N_RAYS), dtype=np.int64)
+        self._reward = np.zeros(n, dtype=np.float64)
+        self._terminated = np.zeros(n, dtype=np.bool_)
+        self._truncated = np.zeros(n, dtype=np.bool_)
+        self._all = np.arange(n, dtype=np.int64)
+        self._no_actions = np.zeros(n, dtype=np.int64)
+
+    def _distance_offset(self, e: int, target_type: str) -> int:
+        """Offset of the (house, target) distance field in the packed array; computed on first use."""
+        key = (e, target_type)
+        off = self._field_offset.get(key)
+        if off is None:
+            world = self.worlds[e]
+            field = np.asarray(geodesic.distance_field(world, target_type), dtype=np.float32)
+            if field.shape != world.grid.shape:
+                raise ValueError(f"distance field of {target_type!r} has shape {field.shape}, "
+                                 f"expected the grid's {world.grid.shape}")
+            off = self._field_offset[key] = self._dist.size
+            self._dist = np.concatenate([self._dist, field.ravel()])
+            self._targets[key] = np.asarray(task.target_points(world, target_type).points, dtype=np.float64)
+        return off
+
+    def reset(self, episodes: Sequence, env_idx: Sequence[int] | np.ndarray | None = None
+              ) -> tuple[dict[str, np.ndarray], dict[str, np.ndarray]]:
+        """Start one episode per agent (B = len(episodes)); ``env_idx[i]`` is its house (default i % n_houses)."""
+        self._allocate(len(episodes))
+        if env_idx is None:
+            env_idx = np.arange(len(episodes)) % len(self.worlds)
+        self.reset_at(np.arange(len(episodes)), episodes, env_idx)
+        return self.observe(), self.info()
+
+    def reset_at(self, indices: Sequence[int] | np.ndarray, episodes: Sequence,
+                 env_idx: Sequence[int] | np.ndarray | None = None) -> dict[str, np.ndarray]:
+        """Give agents ``indices`` new episodes (in houses ``env_idx``, default: their current ones).
+
+        Returns the whole batch's observation, with the fresh first observations in those slots.
+        """
+        idx = np.asarray(indices, dtype=np.int64).reshape(-1)
+        if len(episodes) != idx.size:
+            raise ValueError(f"reset_at got {idx.size} indices but {len(episodes)} episodes")
+        if idx.size == 0:
+            return self.observe()
+        envs = self.env[idx] if env_idx is None else np.asarray(env_idx, dtype=np.int64).reshape(-1)
+        if envs.size != idx.size or envs.min() < 0 or envs.max() >= len(self.worlds):
+            raise ValueError(f"env_idx must hold {idx.size} house indices in [0, {len(self.worlds)})")
+        types = [ep.target_type for ep in episodes]
+        starts = np.array([ep.start for ep in episodes], dtype=np.float64).reshape(-1, 3)
+        self.env[idx] = envs
+        self.x[idx], self.z[idx], self.yaw[idx] = starts[:, 0], starts[:, 1], starts[:, 2] % 360.0
+        self.target[idx] = [_class_of(t) for t in types]
+        self._doff[idx] = [self._distance_offset(e, t) for e, t in zip(envs.tolist(), types, strict=True)]
+        for i, t in zip(idx.tolist(), types, strict=True):
+            self.target_types[i] = t
+        self.steps[idx] = 0
+        self.prev_action[idx] = NO_ACTION
+        self.moved[idx] = True
+        self.collisions[idx] = 0
+        self.path_length[idx] = 0.0
+        self.success[idx] = False
+        self.done[idx] = False
+        self.best[idx] = np.inf
+        self._run(idx, self._no_actions, stepping=False)
+        self.start_geodesic[idx] = self.geodesic[idx]
+        return self.observe()
+
+    # -- stepping ------------------------------------------------------------------------------
+
+    def _run(self, idx: np.ndarray, actions: np.ndarray, stepping: bool) -> None:
+        """The compiled kernel over agents ``idx``: act (if stepping), reward, distance, scan."""
+        g = self.grids
+        parallel = idx.shape[0] >= PARALLEL_MIN_BATCH if self.parallel is None else self.parallel
+        kernel = _run_parallel if parallel else _run_serial
+        kernel(idx, stepping, g.clearance, self.semantic, self._dist, g.offset, g.height, g.width, g.x0, g.z0,
+               g.resolution, self.env, self._doff, self.x, self.z, self.yaw, self.steps, self.collisions,
+               self.prev_action, self.path_length, self.geodesic, self.best, self.moved, self.done,
+               actions, self.radius, _YAW_DELTA, _MOVE_DELTA, RAY_COS, RAY_SIN, self.max_range, self.max_steps,
+               self._reward, self._terminated, self._truncated, self._depth, self._classes)
+
+    def advance(self, actions: np.ndarray) -> None:
+        """Step the state in place, leaving reward/terminated/truncated in ``last_*`` (no copies)."""
+        actions = np.asarray(actions, dtype=np.int64).reshape(-1)
+        if actions.shape[0] != self.num_agents:
+            raise ValueError(f"step expected {self.num_agents} actions, got {actions.shape[0]}")
+        if actions.size and (actions.min() < 0 or actions.max() >= N_ACTIONS):
+            raise ValueError(f"actions must be in [0, {N_ACTIONS}), got {actions.min()}..{actions.max()}")
+        self._run(self._all, actions, stepping=True)
+        for i in np.flatnonzero(self._terminated).tolist():
+            if self._judge(i):
+                self.success[i] = True
+                self._reward[i] += SUCCESS_REWARD
+
+    @property
+    def last_reward(self) -> np.ndarray:
+        return self._reward
+
+    @property
+    def last_terminated(self) -> np.ndarray:
+        return self._terminated
+
+    @property
+    def last_truncated(self) -> np.ndarray:
+        return self._truncated
+
+    def step(self, actions: np.ndarray) -> tuple[dict[str, np.ndarray], np.ndarray, np.ndarray, np.ndarray,
+                                                 dict[str, np.ndarray]]:
+        """Advance every active agent by one action: (obs, reward, terminated, truncated, info), batched."""
+        self.advance(actions)
+        return (self.observe(), self._reward.copy(), self._terminated.copy(), self._truncated.copy(),
+                self.info(self._terminated))
+
+    def _judge(self, i: int) -> bool:
+        """``task.is_success`` for agent i, skipped when no target sample point is within reach."""
+        e, target_type = int(self.env[i]), self.target_types[i]
+        pts = self._targets[(e, target_type)]
+        if pts.shape[0] == 0:
+            return False
+        if not _any_within(pts, float(self.x[i]), float(self.z[i]), SUCCESS_DISTANCE ** 2):
+            return False  # exactly is_success's first test (every point farther than the success distance)
+        return bool(task.is_success(self.worlds[e], float(self.x[i]), float(self.z[i]), float(self.yaw[i]),
+                                    target_type))
+
+    # -- views ---------------------------------------------------------------------------------
+
+    def observe(self) -> dict[str, np.ndarray]:
+        """The current observation of every agent (fresh arrays, leading batch dimension)."""
+        return {"depth": self._depth.copy(), "semantic": self._classes.copy(), "target": self.target.copy(),
+                "prev_action": self.prev_action.copy(), "collided": (~self.moved).astype(np.int64)}
+
+    def info(self, ended: np.ndarray | None = None) -> dict[str, np.ndarray]:
+        """Per-agent diagnostics: success, SPL (NaN except where ``ended``), collisions, geodesic
+        distance, path length, steps and pose."""
+        spl = np.full(self.num_agents, np.nan)
+        if ended is not None and ended.any():
+            spl[ended] = [self.spl(i) for i in np.flatnonzero(ended).tolist()]
+        return {"success": self.success.copy(), "spl": spl, "collisions": self.collisions.copy(),
+                "geodesic": self.geodesic.copy(), "path_length": self.path_length.copy(),
+                "steps": self.steps.copy(), "x": self.x.copy(), "z": self.z.copy(), "yaw": self.yaw.copy()}
+
+    def spl(self, i: int) -> float:
+        """SPL of agent i's episode so far (``metrics.spl``; optimal = geodesic distance from the start)."""
+        return metrics.spl(bool(self.success[i]), float(self.start_geodesic[i]), float(self.path_length[i]))
+
+    @property
+    def nbytes(self) -> int:
+        """Memory of the packed simulator arrays (clearance, semantics, distance fields) that are not
+        views of the worlds' own arrays (one world's rasters are used in place)."""
+        return int(sum(a.nbytes for a in (self.grids.clearance, self.semantic, self._dist) if a.base is None))
+
+
+class EpisodeSampler:
+    """Draws ObjectNav episodes for many slots quickly (for auto-reset and benchmarks).
+
+    Same distribution as ``task.sample_episode`` (a house uniformly, a target type uniformly among
+    ``task.available_targets`` or the given types, the start at the centre of a cell drawn uniformly
+    among those with finite positive geodesic distance, yaw a multiple of 30 degrees), but the
+    candidate cells are computed once per (house, target) pair, so a draw costs microseconds.
+    """
+
+    def __init__(self, worlds: Sequence, target_types: Sequence[str] | None = None) -> None:
+        self.worlds = list(worlds)
+        self.target_types = tuple(target_types) if target_types is not None else None
+        self._types: dict[int, list[str]] = {}
+        self._cells: dict[tuple[int, str], np.ndarray] = {}
+
+    def types_of(self, e: int) -> list[str]:
+        """Target types episodes in house e may ask for."""
+        if e not in self._types:
+            world = self.worlds[e]
+            avail = task.available_targets(world)
+            types = avail if self.target_types is None else [t for t in self.target_types if t in avail]
+            if not types:
+                wanted = "any ObjectNav target" if self.target_types is None else f"any of {list(self.target_types)}"
+                raise AdaptenvError(f"{world.name}: no episode can be drawn ({wanted} must be present and "
+                                         "reachable); pick other target types or houses")
+            self._types[e] = types
+        return self._types[e]
+
+    def _candidates(self, e: int, target_type: str) -> np.ndarray:
+        key = (e, target_type)
+        if key not in self._cells:
+            field = geodesic.distance_field(self.worlds[e], target_type)
+            cells = np.flatnonzero(np.isfinite(field) & (field > 0))
+            if cells.size == 0:
+                raise AdaptenvError(f"{self.worlds[e].name}: the {target_type} cannot be reached from any free "
+                                    "floor; choose other target types or houses")
+            self._cells[key] = cells
+        return self._cells[key]
+
+    def draw(self, rng: np.random.Generator, n: int, env_idx: np.ndarray | None = None,
+             target_type: str | None = None) -> tuple[list, np.ndarray]:
+        """``n`` episodes and their house indices (drawn uniformly unless ``env_idx`` is given).
+
+        ``target_type`` fixes the target (it must be reachable in the chosen houses).
+        """
+        envs = rng.integers(len(self.worlds), size=n) if env_idx is None else np.asarray(env_idx, dtype=np.int64)
+        envs = envs.reshape(-1)
+        pick = rng.random((envs.size, 2)).tolist()
+        yaws = (rng.integers(round(360 / ROTATE_LARGE), size=envs.size) * ROTATE_LARGE).tolist()
+        episodes = []
+        for e, (p_type, p_cell), yaw in zip(envs.tolist(), pick, yaws, strict=True):
+            if target_type is None:
+                types = self.types_of(e)
+                target = types[min(int(p_type * len(types)), len(types) - 1)]
+            else:
+                target = target_type
+            cells = self._candidates(e, target)
+            g = self.worlds[e].grid
+            row, col = divmod(int(cells[min(int(p_cell * cells.size), cells.size - 1)]), g.blocked.shape[1])
+            x, z = g.x0 + (col + 0.5) * g.resolution, g.z0 + (row + 0.5) * g.resolution
+            episodes.append(task.Episode(target, (float(x), float(z), float(yaw))))
+        return episodes, envs

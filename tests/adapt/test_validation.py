@@ -1,0 +1,117 @@
+"""The validation module: validate_scene's rules, the incremental raster, and the edit validator's guarantees."""
+
+from __future__ import annotations
+
+import math
+from functools import cache
+
+import numpy as np
+import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+from adaptenv.adapt.edits import Edit, apply_edit
+from adaptenv.adapt.validation import EditValidator, NavRaster, check_edit, validate_scene
+from adaptenv.scene.geometry import SceneGeometry
+from adaptenv.scene.house import load_house
+from adaptenv.scene.occupancy import rasterize
+from adaptenv.sim.geodesic import geodesic_distance
+from adaptenv.sim.world import compile_world
+from tests.conftest import REAL_HOUSE
+from tests.sim import helpers as H
+
+BED, CHAIR = "Bed_1", "Chair_002_1"
+
+
+def door_house():
+    """Rooms 0..4 and 4..8 (x) by 0..4 (z), a 1 m door at z = 2 on x = 4, a bed near the door, a can in room 1."""
+    return H.make_house([(0.0, 0.0, 4.0, 4.0), (4.0, 0.0, 8.0, 4.0)], doors=[H.Door(0, 1, 2.0, 1.0)],
+                        objects=[H.Obj(BED, 1.8, 1.9), H.Obj(H.LOW_TARGET, 7.0, 1.0), H.Obj(CHAIR, 0.6, 0.6)],
+                        agent=(0.5, 3.5, 0.0))
+
+
+def kinds(problems) -> set[str]:
+    return {p.kind for p in problems}
+
+
+def test_untouched_houses_are_valid(real_house):
+    assert validate_scene(real_house) == []
+    assert validate_scene(real_house, original=real_house) == []
+    assert validate_scene(door_house()) == []
+
+
+def test_moving_into_a_doorway_that_disconnects_rooms_is_rejected():
+    house = door_house()
+    # 8 m house: 100 units = 8 m; 18.125 units = 1.45 m puts the bed flush against the door wall.
+    out, edit = check_edit(house, "Bed|0", 18.125, 0.0)
+    assert edit.stop_reason == "reached"  # placement allows it: blocking a door is not a collision
+    assert not edit.accepted and any("room|1" in p for p in edit.problems)
+    assert out.object_by_id("Bed|0").position.x == pytest.approx(1.8)  # the scene was left unchanged
+    moved = apply_edit(house, Edit(object_id="Bed|0", achieved_dx=1.45))
+    assert {"room_unreachable", "doorway_blocked", "target_unreachable"} <= kinds(validate_scene(moved, original=house))
+
+
+def test_validate_scene_reports_new_overlaps_walls_and_start():
+    house = door_house()
+    onto_bed = apply_edit(house, Edit(object_id="Chair|2", achieved_dx=1.0, achieved_dz=1.0))
+    assert "overlap" in kinds(validate_scene(onto_bed, original=house))
+    through_wall = apply_edit(house, Edit(object_id="Chair|2", achieved_dx=-0.5))
+    assert "outside_room" in kinds(validate_scene(through_wall, original=house))
+    blocked = house.model_copy(deep=True)
+    blocked.set_agent_pose(1.8, 1.9, 0.0)  # inside the bed
+    assert kinds(validate_scene(blocked)) == {"start_blocked"}
+
+
+def test_preexisting_overlaps_are_allowed_but_may_not_grow(real_house):
+    assert validate_scene(real_house, original=real_house) == []
+    chair = real_house.object_by_id("Chair|3|0|1")
+    table = real_house.object_by_id("DiningTable|3|0|0")
+    d = np.array([table.position.x - chair.position.x, table.position.z - chair.position.z])
+    deeper = apply_edit(real_house, Edit(object_id="Chair|3|0|1", achieved_dx=d[0] * 0.5, achieved_dz=d[1] * 0.5))
+    assert "overlap_grew" in kinds(validate_scene(deeper, original=real_house))
+
+
+def test_nav_raster_matches_the_full_raster_after_edits(real_house):
+    v = EditValidator(real_house)
+    rng = np.random.default_rng(5)
+    ids = [oid for oid, m in zip(v.ctx.ids, v.ctx.movable, strict=True) if m]
+    for _ in range(20):
+        v.try_edit(ids[int(rng.integers(len(ids)))], *rng.uniform(-25, 25, 2), float(rng.uniform(0, 360)))
+    full = rasterize(SceneGeometry.from_house(v.house)).navigable(0.2)
+    assert np.array_equal(v.raster.navigable(), full)
+    assert np.array_equal(NavRaster(SceneGeometry.from_house(v.house)).navigable(), full)
+
+
+@cache
+def _houses():
+    from adaptenv.scene.procedural import GenerationConfig, generate_house
+
+    return (load_house(REAL_HOUSE, validate=False), generate_house(1, GenerationConfig(n_rooms=5)), door_house())
+
+
+edit_st = st.tuples(st.integers(0, 10_000), st.floats(-30, 30), st.floats(-30, 30),
+                    st.one_of(st.none(), st.floats(0, 360, exclude_max=True)))
+
+
+@settings(max_examples=12, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(which=st.integers(0, 2), edits=st.lists(edit_st, min_size=1, max_size=8))
+def test_random_edit_sequences_never_yield_an_invalid_scene(which, edits):
+    house = _houses()[which]
+    v = EditValidator(house)
+    ids = [oid for oid, m in zip(v.ctx.ids, v.ctx.movable, strict=True) if m]
+    for k, dx, dy, yaw in edits:
+        v.try_edit(ids[k % len(ids)], dx, dy, yaw, source="hypothesis")
+    assert validate_scene(v.house, original=house) == []
+    # The expert-level solvability check: every target type reachable before still is.
+    world = compile_world(v.house)
+    x, z, _ = house.agent_pose()
+    for t in v.need_targets:
+        assert math.isfinite(geodesic_distance(world, t, x, z)), t
+
+
+def test_episode_targets_are_kept_reachable():
+    house = door_house()
+    v = EditValidator(house, episode_targets=["GarbageCan"])
+    assert v.need_targets == {"GarbageCan"}
+    edit = v.try_edit("Bed|0", 18.125, 0.0)
+    assert not edit.accepted and any("GarbageCan" in p or "room|1" in p for p in edit.problems)
