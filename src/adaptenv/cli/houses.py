@@ -1,0 +1,153 @@
+"""``adaptenv houses``: generate procedural ProcTHOR-format houses and rearranged variants.
+
+Also registers ``adaptenv bench houses`` (generation speed).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Annotated
+
+import typer
+
+from adaptenv.cli._common import JSON_OPTION, existing_file
+from adaptenv.errors import ConfigError
+
+houses_app = typer.Typer(help="Procedural ProcTHOR-format houses: generate new ones, rearrange existing ones.",
+                         no_args_is_help=True)
+
+_ROOMS_HELP = ("Rooms per house: a count from 1 to 10 (e.g. 5) or a comma-separated list of types "
+               "(e.g. Kitchen,LivingRoom,Bedroom). Default: 2 to 6 rooms.")
+
+
+def _config_for(rooms: str | None, split: str):
+    """The generation config for the --rooms and --split options, with errors naming the option."""
+    from adaptenv.scene.assets import ROOM_TYPES
+    from adaptenv.scene.procedural import GenerationConfig
+    from adaptenv.scene.procedural.config import MAX_ROOMS, MIN_ROOMS, SPLITS
+
+    if split not in SPLITS:
+        raise ConfigError(f"--split: unknown asset split {split!r}; use one of {', '.join(SPLITS)}")
+    cfg = GenerationConfig(split=split)
+    if rooms is None:
+        return cfg
+    text = rooms.strip()
+    if text.lstrip("-").isdigit():
+        n = int(text)
+        if not MIN_ROOMS <= n <= MAX_ROOMS:
+            raise ConfigError(f"--rooms: expected {MIN_ROOMS} to {MAX_ROOMS} rooms, got {n}; pick a count in that range")
+        return cfg.with_rooms(n)
+    types = [t.strip() for t in text.split(",") if t.strip()]
+    bad = [t for t in types if t not in ROOM_TYPES]
+    if bad or not types:
+        raise ConfigError(f"--rooms: unknown room type {bad[0] if bad else text!r}; give a count or a comma-separated "
+                          f"list of {', '.join(ROOM_TYPES)}")
+    if len(types) > MAX_ROOMS:
+        raise ConfigError(f"--rooms: {len(types)} room types given; give at most {MAX_ROOMS}")
+    return cfg.with_rooms(",".join(types))
+
+
+def _summary_row(name: str, house) -> tuple[str, str, str, str]:
+    from adaptenv.scene.assets import load_catalog
+    from adaptenv.sim.spec import TARGET_TYPES
+
+    catalog = load_catalog()
+    abbrev = {"Kitchen": "K", "LivingRoom": "L", "Bedroom": "B", "Bathroom": "b"}
+    types = sorted({catalog.asset(o.assetId).object_type for o in house.objects} & set(TARGET_TYPES))
+    rooms = "".join(abbrev.get(r.roomType, "?") for r in house.rooms)
+    return name, f"{len(house.rooms)} ({rooms})", str(len(house.objects)), ", ".join(types)
+
+
+def _print_summary(rows: list[tuple[str, str, str, str]], out: Path) -> None:
+    from rich.console import Console
+    from rich.table import Table
+
+    table = Table(title=f"houses written to {out}")
+    for col, justify in (("house", "left"), ("rooms", "left"), ("objects", "right"), ("target types", "left")):
+        table.add_column(col, justify=justify)
+    for row in rows:
+        table.add_row(*row)
+    console = Console()
+    console.print(table)
+    console.print("rooms: K kitchen, L living room, B bedroom, b bathroom", style="dim")
+
+
+@houses_app.command("generate")
+def generate(
+    out: Annotated[Path, typer.Option("-o", "--out", help="Folder to write house_0000.json, ... (or the preset's names) to.")],
+    n: Annotated[int, typer.Option("--n", help="Number of houses (ignored with --preset).")] = 1,
+    seed: Annotated[int, typer.Option("--seed", help="Root seed: the same seed gives byte-identical houses.")] = 0,
+    rooms: Annotated[str | None, typer.Option("--rooms", help=_ROOMS_HELP)] = None,
+    preset: Annotated[str | None, typer.Option("--preset", help="A named house set: pretrain-train, "
+                                               "pretrain-rearranged, pretrain-unseen or tiny (ignores --n, --seed "
+                                               "and --rooms).")] = None,
+    split: Annotated[str, typer.Option("--split", help="ProcTHOR asset split the furniture comes from.")] = "train",
+) -> None:
+    """Generate procedural ProcTHOR-format houses (loadable in AI2-THOR >= 5.0)."""
+    from rich.progress import Progress
+
+    from adaptenv.scene.house import save_house
+    from adaptenv.scene.procedural import child_seeds, generate_house, generate_preset, preset_spec
+
+    if n < 1 or n > 100_000:
+        raise ConfigError(f"--n: expected 1 to 100000 houses, got {n}")
+    if seed < 0:
+        raise ConfigError(f"--seed: expected a non-negative integer, got {seed}")
+    if out.exists() and not out.is_dir():
+        raise ConfigError(f"{out}: exists and is not a folder; pass a folder to -o")
+    rows = []
+    with Progress(transient=True) as progress:
+        if preset is not None:
+            spec = preset_spec(preset)
+            task = progress.add_task(f"generating {preset}", total=spec.n_houses)
+            named = generate_preset(preset, on_house=lambda i, total: progress.update(task, completed=i + 1, total=total))
+        else:
+            cfg = _config_for(rooms, split)
+            task = progress.add_task("generating houses", total=n)
+            named = []
+            for i, s in enumerate(child_seeds(seed, n)):
+                named.append((f"house_{i:04d}", generate_house(s, cfg)))
+                progress.update(task, completed=i + 1)
+    out.mkdir(parents=True, exist_ok=True)
+    for name, house in named:
+        save_house(house, out / f"{name}.json")
+        rows.append(_summary_row(name, house))
+    _print_summary(rows, out)
+
+
+@houses_app.command("rearrange")
+def rearrange(
+    house_path: Annotated[Path, typer.Argument(metavar="HOUSE.json", help="The house to rearrange.")],
+    out: Annotated[Path, typer.Option("-o", "--out", help="Where to write the rearranged house (a .json file).")],
+    seed: Annotated[int, typer.Option("--seed", help="Seed of the new arrangement.")] = 0,
+) -> None:
+    """Place a house's movable furniture anew (same rooms, doors, fixtures and target types)."""
+    from rich.console import Console
+
+    from adaptenv.scene.house import load_house, save_house
+    from adaptenv.scene.procedural import rearrange_house
+
+    if seed < 0:
+        raise ConfigError(f"--seed: expected a non-negative integer, got {seed}")
+    if out.suffix.lower() != ".json":
+        raise ConfigError(f"{out}: the output must be a .json file; pass e.g. -o rearranged.json")
+    house = load_house(existing_file(house_path, "house file"))
+    new = rearrange_house(house, seed)
+    save_house(new, out)
+    old = {o.id: o.position for o in house.objects}
+    moved = sum(1 for o in new.objects if o.id in old and old[o.id] != o.position)
+    Console().print(f"wrote [bold]{out}[/]: {len(new.objects)} objects, {moved} moved")
+
+
+def bench_houses(as_json: bool = JSON_OPTION,
+                 houses: Annotated[int, typer.Option("--houses", min=5, help="Houses timed per room count.")] = 20,
+                 ) -> None:
+    """Median time to generate a 5-room and a 10-room procedural house."""
+    from adaptenv.bench.houses import run
+
+    run(as_json, houses)
+
+
+def register(app: typer.Typer, bench: typer.Typer) -> None:
+    app.add_typer(houses_app, name="houses")
+    bench.command("houses")(bench_houses)
