@@ -2,17 +2,20 @@
 
 The paper's F reads a top-down trajectory image and returns {outcome, concerns, suggestions}.
 :class:`Analysis` is that result; :func:`analyze_trajectory` is the built-in, deterministic F that
-computes it from the trajectory, the scene geometry and the geodesic distance field. The LLM
-analyzer (``adapt/llm_agents.py``) returns the same type. Suggestions say *what* should change
+computes it from the trajectory, the scene geometry and the geodesic distance field;
+:class:`LLMAnalyzer` asks a vision-language model about the top-down render and returns the same
+type (``source="llm"``). Both satisfy the :class:`Analyzer` protocol. Suggestions say *what* should change
 (narrow a passage, occlude the target, lengthen the route, add clutter), never *how*: turning
 them into object moves is the generator's job.
 """
 
 from __future__ import annotations
 
+import io
+import logging
 import math
 from collections import Counter
-from typing import Literal
+from typing import TYPE_CHECKING, Literal, Protocol, runtime_checkable
 
 import numpy as np
 from pydantic import BaseModel, Field
@@ -21,6 +24,11 @@ from adaptenv.scene.occupancy import LABEL_DOOR, LABEL_OBJECT0, LABEL_WINDOW
 from adaptenv.sim.spec import AGENT_RADIUS, MAX_STEPS, MOVE_STEP
 from adaptenv.sim.trajectory import Trajectory
 from adaptenv.sim.world import NavWorld
+
+if TYPE_CHECKING:
+    from adaptenv.adapt.llm.backend import LLMBackend
+
+log = logging.getLogger(__name__)
 
 FailureMode = Literal["timeout", "ended_too_far", "ended_without_sight", "stuck", "looping", "never_saw_target"]
 ConcernKind = Literal["collision", "close_proximity", "narrow_clearance", "detour", "revisit", "oscillation",
@@ -270,3 +278,184 @@ def _suggest(concerns: list[Concern], outcome: Outcome, traj: Trajectory) -> lis
         for s in out:
             s.priority = min(1.0, s.priority + 0.1)
     return sorted(out, key=lambda s: -s.priority)
+
+
+# --------------------------------------------------------------------------- analyzers (F)
+
+@runtime_checkable
+class Analyzer(Protocol):
+    """The paper's F: a recorded episode in a compiled house -> :class:`Analysis`."""
+
+    name: str
+
+    def analyze(self, trajectory: Trajectory, world: NavWorld) -> Analysis:
+        """Outcome, concerns and suggestions for one episode."""
+        ...
+
+
+class BuiltinAnalyzer:
+    """The offline, deterministic F (:func:`analyze_trajectory`) behind the :class:`Analyzer` protocol."""
+
+    name = "builtin"
+
+    def analyze(self, trajectory: Trajectory, world: NavWorld) -> Analysis:
+        return analyze_trajectory(trajectory, world)
+
+
+class LLMConcern(BaseModel):
+    """One concern as the model reports it (grid position may be unknown)."""
+
+    kind: ConcernKind
+    severity: float
+    description: str
+    grid_x: float | None
+    grid_y: float | None
+    objects: list[str]
+
+
+class LLMSuggestion(BaseModel):
+    """One abstract suggestion as the model reports it; ``addresses`` holds concern numbers (1-based)."""
+
+    kind: SuggestionKind
+    description: str
+    addresses: list[int]
+    priority: float
+
+
+class LLMAnalysisAnswer(BaseModel):
+    """The structured answer F's model must give (validated by the backend's ``parse``)."""
+
+    success: bool
+    failure_mode: FailureMode | None
+    summary: str
+    concerns: list[LLMConcern]
+    suggestions: list[LLMSuggestion]
+
+
+ANALYZER_SYSTEM = (
+    "You are an expert reviewer of household robot navigation. You look at a top-down floor plan on "
+    "which one episode of a robot searching for an object is drawn, and you report what happened so "
+    "that a level designer can make the apartment more demanding for this robot.")
+
+ANALYZER_PROMPT = """{task}
+
+How to read the image: north is up. A normalized grid runs from 0 to 100 along both axes (x to the
+right, y upward; ticks every 10 units). The robot's path goes from yellow (start) to orange (end);
+red x marks are blocked moves (collisions); orange crosses mark every instance of the target
+object; furniture is drawn as labelled rectangles with a tick on its front side.
+
+Report three things:
+1. outcome: did the robot succeed (stop with the target in view within 2 m)? If not, choose a
+   failure_mode from: timeout, ended_too_far, ended_without_sight, stuck, looping, never_saw_target.
+   Add a one-sentence summary.
+2. concerns: behaviour worth training on, even when the episode succeeded. Each has a kind from:
+   collision, close_proximity, narrow_clearance, detour, revisit, oscillation, late_sight,
+   premature_end; a severity between 0 and 1; a short description; where it happened (grid_x,
+   grid_y, or null if it concerns the whole episode); and the ids of the objects involved, copied
+   from the labels in the image.
+3. suggestions: what aspect of the apartment should change so the robot has to practise handling
+   these concerns. Each has a kind from: narrow_passage, occlude_target, lengthen_route,
+   add_clutter; a description of WHAT should change (not how: do not name positions or moves);
+   the numbers (1-based) of the concerns it addresses; and a priority between 0 and 1."""
+
+
+def _png_bytes(image) -> bytes:
+    buf = io.BytesIO()
+    image.save(buf, format="PNG")
+    return buf.getvalue()
+
+
+def render_for_analysis(trajectory: Trajectory, world: NavWorld, *, size: int = 768) -> bytes:
+    """The PNG F looks at: the top-down map with the normalized grid and the episode drawn on it."""
+    from adaptenv.render.topdown import render_house
+
+    return _png_bytes(render_house(None, geometry=world.geometry, trajectory=trajectory, grid=True, size=size))
+
+
+def answer_to_analysis(answer: LLMAnalysisAnswer, task: str, trajectory: Trajectory,
+                       known_ids: set[str] | None = None) -> Analysis:
+    """Convert the model's structured answer to an :class:`Analysis` (ids c1.., s1..; unknown object ids dropped)."""
+    concerns = []
+    for k, c in enumerate(answer.concerns, 1):
+        where = None
+        if c.grid_x is not None and c.grid_y is not None and math.isfinite(c.grid_x) and math.isfinite(c.grid_y):
+            where = GridPoint(x=float(np.clip(c.grid_x, 0, 100)), y=float(np.clip(c.grid_y, 0, 100)))
+        objs = [o for o in c.objects if known_ids is None or o in known_ids]
+        concerns.append(Concern(id=f"c{k}", kind=c.kind, severity=float(np.clip(np.nan_to_num(c.severity), 0, 1)),
+                                description=c.description, where=where, objects=objs))
+    suggestions = []
+    for k, s in enumerate(answer.suggestions, 1):
+        refs = [f"c{i}" for i in s.addresses if 1 <= i <= len(concerns)]
+        suggestions.append(Suggestion(id=f"s{k}", kind=s.kind, description=s.description, addresses=refs,
+                                      priority=float(np.clip(np.nan_to_num(s.priority), 0, 1))))
+    suggestions.sort(key=lambda s: -s.priority)
+    m = trajectory.metrics
+    outcome = Outcome(success=answer.success, failure_mode=None if answer.success else answer.failure_mode,
+                      summary=answer.summary, steps=len(trajectory.steps), spl=m.spl if m else None)
+    return Analysis(task=task, outcome=outcome, concerns=concerns, suggestions=suggestions, source="llm")
+
+
+class LLMAnalyzer:
+    """F on a vision-language model: the trajectory render plus the task in, a structured analysis out.
+
+    Invalid answers are sent back with the validation error (``max_attempts`` in all); when every
+    attempt fails, the built-in analysis is returned (``source="builtin-fallback"``) unless
+    ``fallback=False``, in which case the last error is raised.
+
+    Example:
+        >>> from adaptenv.adapt.llm import LLMConfig, make_backend
+        >>> f = LLMAnalyzer(make_backend(LLMConfig(model="gpt-4.1-mini")))  # doctest: +SKIP
+        >>> analysis = f.analyze(trajectory, world)  # doctest: +SKIP
+    """
+
+    name = "llm"
+
+    def __init__(self, backend: LLMBackend, *, max_attempts: int = 3, image_size: int = 768, fallback: bool = True):
+        self.backend = backend
+        self.max_attempts = max_attempts
+        self.image_size = image_size
+        self.fallback = fallback
+        self.last_error: str | None = None
+
+    def prompt(self, trajectory: Trajectory) -> str:
+        """The user prompt: the task description and what to report."""
+        task = f"Task: the robot had to find a {trajectory.target_type} (object navigation) in this apartment."
+        return ANALYZER_PROMPT.format(task=task)
+
+    def analyze(self, trajectory: Trajectory, world: NavWorld) -> Analysis:
+        from adaptenv.adapt.llm import Message, ModelAnswerError
+
+        png = render_for_analysis(trajectory, world, size=self.image_size)
+        messages = [Message.user(self.prompt(trajectory), png)]
+        task = f"Find a {trajectory.target_type} (ObjectNav) in house {trajectory.house}."
+        known = {f.object_id for f in world.geometry.footprints}
+        self.last_error = None
+        for attempt in range(self.max_attempts):
+            try:
+                answer = self.backend.parse(ANALYZER_SYSTEM, messages, None, LLMAnalysisAnswer)
+            except ModelAnswerError as exc:
+                self.last_error = str(exc)
+                log.info("analysis answer %d rejected: %s", attempt + 1, exc)
+                messages += [Message.assistant(exc.raw or "(no answer)"), Message.user(exc.feedback)]
+                continue
+            return answer_to_analysis(answer.value, task, trajectory, known)
+        if not self.fallback:
+            from adaptenv.adapt.llm import LLMError
+
+            raise LLMError(f"the analysis model gave no valid answer in {self.max_attempts} attempts "
+                           f"(last: {self.last_error})")
+        log.warning("falling back to the built-in analysis: %s", self.last_error)
+        out = analyze_trajectory(trajectory, world)
+        out.source = "builtin-fallback"
+        return out
+
+
+def make_analyzer(name: str = "builtin", **kw) -> Analyzer:
+    """``builtin`` (default, offline) or ``llm`` (needs ``backend=`` from ``adapt.llm.make_backend``)."""
+    if name == "builtin":
+        return BuiltinAnalyzer()
+    if name == "llm":
+        return LLMAnalyzer(**kw)
+    from adaptenv.errors import ConfigError
+
+    raise ConfigError(f"unknown analyzer {name!r}; use builtin or llm")

@@ -5,7 +5,8 @@ The geodesic distance is a shortest path over navigable cells (clearance >= AGEN
 res*sqrt(5)), never cutting a corner (a move needs every cell its segment crosses to be
 navigable). Knight moves cut the metric's worst error against the true Euclidean shortest path
 from 8.2% (8 neighbours) to 2.7%. Navigable connectivity is unchanged (4-connected components).
-Fields are cached per target type in ``world.cache``.
+Fields are cached per target type in ``world.cache``; once a type's distance field exists its
+success region is not kept (it is exactly the field's zeros).
 """
 
 from __future__ import annotations
@@ -165,16 +166,23 @@ def success_region(world: NavWorld, target_type: str) -> np.ndarray:
     Exactly the cells where :func:`adaptenv.sim.task.visible_instances` with a 360-degree field of
     view is non-empty at the cell centre (same sample points, same line-of-sight walk).
     """
+    field = world.cache.get(("distance", target_type))
+    if field is not None:  # the region is exactly where the field is 0 (its sources; every step costs > 0)
+        return field == 0.0
     key = ("region", target_type)
     if key not in world.cache:
-        g = world.grid
-        out = np.zeros(g.shape, dtype=np.bool_)
-        tp = target_points(world, target_type)
-        if len(tp.points):
-            _region(g.clearance, world.occluder, g.label, g.x0, g.z0, g.resolution, AGENT_RADIUS,
-                    tp.points, tp.label, SUCCESS_DISTANCE, out)
-        world.cache[key] = out
+        world.cache[key] = _compute_region(world, target_type)
     return world.cache[key]
+
+
+def _compute_region(world: NavWorld, target_type: str) -> np.ndarray:
+    g = world.grid
+    out = np.zeros(g.shape, dtype=np.bool_)
+    tp = target_points(world, target_type)
+    if len(tp.points):
+        _region(g.clearance, world.occluder, g.label, g.x0, g.z0, g.resolution, AGENT_RADIUS,
+                tp.points, tp.label, SUCCESS_DISTANCE, out)
+    return out
 
 
 def navigable(world: NavWorld) -> np.ndarray:
@@ -191,6 +199,7 @@ def distance_field(world: NavWorld, target_type: str) -> np.ndarray:
     if key not in world.cache:
         region = success_region(world, target_type)
         world.cache[key] = shortest_paths(navigable(world), region, world.grid.resolution)[0]
+        world.cache.pop(("region", target_type), None)  # now derived from the field: saves H*W bytes
     return world.cache[key]
 
 

@@ -8,15 +8,17 @@ lives in NumPy arrays. Only the rare agents that issue ``end`` go through Python
 
 from __future__ import annotations
 
+import hashlib
 import math
 from collections.abc import Sequence
 from functools import cache
+from pathlib import Path
 
 import numba
 import numpy as np
 
 from adaptenv.errors import AdaptenvError
-from adaptenv.sim import geodesic, metrics, task
+from adaptenv.sim import geodesic, metrics, physics, scan, task
 from adaptenv.sim.physics import _MOVE_DELTA, _YAW_DELTA, PackedGrids, _move_one
 from adaptenv.sim.scan import RAY_COS, RAY_SIN, _scan_one, pack_semantic
 from adaptenv.sim.spec import (
@@ -61,68 +63,100 @@ def _field_at(dist, off, h, w, x0, z0, res, x, z):
     return best
 
 
-@numba.njit(cache=True)
-def _agent_step(i, stepping, clear, sem, dist, offs, hs, ws, x0s, z0s, ress,
-                env, doff, x, z, yaw, steps, collisions, prev_action, path, geo, best, moved, done,
-                actions, radius, yaw_delta, move_delta, ray_cos, ray_sin, max_range, max_steps,
-                reward, terminated, truncated, depth, classes):
-    """Agent i: act (when ``stepping`` and not done), book-keep the reward, then look and measure."""
-    e = env[i]
-    off, h, w, x0, z0, res = offs[e], hs[e], ws[e], x0s[e], z0s[e], ress[e]
-    act = stepping and not done[i]
-    a = actions[i] if act else 0
-    if act:
-        nx, nz, nyaw, ok = _move_one(clear, off, h, w, x0, z0, res, x[i], z[i], yaw[i], yaw_delta[a],
-                                     move_delta[a], radius)
-        x[i], z[i], yaw[i], moved[i] = nx, nz, nyaw, ok
-        if ok:
-            path[i] += abs(move_delta[a])
+def _dependency_stamp() -> str:
+    """SHA-256 of the sources the batch kernels inline from other files (physics.py, scan.py).
+
+    numba's on-disk cache only checks the kernel's own file; the stamp is a closure variable of the
+    kernels, and numba keys cached code on closure contents, so editing a dependency recompiles.
+    """
+    h = hashlib.sha256()
+    for mod in (physics, scan):
+        h.update(Path(mod.__file__).read_bytes())
+    return h.hexdigest()
+
+
+def _make_agent_step(stamp: str):
+    """The per-agent step kernel, keyed in numba's cache by ``stamp`` (its only closure variable)."""
+
+    @numba.njit(cache=True)
+    def _agent_step(i, stepping, clear, sem, dist, offs, hs, ws, x0s, z0s, ress,
+                    env, doff, x, z, yaw, steps, collisions, prev_action, path, geo, best, moved, done,
+                    actions, radius, yaw_delta, move_delta, ray_cos, ray_sin, max_range, max_steps,
+                    reward, terminated, truncated, depth, classes):
+        """Agent i: act (when ``stepping`` and not done), book-keep the reward, then look and measure."""
+        _ = stamp  # a closure variable, so that numba's cache key covers physics.py and scan.py
+        e = env[i]
+        off, h, w, x0, z0, res = offs[e], hs[e], ws[e], x0s[e], z0s[e], ress[e]
+        act = stepping and not done[i]
+        a = actions[i] if act else 0
+        if act:
+            nx, nz, nyaw, ok = _move_one(clear, off, h, w, x0, z0, res, x[i], z[i], yaw[i], yaw_delta[a],
+                                         move_delta[a], radius)
+            x[i], z[i], yaw[i], moved[i] = nx, nz, nyaw, ok
+            if ok:
+                path[i] += abs(move_delta[a])
+            else:
+                collisions[i] += 1
+            steps[i] += 1
+            prev_action[i] = a
+        d = _field_at(dist[doff[i]], 0, h, w, x0, z0, res, x[i], z[i])
+        geo[i] = d
+        if act:
+            gain = 0.0
+            if d < math.inf and best[i] < math.inf and best[i] > d:
+                gain = best[i] - d
+            reward[i] = STEP_PENALTY + gain
+            terminated[i] = a == END
+            truncated[i] = a != END and steps[i] >= max_steps
+            done[i] = terminated[i] or truncated[i]
         else:
-            collisions[i] += 1
-        steps[i] += 1
-        prev_action[i] = a
-    d = _field_at(dist, doff[i], h, w, x0, z0, res, x[i], z[i])
-    geo[i] = d
-    if act:
-        gain = 0.0
-        if d < math.inf and best[i] < math.inf and best[i] > d:
-            gain = best[i] - d
-        reward[i] = STEP_PENALTY + gain
-        terminated[i] = a == END
-        truncated[i] = a != END and steps[i] >= max_steps
-        done[i] = terminated[i] or truncated[i]
-    else:
-        reward[i] = 0.0
-        terminated[i] = False
-        truncated[i] = False
-    if d < best[i]:
-        best[i] = d
-    _scan_one(clear, sem, off, h, w, x0, z0, res, x[i], z[i], yaw[i], ray_cos, ray_sin, max_range, depth, classes,
-              i)
+            reward[i] = 0.0
+            terminated[i] = False
+            truncated[i] = False
+        if d < best[i]:
+            best[i] = d
+        _scan_one(clear, sem, off, h, w, x0, z0, res, x[i], z[i], yaw[i], ray_cos, ray_sin, max_range, depth, classes,
+                  i)
+
+    return _agent_step
 
 
-@numba.njit(cache=True)
-def _run_serial(idx, stepping, clear, sem, dist, offs, hs, ws, x0s, z0s, ress,
-                env, doff, x, z, yaw, steps, collisions, prev_action, path, geo, best, moved, done,
-                actions, radius, yaw_delta, move_delta, ray_cos, ray_sin, max_range, max_steps,
-                reward, terminated, truncated, depth, classes):
-    for k in range(idx.shape[0]):
-        _agent_step(idx[k], stepping, clear, sem, dist, offs, hs, ws, x0s, z0s, ress,
+_STAMP = _dependency_stamp()
+_agent_step = _make_agent_step(_STAMP)
+
+
+def _make_loops(stamp: str):
+    """Serial and parallel loops of ``_agent_step`` over agents (a global, so that the closure holds
+    only ``stamp``: numba's cache key must not include a dispatcher object)."""
+
+    @numba.njit(cache=True)
+    def _run_serial(idx, stepping, clear, sem, dist, offs, hs, ws, x0s, z0s, ress,
                     env, doff, x, z, yaw, steps, collisions, prev_action, path, geo, best, moved, done,
                     actions, radius, yaw_delta, move_delta, ray_cos, ray_sin, max_range, max_steps,
-                    reward, terminated, truncated, depth, classes)
+                    reward, terminated, truncated, depth, classes):
+        _ = stamp
+        for k in range(idx.shape[0]):
+            _agent_step(idx[k], stepping, clear, sem, dist, offs, hs, ws, x0s, z0s, ress,
+                        env, doff, x, z, yaw, steps, collisions, prev_action, path, geo, best, moved, done,
+                        actions, radius, yaw_delta, move_delta, ray_cos, ray_sin, max_range, max_steps,
+                        reward, terminated, truncated, depth, classes)
+
+    @numba.njit(cache=True, parallel=True)
+    def _run_parallel(idx, stepping, clear, sem, dist, offs, hs, ws, x0s, z0s, ress,
+                      env, doff, x, z, yaw, steps, collisions, prev_action, path, geo, best, moved, done,
+                      actions, radius, yaw_delta, move_delta, ray_cos, ray_sin, max_range, max_steps,
+                      reward, terminated, truncated, depth, classes):
+        _ = stamp
+        for k in numba.prange(idx.shape[0]):
+            _agent_step(idx[k], stepping, clear, sem, dist, offs, hs, ws, x0s, z0s, ress,
+                        env, doff, x, z, yaw, steps, collisions, prev_action, path, geo, best, moved, done,
+                        actions, radius, yaw_delta, move_delta, ray_cos, ray_sin, max_range, max_steps,
+                        reward, terminated, truncated, depth, classes)
+
+    return _run_serial, _run_parallel
 
 
-@numba.njit(cache=True, parallel=True)
-def _run_parallel(idx, stepping, clear, sem, dist, offs, hs, ws, x0s, z0s, ress,
-                  env, doff, x, z, yaw, steps, collisions, prev_action, path, geo, best, moved, done,
-                  actions, radius, yaw_delta, move_delta, ray_cos, ray_sin, max_range, max_steps,
-                  reward, terminated, truncated, depth, classes):
-    for k in numba.prange(idx.shape[0]):
-        _agent_step(idx[k], stepping, clear, sem, dist, offs, hs, ws, x0s, z0s, ress,
-                    env, doff, x, z, yaw, steps, collisions, prev_action, path, geo, best, moved, done,
-                    actions, radius, yaw_delta, move_delta, ray_cos, ray_sin, max_range, max_steps,
-                    reward, terminated, truncated, depth, classes)
+_run_serial, _run_parallel = _make_loops(_STAMP)
 
 
 @numba.njit(cache=True)
@@ -183,7 +217,7 @@ class BatchSim:
         self.max_range = float(max_range)
         self.parallel = parallel
         """Multi-threaded kernel: True, False, or None for batches of at least PARALLEL_MIN_BATCH."""
-        self._dist = np.zeros(0, dtype=np.float32)
+        self._fields = numba.typed.List.empty_list(numba.types.float32[::1])
         self._field_offset: dict[tuple[int, str], int] = {}
         self._targets: dict[tuple[int, str], np.ndarray] = {}
         self._allocate(0)
@@ -218,7 +252,10 @@ class BatchSim:
         self._no_actions = np.zeros(n, dtype=np.int64)
 
     def _distance_offset(self, e: int, target_type: str) -> int:
-        """Offset of the (house, target) distance field in the packed array; computed on first use."""
+        """Index of the (house, target) distance field in ``self._fields``; fetched on first use.
+
+        The fields are flat views of ``geodesic.distance_field``'s cached arrays, not copies.
+        """
         key = (e, target_type)
         off = self._field_offset.get(key)
         if off is None:
@@ -227,8 +264,8 @@ class BatchSim:
             if field.shape != world.grid.shape:
                 raise ValueError(f"distance field of {target_type!r} has shape {field.shape}, "
                                  f"expected the grid's {world.grid.shape}")
-            off = self._field_offset[key] = self._dist.size
-            self._dist = np.concatenate([self._dist, field.ravel()])
+            off = self._field_offset[key] = len(self._fields)
+            self._fields.append(np.ascontiguousarray(field).reshape(-1))
             self._targets[key] = np.asarray(task.target_points(world, target_type).points, dtype=np.float64)
         return off
 
@@ -282,7 +319,7 @@ class BatchSim:
         g = self.grids
         parallel = idx.shape[0] >= PARALLEL_MIN_BATCH if self.parallel is None else self.parallel
         kernel = _run_parallel if parallel else _run_serial
-        kernel(idx, stepping, g.clearance, self.semantic, self._dist, g.offset, g.height, g.width, g.x0, g.z0,
+        kernel(idx, stepping, g.clearance, self.semantic, self._fields, g.offset, g.height, g.width, g.x0, g.z0,
                g.resolution, self.env, self._doff, self.x, self.z, self.yaw, self.steps, self.collisions,
                self.prev_action, self.path_length, self.geodesic, self.best, self.moved, self.done,
                actions, self.radius, _YAW_DELTA, _MOVE_DELTA, RAY_COS, RAY_SIN, self.max_range, self.max_steps,
@@ -354,9 +391,12 @@ class BatchSim:
 
     @property
     def nbytes(self) -> int:
-        """Memory of the packed simulator arrays (clearance, semantics, distance fields) that are not
-        views of the worlds' own arrays (one world's rasters are used in place)."""
-        return int(sum(a.nbytes for a in (self.grids.clearance, self.semantic, self._dist) if a.base is None))
+        """Memory of the arrays BatchSim holds that no world holds too: packed rasters of several
+        worlds (one world's are used in place) and distance fields no longer in their world's cache."""
+        own = sum(a.nbytes for a in (self.grids.clearance, self.semantic) if a.base is None)
+        held = {id(a) for w in self.worlds for a in w.cache.values() if isinstance(a, np.ndarray)}
+        own += sum(f.nbytes for f in self._fields if id(f.base) not in held)
+        return int(own)
 
 
 class EpisodeSampler:

@@ -6,7 +6,7 @@ distance fields then only read these arrays.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, fields, is_dataclass
 
 import numpy as np
 
@@ -67,8 +67,24 @@ class NavWorld:
     @property
     def nbytes(self) -> int:
         """Memory held by the world's arrays (grid, semantic, occluder and cached fields)."""
-        cached = sum(v.nbytes for v in self.cache.values() if isinstance(v, np.ndarray))
+        seen: set[int] = set()
+        cached = sum(_array_bytes(v, seen) for v in self.cache.values())
         return self.grid.nbytes + self.semantic.nbytes + self.occluder.nbytes + cached
+
+
+def _array_bytes(value, seen: set[int]) -> int:
+    """Bytes of the NumPy arrays in a cache entry (an array, a dataclass or a sequence of them),
+    each array counted once (``seen`` holds ids), so fields shared between entries are not double-counted."""
+    if isinstance(value, np.ndarray):
+        if id(value) in seen:
+            return 0
+        seen.add(id(value))
+        return value.nbytes
+    if is_dataclass(value) and not isinstance(value, type):
+        return sum(_array_bytes(getattr(value, f.name), seen) for f in fields(value))
+    if isinstance(value, (list, tuple)):
+        return sum(_array_bytes(v, seen) for v in value)
+    return 0
 
 
 def compile_world(house: House, name: str = "house", resolution: float = DEFAULT_RESOLUTION,

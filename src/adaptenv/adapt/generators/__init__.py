@@ -1,0 +1,189 @@
+"""The generator G: turn an analysis into k single-object edits of a house, one interface, three kinds.
+
+Every generator implements :class:`Generator`::
+
+    result = generator.generate(house, analysis, steps=5, context=ctx, rng=np.random.default_rng(0))
+
+and returns a :class:`GenerationResult`: the edited house, one :class:`StepRecord` per step (the
+edit, verification outcome, revisions, objective before/after), the full
+:class:`~adaptenv.adapt.edits.EditLog` (rejected tries included), the renders after each edit,
+token usage (LLM) and the objective trace.
+
+- ``builtin`` (:class:`~adaptenv.adapt.generators.builtin.BuiltinGenerator`, default, offline,
+  deterministic): suggestions become objectives, candidate moves are searched and scored.
+- ``llm`` (:class:`~adaptenv.adapt.generators.llm.LLMGenerator`): the paper's procedure, one tool
+  call per edit, with verification.
+- ``random`` (:class:`~adaptenv.adapt.generators.random_perturbation.RandomPerturbation`): every
+  movable object displaced and rotated at random (the paper's comparison point).
+
+Moves are on the normalized 100x100 grid (+x right, +y up); ``rotation`` is the object's new
+absolute yaw in degrees (0 faces up on the map, 90 faces right).
+"""
+
+from __future__ import annotations
+
+import io
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import TYPE_CHECKING, Any, Literal, Protocol, runtime_checkable
+
+import numpy as np
+from pydantic import BaseModel, Field
+
+from adaptenv.adapt.edits import Edit, EditLog
+from adaptenv.errors import ConfigError
+
+if TYPE_CHECKING:
+    from PIL import Image
+
+    from adaptenv.adapt.analysis import Analysis
+    from adaptenv.scene.house import House
+    from adaptenv.sim.task import Episode
+    from adaptenv.sim.trajectory import Trajectory
+
+StepStatus = Literal["applied", "rejected", "skipped"]
+GENERATORS = ("builtin", "llm", "random")
+
+
+class StepRecord(BaseModel):
+    """One generation step: what was targeted, what was applied, and whether verification passed."""
+
+    step: int
+    status: StepStatus
+    suggestion_id: str | None = None
+    suggestion_kind: str | None = None
+    edit: Edit | None = None
+    """The edit kept for this step (None when skipped)."""
+    reason: str = ""
+    """Why a step was skipped or rejected, or the verifier's reason."""
+    verified: bool | None = None
+    """Whether verification passed (None: not verified)."""
+    verification: str = "none"
+    """How it was verified: ``objective``, ``llm`` or ``none``."""
+    revisions: int = 0
+    """Revisions taken after the first attempt."""
+    attempts: int = 1
+    """Proposals requested for this step (LLM answers, including invalid ones)."""
+    candidates: int = 0
+    """Candidate moves evaluated (built-in)."""
+    objective_before: dict[str, float | None] = Field(default_factory=dict)
+    objective_after: dict[str, float | None] = Field(default_factory=dict)
+    gain: float | None = None
+    """Gain of the targeted objective (positive = harder as intended)."""
+    policy_score_before: float | None = None
+    policy_score_after: float | None = None
+    """Mean SPL of the policy on the checking episodes before/after the edit (when checked)."""
+    render: str | None = None
+    """File of the render after this step, when written."""
+
+
+@dataclass
+class GenerationContext:
+    """What a generator knows besides the house and the analysis: the episode and (optionally) the agent."""
+
+    episode: Episode
+    trajectory: Trajectory | None = None
+    """The rollout F analysed; its route feeds the objectives and is drawn on the renders."""
+    policy: Any = None
+    """Policy used to check candidate edits with rollouts (built-in); None skips the check."""
+    rollout_episodes: int = 3
+    """Episodes per rollout check (the same start and target, different initial headings)."""
+    render: bool = True
+    """Re-render after every edit (the LLM generator always does)."""
+    render_size: int = 768
+    out_dir: Path | None = None
+    """When set, renders are written here as ``step-XX.png``."""
+
+
+@dataclass
+class GenerationResult:
+    """Everything a generation run produced."""
+
+    house: House
+    steps: list[StepRecord]
+    edit_log: EditLog
+    generator: str
+    renders: list[Image.Image] = field(default_factory=list)
+    render_paths: list[Path] = field(default_factory=list)
+    usage: dict[str, int] = field(default_factory=dict)
+    objective_trace: list[dict[str, float | None]] = field(default_factory=list)
+    """Objective values before the first step and after every step."""
+
+    @property
+    def applied(self) -> list[Edit]:
+        return [s.edit for s in self.steps if s.status == "applied" and s.edit is not None]
+
+    def to_json_dict(self) -> dict[str, Any]:
+        """The log written next to a run: steps, every tried edit, usage, objective trace."""
+        return {"generator": self.generator, "steps": [s.model_dump(mode="json") for s in self.steps],
+                "edit_log": self.edit_log.model_dump(mode="json")["edits"], "usage": self.usage,
+                "objective_trace": self.objective_trace}
+
+
+@runtime_checkable
+class Generator(Protocol):
+    """The paper's G: ``(house, analysis) -> edited house`` in ``steps`` single-object edits."""
+
+    name: str
+
+    def generate(self, house: House, analysis: Analysis, *, steps: int, context: GenerationContext,
+                 rng: np.random.Generator) -> GenerationResult:
+        """Edit a copy of ``house``; never modifies the input."""
+        ...
+
+
+def png_bytes(image: Image.Image) -> bytes:
+    """PNG encoding of a PIL image (what the LLM backends send)."""
+    buf = io.BytesIO()
+    image.save(buf, format="PNG")
+    return buf.getvalue()
+
+
+def render_scene(house: House, context: GenerationContext, *, highlight: dict[str, str] | None = None,
+                 title: str | None = None) -> Image.Image:
+    """The top-down render with the normalized grid and the analysed trajectory (if any)."""
+    from adaptenv.render.topdown import render_house
+
+    return render_house(house, trajectory=context.trajectory, grid=True, size=context.render_size,
+                        highlight=highlight, title=title)
+
+
+def keep_render(result: GenerationResult, image: Image.Image, context: GenerationContext, step: int) -> str | None:
+    """Store a render in the result (and on disk when ``context.out_dir`` is set); returns the file name."""
+    result.renders.append(image)
+    if context.out_dir is None:
+        return None
+    from adaptenv.render.topdown import save_render
+
+    path = save_render(image, Path(context.out_dir) / f"step-{step:02d}.png")
+    result.render_paths.append(path)
+    return str(path)
+
+
+def movable_ids(house: House) -> list[str]:
+    """Ids of the top-level floor objects placement may move (the LLM's allowed ids)."""
+    from adaptenv.adapt.placement import PlacementContext
+
+    ctx = PlacementContext.from_house(house)
+    return [oid for oid, m in zip(ctx.ids, ctx.movable, strict=True) if m]
+
+
+def make_generator(name: str = "builtin", **kw: Any) -> Generator:
+    """Build a generator by name: ``builtin`` (default), ``llm`` (needs ``backend=``) or ``random``."""
+    if name == "builtin":
+        from adaptenv.adapt.generators.builtin import BuiltinGenerator
+
+        return BuiltinGenerator(**kw)
+    if name == "llm":
+        from adaptenv.adapt.generators.llm import LLMGenerator
+
+        return LLMGenerator(**kw)
+    if name == "random":
+        from adaptenv.adapt.generators.random_perturbation import RandomPerturbation
+
+        return RandomPerturbation(**kw)
+    raise ConfigError(f"unknown generator {name!r}; use one of {', '.join(GENERATORS)}")
+
+
+__all__ = ["GENERATORS", "GenerationContext", "GenerationResult", "Generator", "StepRecord", "keep_render",
+           "make_generator", "movable_ids", "png_bytes", "render_scene"]

@@ -1,0 +1,224 @@
+"""The LLM generator and the LLM analyzer through the real openai SDK with a mocked HTTP transport."""
+
+from __future__ import annotations
+
+import importlib.util
+import json
+import sys
+from pathlib import Path
+
+import httpx2
+import numpy as np
+import pytest
+
+from adaptenv.adapt.analysis import LLMAnalyzer, analyze_trajectory
+from adaptenv.adapt.generators import GenerationContext
+from adaptenv.adapt.generators.llm import SYSTEM_PROMPT, LLMGenerator
+from adaptenv.adapt.llm import ChatCompletionsBackend, LLMConfig, move_tool
+from adaptenv.sim.rollout import expert_policy, run_episode
+from adaptenv.sim.task import Episode
+from adaptenv.sim.world import compile_world
+from tests.sim import helpers as H
+
+
+def _load_server_module():
+    name = "adaptenv_tests_llm_server"
+    if name not in sys.modules:
+        spec = importlib.util.spec_from_file_location(name, Path(__file__).with_name("llm_server.py"))
+        module = importlib.util.module_from_spec(spec)
+        sys.modules[name] = module
+        spec.loader.exec_module(module)
+    return sys.modules[name]
+
+
+srv = _load_server_module()
+IDS = ["GarbageCan|0", "Desk|1", "CoffeeTable|2"]
+
+
+class Mock:
+    """Scripted replies in order; records every request body."""
+
+    def __init__(self, *replies):
+        self.replies = list(replies)
+        self.bodies: list[dict] = []
+
+    def __call__(self, request: httpx2.Request) -> httpx2.Response:
+        self.bodies.append(json.loads(request.content))
+        status, body = self.replies.pop(0)
+        return httpx2.Response(status, json=body)
+
+    def backend(self, **cfg) -> ChatCompletionsBackend:
+        config = LLMConfig(provider="openai-compatible", base_url="http://127.0.0.1:9/v1", model="vlm", **cfg)
+        return ChatCompletionsBackend(config, http_client=httpx2.Client(transport=httpx2.MockTransport(self)),
+                                      sleep=lambda s: None)
+
+
+def move(oid="CoffeeTable|2", xd="right", xu=5.0, yd="up", yu=0.0, rot=0.0) -> tuple[int, dict]:
+    return 200, srv.chat_tool_reply("propose_move_instruction", {
+        "object_id": oid, "x_direction": xd, "x_units": xu, "y_direction": yd, "y_units": yu, "rotation": rot})
+
+
+def verify(ok: bool, revised: dict | None = None) -> tuple[int, dict]:
+    return 200, srv.chat_tool_reply("verify_move", {"matches_intent": ok, "reason": "looks right" if ok else "no",
+                                                    "revised_move": revised})
+
+
+@pytest.fixture(scope="module")
+def scene():
+    house = H.corridor_house()
+    world = compile_world(house, "corridor")
+    ep = Episode("GarbageCan", (1.0, 0.5, 0.0))
+    traj = run_episode(world, ep, expert_policy())
+    return house, world, ep, traj, analyze_trajectory(traj, world)
+
+
+def _run(scene, mock: Mock, steps: int = 1, **kw):
+    house, world, ep, traj, analysis = scene
+    ctx = GenerationContext(episode=ep, trajectory=traj, render_size=320)
+    return LLMGenerator(mock.backend(), **kw).generate(house, analysis, steps=steps, context=ctx,
+                                                       rng=np.random.default_rng(0))
+
+
+def _positions(house):
+    return {o.id: (round(o.position.x, 6), round(o.position.z, 6), round(o.rotation.y, 6)) for o in house.objects}
+
+
+def test_step_request_body_and_verification(scene):
+    house, world, ep, traj, analysis = scene
+    mock = Mock(move(), verify(True))
+    res = _run(scene, mock)
+    first, second = mock.bodies
+    assert first["messages"][0] == {"role": "system", "content": SYSTEM_PROMPT}
+    user = first["messages"][1]
+    assert [p["type"] for p in user["content"]] == ["text", "image_url"]
+    assert user["content"][1]["image_url"]["url"].startswith("data:image/png;base64,")
+    text = user["content"][0]["text"]
+    assert analysis.to_text() in text and "rotation is the object's NEW absolute heading" in text
+    assert "- CoffeeTable|2: CoffeeTable at x=" in text and "Desk|1" in text
+    assert first["tools"] == [{"type": "function", "function": {
+        "name": "propose_move_instruction", "description": move_tool(IDS).description,
+        "parameters": move_tool(IDS).parameters, "strict": True}}]
+    assert first["tools"][0]["function"]["parameters"]["properties"]["object_id"]["enum"] == IDS
+    assert first["tool_choice"] == {"type": "function", "function": {"name": "propose_move_instruction"}}
+    assert first["parallel_tool_calls"] is False
+    assert second["tool_choice"] == {"type": "function", "function": {"name": "verify_move"}}
+    last = second["messages"][-1]
+    assert [p["type"] for p in last["content"]] == ["text", "image_url"]
+    assert "Placement achieved: moved +" in last["content"][0]["text"]
+    (step,) = res.steps
+    assert step.status == "applied" and step.verified is True and step.revisions == 0 and step.attempts == 1
+    assert step.edit.object_id == "CoffeeTable|2" and step.edit.achieved_dx_units > 0
+    assert res.usage["calls"] == 2 and res.usage["total_tokens"] == 36
+    assert len(res.renders) == 1 and _positions(house) != _positions(res.house)
+
+
+def test_unknown_id_is_sent_back_and_the_retry_succeeds(scene):
+    mock = Mock(move(oid="Sofa|9"), move(), verify(True))
+    res = _run(scene, mock)
+    retry = mock.bodies[1]["messages"]
+    assert retry[-2]["role"] == "assistant" and "Sofa|9" in retry[-2]["content"]
+    assert retry[-1]["role"] == "user" and "object_id 'Sofa|9' is not allowed" in retry[-1]["content"]
+    assert res.steps[0].status == "applied" and res.steps[0].attempts == 2
+
+
+def test_three_bad_answers_skip_the_step_and_the_loop_goes_on(scene):
+    house = scene[0]
+    mock = Mock(move(oid="Nope"), move(xu="far"), (200, srv.chat_text_reply("I would move the sofa.")),
+                move(), verify(True))
+    res = _run(scene, mock, steps=2)
+    skipped, applied = res.steps
+    assert skipped.status == "skipped" and skipped.attempts == 3 and skipped.edit is None
+    assert "no valid move after 3 answers" in skipped.reason
+    assert applied.status == "applied" and len(res.edit_log) == 1
+    assert _positions(res.house) != _positions(house)
+
+
+def test_revise_replaces_the_move_from_the_scene_before_it(scene):
+    house = scene[0]
+    revised = {"object_id": "Desk|1", "x_direction": "right", "x_units": 4.0, "y_direction": "up", "y_units": 0.0,
+               "rotation": 90.0}
+    mock = Mock(move(), verify(False, revised), verify(True))
+    res = _run(scene, mock)
+    (step,) = res.steps
+    assert step.status == "applied" and step.revisions == 1 and step.verified is True
+    assert [e.object_id for e in res.edit_log] == ["CoffeeTable|2", "Desk|1"]
+    before, after = _positions(house), _positions(res.house)
+    assert after["CoffeeTable|2"] == before["CoffeeTable|2"], "the first attempt must be undone"
+    assert after["Desk|1"] != before["Desk|1"]
+
+
+def test_revise_without_a_revised_move_asks_for_a_new_one(scene):
+    mock = Mock(move(), verify(False), move(oid="Desk|1", xu=3.0, rot=90.0), verify(True))
+    res = _run(scene, mock)
+    assert mock.bodies[2]["tool_choice"]["function"]["name"] == "propose_move_instruction"
+    assert "replaces the previous one" in mock.bodies[2]["messages"][-1]["content"]
+    assert res.steps[0].revisions == 1 and res.steps[0].edit.object_id == "Desk|1"
+
+
+def test_revisions_are_bounded(scene):
+    mock = Mock(move(), verify(False), move(xu=2.0), verify(False), move(xu=1.0), verify(False))
+    res = _run(scene, mock, max_revisions=2)
+    step = res.steps[0]
+    assert step.revisions == 2 and step.verified is False and step.status == "applied"
+    assert not mock.replies
+
+
+def test_malformed_json_never_raises(scene):
+    bad = (200, srv.chat_tool_reply("propose_move_instruction", '{"object_id": "Desk|1", '))
+    mock = Mock(bad, bad, bad)
+    res = _run(scene, mock)
+    assert res.steps[0].status == "skipped" and "not valid JSON" in res.steps[0].reason
+    assert "were not valid JSON" in mock.bodies[1]["messages"][-1]["content"]
+
+
+def test_server_down_ends_the_run_with_a_reason(scene):
+    mock = Mock((500, srv.error_body("boom", "server_error")))
+    house, world, ep, traj, analysis = scene
+    gen = LLMGenerator(mock.backend(max_retries=0))
+    res = gen.generate(house, analysis, steps=3, context=GenerationContext(episode=ep, trajectory=traj, render_size=320),
+                       rng=np.random.default_rng(0))
+    assert len(res.steps) == 1 and res.steps[0].reason.startswith("LLM unavailable")
+
+
+# ----------------------------------------------------------------------------- the LLM analyzer
+
+ANSWER = {"success": False, "failure_mode": "timeout", "summary": "kept circling the corridor",
+          "concerns": [{"kind": "collision", "severity": 0.7, "description": "bumped the desk", "grid_x": 20.0,
+                        "grid_y": 30.0, "objects": ["Desk|1", "Ghost|7"]},
+                       {"kind": "detour", "severity": 1.4, "description": "long loop", "grid_x": None,
+                        "grid_y": None, "objects": []}],
+          "suggestions": [{"kind": "add_clutter", "description": "more obstacles near the corridor",
+                           "addresses": [2], "priority": 0.4},
+                          {"kind": "narrow_passage", "description": "tighter passage by the desk",
+                           "addresses": [1, 5], "priority": 0.9}]}
+
+
+def test_llm_analyzer_sends_the_render_and_converts_the_answer(scene):
+    house, world, ep, traj, _ = scene
+    mock = Mock((200, srv.chat_text_reply("not json")), (200, srv.chat_text_reply(json.dumps(ANSWER))))
+    a = LLMAnalyzer(mock.backend(), image_size=320).analyze(traj, world)
+    body = mock.bodies[0]
+    assert body["response_format"]["type"] == "json_schema"
+    parts = body["messages"][1]["content"]
+    assert [p["type"] for p in parts] == ["text", "image_url"] and "find a GarbageCan" in parts[0]["text"]
+    assert "did not match" in mock.bodies[1]["messages"][-1]["content"]
+    assert a.source == "llm" and a.outcome.failure_mode == "timeout" and not a.outcome.success
+    assert [c.id for c in a.concerns] == ["c1", "c2"]
+    assert a.concerns[0].objects == ["Desk|1"] and a.concerns[0].where.x == 20.0
+    assert a.concerns[1].severity == 1.0 and a.concerns[1].where is None
+    assert [s.kind for s in a.suggestions] == ["narrow_passage", "add_clutter"]
+    assert a.suggestions[0].addresses == ["c1"] and a.suggestions[1].addresses == ["c2"]
+
+
+def test_llm_analyzer_falls_back_to_builtin(scene):
+    house, world, ep, traj, analysis = scene
+    bad = (200, srv.chat_text_reply("{}"))
+    a = LLMAnalyzer(Mock(bad, bad, bad).backend(), image_size=320).analyze(traj, world)
+    assert a.source == "builtin-fallback" and a.concerns == analysis.concerns
+
+
+def test_invalid_verification_answers_leave_the_edit_unverified(scene):
+    bad = (200, srv.chat_tool_reply("verify_move", {"matches_intent": "yes"}))
+    res = _run(scene, Mock(move(), bad, bad, bad))
+    step = res.steps[0]
+    assert step.status == "applied" and step.verified is None and "verification skipped" in step.reason
