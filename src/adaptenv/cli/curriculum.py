@@ -1,0 +1,100 @@
+"""``adaptenv loop`` (one method, one seed) and ``adaptenv experiment`` (methods x seeds)."""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+import typer
+
+from adaptenv.errors import ConfigError
+
+
+def _heldout(values: list[str] | None) -> dict[str, str] | None:
+    """Parse repeated ``NAME=SPEC`` options."""
+    if not values:
+        return None
+    out = {}
+    for v in values:
+        name, sep, spec = v.partition("=")
+        if not sep or not name or not spec:
+            raise ConfigError(f"--heldout {v!r}: expected NAME=HOUSES, e.g. rearranged=preset:pretrain-rearranged")
+        out[name] = spec
+    return out
+
+
+def loop(
+    policy: str = typer.Option("pretrained", "--policy", help="Starting policy: pretrained or a checkpoint path."),
+    houses: str = typer.Option("preset:pretrain-train", "--houses", help="Training scenes: a folder or preset:NAME."),
+    iterations: int = typer.Option(3, "--iterations", "-T", min=1, help="Loop iterations."),
+    method: str = typer.Option("ours", "--method", help="none, random, dr, plr, accel, ours or ours-llm."),
+    seed: int = typer.Option(0, "--seed", help="Root seed."),
+    out: Path = typer.Option(Path("runs/loop"), "-o", "--out", help="Run folder."),
+    resume: bool = typer.Option(False, "--resume", help="Continue the run in --out from its last iteration."),
+    scenes: int = typer.Option(8, "--scenes", min=1, help="Scenes rolled out and made per iteration."),
+    edit_steps: int = typer.Option(5, "--edit-steps", min=0, help="Single-object edits per adapted scene."),
+    finetune_frames: int = typer.Option(16_384, "--finetune-frames", min=1, help="DAgger frames per iteration."),
+    heldout_episodes: int = typer.Option(100, "--heldout-episodes", min=1, help="Episodes per held-out set."),
+    heldout: list[str] = typer.Option(None, "--heldout", help="Held-out set NAME=HOUSES (repeatable); default: "
+                                      "rearranged=preset:pretrain-rearranged and unseen=preset:pretrain-unseen."),
+    model: str = typer.Option(None, "--model", help="LLM model for ours-llm."),
+    base_url: str = typer.Option(None, "--base-url", help="OpenAI-compatible server URL for ours-llm."),
+) -> None:
+    """Run the closed loop: evaluate, analyze (F), generate (G), fine-tune, measure held-out success."""
+    from rich.console import Console
+
+    from adaptenv.curriculum.loop import LoopConfig, run_loop
+
+    console = Console()
+    llm = {}
+    if model or base_url:
+        llm = {"provider": "openai-compatible" if base_url else "openai", **({"model": model} if model else {}),
+               **({"base_url": base_url} if base_url else {})}
+    cfg = LoopConfig(method=method, policy=policy, houses=houses, iterations=iterations, seed=seed,
+                     scenes_per_iteration=scenes, edit_steps=edit_steps, finetune_frames=finetune_frames,
+                     heldout_episodes=heldout_episodes, llm=llm, **({"heldout": h} if (h := _heldout(heldout)) else {}))
+    records = run_loop(cfg, out, resume=resume, progress=lambda text: console.print(f"[dim]{text}[/]"),
+                       command=" ".join(["adaptenv"] + sys.argv[1:]))
+    from rich.table import Table
+
+    table = Table(title=f"{method} seed {seed}: held-out success per iteration")
+    sets = sorted(records[0].heldout)
+    for col in ["iteration", "env steps", "updates", "edits", *sets]:
+        table.add_column(col, justify="right")
+    for r in records:
+        table.add_row(str(r.iteration), f"{r.env_steps:,}", f"{r.grad_updates:,}", str(r.edits),
+                      *[f"{r.heldout[s].success:.3f}" for s in sets])
+    console.print(table)
+    console.print(f"run folder: [bold]{out}[/]  (report: adaptenv report {out})")
+
+
+def experiment(
+    config: Path = typer.Option(..., "--config", help="Experiment config JSON (see configs/)."),
+    out: Path = typer.Option(None, "-o", "--out", help="Experiment folder (default runs/<config name>)."),
+    executor: str = typer.Option("inprocess", "--executor", help="inprocess, process or ray."),
+    workers: int = typer.Option(1, "--workers", min=1, help="Parallel runs (process or ray executor)."),
+    address: str = typer.Option(None, "--address", help="Ray cluster address (ray executor)."),
+) -> None:
+    """Run methods x seeds (resuming finished runs), then write CSVs, the summary table and plots."""
+    from rich.console import Console
+
+    from adaptenv.curriculum.executor import make_executor
+    from adaptenv.curriculum.experiment import ExperimentConfig, run_experiment
+
+    console = Console()
+    cfg = ExperimentConfig.load(config)
+    out = out or Path("runs") / config.stem
+    ex = None if executor == "inprocess" and workers == 1 else make_executor(executor, workers, address)
+    try:
+        run_experiment(cfg, out, executor=ex, command=" ".join(["adaptenv"] + sys.argv[1:]),
+                       progress=lambda text: console.print(f"[dim]{text}[/]"))
+    finally:
+        if ex is not None:
+            ex.close()
+    console.print((out / "summary.md").read_text(encoding="utf-8"))
+    console.print(f"experiment folder: [bold]{out}[/]  (report: adaptenv report {out})")
+
+
+def register(app: typer.Typer, bench: typer.Typer) -> None:
+    app.command("loop")(loop)
+    app.command("experiment")(experiment)

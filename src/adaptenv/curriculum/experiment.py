@@ -1,0 +1,229 @@
+"""The experiment the paper leaves as future work: methods x seeds under one budget, held-out results.
+
+``run_experiment`` runs :func:`~adaptenv.curriculum.loop.run_loop` for every (method, seed) into
+``OUT/<method>/seed_<s>/`` (resumable), then :func:`summarize` writes:
+
+- ``OUT/<method>/per_seed.csv``: rows ``metric:set``, one column per seed (final iteration);
+- ``OUT/summary.json`` and ``OUT/summary.md``: mean and standard error per method and set, and a
+  paired t-test (over seeds: the same seed gives every method the same pi_0 and the same held-out
+  episodes) of ours against each baseline;
+- ``OUT/plots/heldout_<set>_vs_iterations.png`` and ``..._vs_env_steps.png``.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import asdict, dataclass, field, fields
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from adaptenv.curriculum.loop import METHODS, LoopConfig, run_loop
+from adaptenv.curriculum.records import atomic_write_text, read_iterations
+from adaptenv.errors import ConfigError
+
+METRICS = ("success", "spl", "collisions")
+
+
+@dataclass
+class ExperimentConfig:
+    """Methods x seeds and the loop settings they share (JSON file for ``adaptenv experiment``)."""
+
+    methods: list[str] = field(default_factory=lambda: ["none", "random", "dr", "plr", "accel", "ours"])
+    """Methods to run; 'ours' is compared against every other one."""
+    seeds: list[int] = field(default_factory=lambda: [0, 1, 2, 3, 4])
+    """Seeds (at least 5 for the committed results)."""
+    loop: dict[str, Any] = field(default_factory=dict)
+    """LoopConfig fields shared by every run (method and seed are set per run)."""
+    reference: str = "ours"
+    """The method tested against every other one."""
+
+    @classmethod
+    def load(cls, path: str | Path) -> ExperimentConfig:
+        """Read a config file; errors name the file and the field."""
+        p = Path(path)
+        try:
+            data = json.loads(p.read_text(encoding="utf-8"))
+        except FileNotFoundError:
+            raise ConfigError(f"{p}: no such experiment config; see configs/ for examples") from None
+        except json.JSONDecodeError as exc:
+            raise ConfigError(f"{p}: not valid JSON (line {exc.lineno}, column {exc.colno}); fix the syntax") from None
+        known = {f.name for f in fields(cls)}
+        unknown = sorted(set(data) - known)
+        if unknown:
+            raise ConfigError(f"{p}: unknown field(s) {', '.join(unknown)}; use {', '.join(sorted(known))}")
+        cfg = cls(**data)
+        loop_known = {f.name for f in fields(LoopConfig)} - {"method", "seed"}
+        bad = sorted(set(cfg.loop) - loop_known)
+        if bad:
+            raise ConfigError(f"{p}: loop field(s) {', '.join(bad)} unknown; use {', '.join(sorted(loop_known))}")
+        for m in cfg.methods:
+            if m not in METHODS:
+                raise ConfigError(f"{p}: methods: {m!r} is unknown; use {', '.join(METHODS)}")
+        if not cfg.seeds:
+            raise ConfigError(f"{p}: seeds is empty; list at least one seed")
+        return cfg
+
+    def loop_config(self, method: str, seed: int) -> LoopConfig:
+        return LoopConfig(**{**self.loop, "method": method, "seed": seed})
+
+
+def run_dir(out: Path, method: str, seed: int) -> Path:
+    return Path(out) / method / f"seed_{seed}"
+
+
+def _run_one(args: tuple[dict[str, Any], str, dict[str, Any] | None, str]) -> str:
+    """Worker entry point (picklable): run or resume one (method, seed)."""
+    loop_fields, folder, _unused, command = args
+    cfg = LoopConfig(**loop_fields)
+    run_loop(cfg, folder, resume=True, command=command)
+    return folder
+
+
+def run_experiment(cfg: ExperimentConfig, out: str | Path, *, executor: Any = None, command: str = "",
+                   progress: Any = None) -> dict[str, Any]:
+    """Run every (method, seed) that is not finished yet, then summarize; returns the summary."""
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    atomic_write_text(out / "experiment.json", json.dumps(asdict(cfg), indent=1))
+    jobs = [(asdict(cfg.loop_config(m, s)), str(run_dir(out, m, s)), None, command) for m in cfg.methods
+            for s in cfg.seeds]
+    if executor is None:
+        for i, job in enumerate(jobs):
+            if progress:
+                progress(f"run {i + 1}/{len(jobs)}: {job[0]['method']} seed {job[0]['seed']}")
+            _run_one(job)
+    else:
+        executor.map(_run_one, jobs, desc="experiment runs")
+    return summarize(out, cfg)
+
+
+def _mean_se(values: list[float]) -> tuple[float, float]:
+    a = np.asarray(values, dtype=float)
+    if a.size == 0:
+        return float("nan"), float("nan")
+    se = float(a.std(ddof=1) / math.sqrt(a.size)) if a.size > 1 else 0.0
+    return float(a.mean()), se
+
+
+def final_figures(out: Path, cfg: ExperimentConfig) -> dict[str, dict[int, dict[str, float]]]:
+    """method -> seed -> {"metric:set": value} at each run's last finished iteration."""
+    table: dict[str, dict[int, dict[str, float]]] = {}
+    for m in cfg.methods:
+        for s in cfg.seeds:
+            recs = read_iterations(run_dir(out, m, s))
+            if not recs:
+                continue
+            last = recs[-1]
+            row = {f"{k}:{name}": getattr(v, k) for name, v in last.heldout.items() for k in METRICS}
+            row.update({"env_steps:all": float(last.env_steps), "grad_updates:all": float(last.grad_updates),
+                        "edits:all": float(last.edits), "iterations:all": float(last.iteration)})
+            table.setdefault(m, {})[s] = row
+    return table
+
+
+def paired_test(a: list[float], b: list[float]) -> float | None:
+    """Two-sided paired t-test p-value of a vs b over seeds (None when it is undefined)."""
+    from scipy import stats
+
+    if len(a) < 2 or len(a) != len(b):
+        return None
+    diff = np.asarray(a) - np.asarray(b)
+    if np.allclose(diff, diff[0]):
+        return None if diff[0] == 0 else 0.0
+    return float(stats.ttest_rel(a, b).pvalue)
+
+
+def summarize(out: str | Path, cfg: ExperimentConfig | None = None) -> dict[str, Any]:
+    """Write per-seed CSVs, summary.json, summary.md and plots for an experiment folder."""
+    out = Path(out)
+    cfg = cfg or ExperimentConfig(**json.loads((out / "experiment.json").read_text(encoding="utf-8")))
+    table = final_figures(out, cfg)
+    metrics = sorted({k for seeds in table.values() for row in seeds.values() for k in row})
+    for m, seeds in table.items():
+        cols = sorted(seeds)
+        lines = ["metric:set," + ",".join(f"seed_{s}" for s in cols)]
+        for key in metrics:
+            lines.append(key + "," + ",".join(f"{seeds[s].get(key, float('nan')):.6g}" for s in cols))
+        atomic_write_text(out / m / "per_seed.csv", "\n".join(lines) + "\n")
+
+    summary: dict[str, Any] = {"methods": {}, "tests": {}, "reference": cfg.reference, "seeds": cfg.seeds}
+    for m, seeds in table.items():
+        summary["methods"][m] = {key: dict(zip(("mean", "se"), _mean_se([row[key] for row in seeds.values()
+                                                                          if key in row]), strict=True))
+                                 | {"n": len(seeds)} for key in metrics}
+    ref = table.get(cfg.reference, {})
+    for m, seeds in table.items():
+        if m == cfg.reference:
+            continue
+        common = sorted(set(ref) & set(seeds))
+        summary["tests"][m] = {key: paired_test([ref[s][key] for s in common], [seeds[s][key] for s in common])
+                               for key in metrics if key.split(":")[0] in METRICS}
+    atomic_write_text(out / "summary.json", json.dumps(summary, indent=1, default=float))
+    atomic_write_text(out / "summary.md", summary_markdown(summary))
+    _plots(out, cfg)
+    return summary
+
+
+def summary_markdown(summary: dict[str, Any]) -> str:
+    """The results table: mean +- SE per method and held-out figure, p-value of ours vs each method."""
+    keys = sorted({k for v in summary["methods"].values() for k in v if k.split(":")[0] in METRICS})
+    ref = summary["reference"]
+    head = "| method | " + " | ".join(keys) + " | env steps | updates |"
+    lines = [head, "|" + "---|" * (len(keys) + 3)]
+    for m, figs in summary["methods"].items():
+        cells = []
+        for k in keys:
+            f = figs.get(k)
+            p = summary["tests"].get(m, {}).get(k)
+            mark = f" (p={p:.3f})" if p is not None else ""
+            cells.append(f"{f['mean']:.3f} ± {f['se']:.3f}{mark}" if f else "")
+        env = figs.get("env_steps:all", {}).get("mean", float("nan"))
+        upd = figs.get("grad_updates:all", {}).get("mean", float("nan"))
+        lines.append(f"| {m} | " + " | ".join(cells) + f" | {env:,.0f} | {upd:,.0f} |")
+    lines.append("")
+    lines.append(f"Mean ± standard error over seeds {summary['seeds']}; p: paired t-test of {ref} against the "
+                 "method on the same seeds (two-sided).")
+    return "\n".join(lines) + "\n"
+
+
+def curves(out: Path, cfg: ExperimentConfig, set_name: str, x: str) -> dict[str, tuple[np.ndarray, np.ndarray, np.ndarray]]:
+    """method -> (x, mean success, se) over seeds, per iteration (x = 'iteration' or 'env_steps')."""
+    result = {}
+    for m in cfg.methods:
+        runs = [read_iterations(run_dir(out, m, s)) for s in cfg.seeds]
+        runs = [r for r in runs if r]
+        if not runs:
+            continue
+        n = min(len(r) for r in runs)
+        ys = np.array([[rec.heldout[set_name].success for rec in r[:n]] for r in runs])
+        xs = np.array([[getattr(rec, x) for rec in r[:n]] for r in runs]).mean(axis=0)
+        se = ys.std(axis=0, ddof=1) / math.sqrt(len(runs)) if len(runs) > 1 else np.zeros(n)
+        result[m] = (xs, ys.mean(axis=0), se)
+    return result
+
+
+def _plots(out: Path, cfg: ExperimentConfig) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    sets = sorted({k for m in cfg.methods for s in cfg.seeds for r in read_iterations(run_dir(out, m, s))[:1]
+                   for k in r.heldout})
+    (out / "plots").mkdir(exist_ok=True)
+    for set_name in sets:
+        for x, label in (("iteration", "iteration"), ("env_steps", "environment steps")):
+            fig, ax = plt.subplots(figsize=(6, 4), dpi=110)
+            for m, (xs, mean, se) in curves(out, cfg, set_name, x).items():
+                ax.plot(xs, mean, marker="o", label=m, linewidth=2.2 if m == cfg.reference else 1.2)
+                ax.fill_between(xs, mean - se, mean + se, alpha=0.15)
+            ax.set_xlabel(label)
+            ax.set_ylabel(f"held-out success ({set_name})")
+            ax.grid(alpha=0.3)
+            ax.legend(fontsize=8)
+            fig.tight_layout()
+            fig.savefig(out / "plots" / f"heldout_{set_name}_vs_{x}.png")
+            plt.close(fig)

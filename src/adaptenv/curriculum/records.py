@@ -1,0 +1,137 @@
+"""What a closed-loop run writes to disk: typed records and the run folder layout.
+
+The loop writes, the report reads; both go through these models, so the layout lives here only::
+
+    RUN_DIR/
+      run.json                      RunInfo: method, seed, config, command
+      iterations.jsonl              one IterationRecord per finished iteration (append-only)
+      iterations.csv                the same figures, flat, for spreadsheets
+      iter_0001/
+        gallery/<scene>/            before.png, after.png, analysis.json, edits.json (adapted scenes)
+        scenes/<scene>.json         training scenes e_{t+1} produced this iteration
+        policy.pt                   pi_{t+1}
+      state.json                    resume point (written last, atomically)
+
+An experiment folder holds one run folder per (method, seed): ``EXP_DIR/<method>/seed_<s>/``.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import tempfile
+from pathlib import Path
+from typing import Any
+
+from pydantic import BaseModel, Field
+
+RUN_INFO = "run.json"
+ITERATIONS = "iterations.jsonl"
+ITERATIONS_CSV = "iterations.csv"
+STATE = "state.json"
+
+
+def iteration_dir(run_dir: Path, t: int) -> Path:
+    """Folder of iteration ``t`` (1-based)."""
+    return Path(run_dir) / f"iter_{t:04d}"
+
+
+class SetMetrics(BaseModel):
+    """Mean figures of a policy on one house set."""
+
+    success: float
+    spl: float
+    collisions: float
+    episodes: int
+    success_se: float = 0.0
+    spl_se: float = 0.0
+
+
+class GalleryItem(BaseModel):
+    """One adapted scene of an iteration, with paths relative to the run folder."""
+
+    scene: str
+    before_png: str | None = None
+    after_png: str | None = None
+    analysis_json: str | None = None
+    edits_json: str | None = None
+    summary: str = ""
+
+
+class IterationRecord(BaseModel):
+    """Figures of one finished iteration t (policy pi_t evaluated, e_{t+1} generated, pi_{t+1} trained)."""
+
+    iteration: int
+    env_steps: int
+    """Environment steps used so far (rollouts for analysis plus training frames), cumulative."""
+    grad_updates: int
+    """Gradient updates so far, cumulative."""
+    edits: int
+    """Scene edits applied so far, cumulative."""
+    train: SetMetrics | None = None
+    """pi_t on the current training scenes."""
+    heldout: dict[str, SetMetrics] = Field(default_factory=dict)
+    """pi_{t+1} on each held-out set (e.g. 'rearranged', 'unseen')."""
+    gallery: list[GalleryItem] = Field(default_factory=list)
+    wall_time_s: float = 0.0
+
+
+class RunInfo(BaseModel):
+    """Which method and seed a run is, and the config it ran with."""
+
+    method: str
+    seed: int
+    config: dict[str, Any] = Field(default_factory=dict)
+    command: str = ""
+
+
+def atomic_write_text(path: Path, text: str) -> Path:
+    """Write a file so that a crash leaves either the old or the new content, never a mix."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+    try:
+        with os.fdopen(fd, "w", encoding="utf-8") as f:
+            f.write(text)
+            f.flush()
+            os.fsync(f.fileno())
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+    return path
+
+
+def read_iterations(run_dir: Path) -> list[IterationRecord]:
+    """Every finished iteration of a run, in order (empty when none)."""
+    p = Path(run_dir) / ITERATIONS
+    if not p.exists():
+        return []
+    return [IterationRecord.model_validate_json(line) for line in p.read_text(encoding="utf-8").splitlines() if line.strip()]
+
+
+def write_iterations(run_dir: Path, records: list[IterationRecord]) -> None:
+    """Rewrite the iteration log (JSON lines and CSV) atomically."""
+    run_dir = Path(run_dir)
+    atomic_write_text(run_dir / ITERATIONS, "".join(r.model_dump_json() + "\n" for r in records))
+    atomic_write_text(run_dir / ITERATIONS_CSV, _csv(records))
+
+
+def _csv(records: list[IterationRecord]) -> str:
+    sets = sorted({k for r in records for k in r.heldout})
+    cols = ["iteration", "env_steps", "grad_updates", "edits", "train_success", "train_spl"]
+    for s in sets:
+        cols += [f"{s}_success", f"{s}_spl", f"{s}_collisions"]
+    lines = [",".join(cols)]
+    for r in records:
+        row: list[Any] = [r.iteration, r.env_steps, r.grad_updates, r.edits,
+                          r.train.success if r.train else "", r.train.spl if r.train else ""]
+        for s in sets:
+            m = r.heldout.get(s)
+            row += [m.success, m.spl, m.collisions] if m else ["", "", ""]
+        lines.append(",".join(f"{v:.6g}" if isinstance(v, float) else str(v) for v in row))
+    return "\n".join(lines) + "\n"
+
+
+def read_run_info(run_dir: Path) -> RunInfo:
+    return RunInfo.model_validate(json.loads((Path(run_dir) / RUN_INFO).read_text(encoding="utf-8")))
