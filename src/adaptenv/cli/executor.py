@@ -1,0 +1,38 @@
+"""``adaptenv bench executor``: speedup of the process pool and Ray from 1 to 2 workers."""
+
+from __future__ import annotations
+
+from typing import Literal
+
+import typer
+
+from adaptenv.cli._common import JSON_OPTION
+
+KIND_OPTION = typer.Option(None, "--kind", help="Only this executor (default: process, and ray when installed).")
+ITEMS_OPTION = typer.Option(16, "--items", min=2, help="Levels per timed map.")
+REPEATS_OPTION = typer.Option(3, "--repeats", min=1, help="Timed maps per configuration (the median is printed).")
+
+
+def bench_executor(kind: Literal["process", "ray"] | None = KIND_OPTION, n_items: int = ITEMS_OPTION,
+                   repeats: int = REPEATS_OPTION, as_json: bool = JSON_OPTION) -> None:
+    """Speedup from 1 to 2 workers (process pool and Ray) on expert episodes in generated houses."""
+    import importlib.util
+
+    from adaptenv.bench import emit
+    from adaptenv.bench.executor import run
+
+    notes = ["target: speedup 1->2 >= 1.6x on a 2-core machine; overhead per item = (1-worker time - "
+             "in-process time) / items"]
+    if kind is not None:
+        kinds: tuple[str, ...] = (kind,)
+    elif importlib.util.find_spec("ray") is not None:
+        kinds = ("process", "ray")
+    else:
+        kinds = ("process",)
+        notes.append("ray is not installed, so it was skipped (pip install 'adaptenv[ray]')")
+    figures = run(kinds, n_items=n_items, repeats=repeats)
+    emit("executor: expert episodes in generated houses (median wall time)", figures, as_json, notes=notes)
+
+
+def register(app: typer.Typer, bench: typer.Typer) -> None:
+    bench.command("executor")(bench_executor)
