@@ -1,4 +1,4 @@
-"""``adaptenv demo``: the main job, offline on built-in defaults."""
+"""``adaptenv demo``: the main job, the closed loop end to end, offline on built-in defaults."""
 
 from __future__ import annotations
 
@@ -9,24 +9,51 @@ import typer
 
 def demo(
     out: Path = typer.Option(Path("runs/demo"), "-o", "--out", help="Folder for the demo's outputs."),
-    houses: int = typer.Option(3, "--houses", min=1, max=50, help="How many procedural houses to generate."),
+    houses: int = typer.Option(4, "--houses", min=1, max=50, help="Procedural training houses to generate."),
+    iterations: int = typer.Option(2, "--iterations", min=1, max=20, help="Closed-loop iterations."),
     seed: int = typer.Option(0, "--seed", help="Root seed: the same seed gives the same outputs."),
+    policy: str = typer.Option("pretrained", "--policy", help="Starting policy: pretrained or a checkpoint path."),
 ) -> None:
-    """Generate procedural houses and render them top-down (offline, deterministic)."""
-    from rich.console import Console
-    from rich.progress import track
+    """Generate houses, run the pretrained agent, analyze and adapt its scenes, fine-tune, write the report."""
+    import shutil
 
-    from adaptenv.render.topdown import render_house
+    from rich.console import Console
+
+    from adaptenv.curriculum.loop import LoopConfig, run_loop
+    from adaptenv.report import build_report
     from adaptenv.scene.house import save_house
-    from adaptenv.scene.procedural import generate_houses
+    from adaptenv.scene.procedural import generate_houses, rearrange_house
 
     console = Console()
-    out.mkdir(parents=True, exist_ok=True)
-    generated = generate_houses(houses, seed)
-    for i, house in enumerate(track(generated, description="rendering houses", console=console)):
-        save_house(house, out / f"house_{i:04d}.json")
-        render_house(house, grid=True).save(out / f"house_{i:04d}.png")
-    console.print(f"wrote {len(generated)} houses and their top-down renders to [bold]{out}[/]")
+    if out.exists():
+        shutil.rmtree(out)
+    train, heldout_re, heldout_new = out / "houses" / "train", out / "houses" / "rearranged", out / "houses" / "unseen"
+    console.print(f"[bold]1/4[/] generating {houses} training houses, their rearranged variants and "
+                  f"{houses} unseen houses")
+    for i, house in enumerate(generate_houses(houses, seed)):
+        save_house(house, train / f"house_{i:02d}.json")
+        save_house(rearrange_house(house, seed + 1000 + i), heldout_re / f"house_{i:02d}.json")
+    for i, house in enumerate(generate_houses(houses, seed + 1)):
+        save_house(house, heldout_new / f"house_{i:02d}.json")
+
+    console.print(f"[bold]2/4[/] closed loop ({iterations} iterations): roll out the agent, analyze each trajectory (F), "
+                  "edit the scenes (G), fine-tune, evaluate on held-out houses")
+    cfg = LoopConfig(method="ours", policy=policy, houses=str(train),
+                     heldout={"rearranged": str(heldout_re), "unseen": str(heldout_new)}, iterations=iterations,
+                     seed=seed, scenes_per_iteration=houses, edit_steps=5, finetune_frames=8192, finetune_envs=64,
+                     heldout_episodes=4 * houses, gallery=houses)
+    run_dir = out / "run"
+    records = run_loop(cfg, run_dir, progress=lambda text: console.print(f"    [dim]{text}[/]"),
+                       command="adaptenv demo")
+
+    console.print("[bold]3/4[/] held-out success per iteration:")
+    for r in records:
+        figs = ", ".join(f"{k} {v.success:.2f}" for k, v in sorted(r.heldout.items()))
+        console.print(f"    t={r.iteration}: {figs}  ({r.edits} edits, {r.env_steps:,} env steps)")
+
+    console.print("[bold]4/4[/] writing the report")
+    index = build_report(run_dir)
+    console.print(f"report: [bold]{index}[/]")
 
 
 def register(app: typer.Typer, bench: typer.Typer) -> None:
