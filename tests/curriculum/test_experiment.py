@@ -1,0 +1,74 @@
+"""The experiment runner: methods x seeds, per-seed CSVs, summary with paired tests, plots, resume."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+
+from adaptenv.curriculum.experiment import ExperimentConfig, paired_test, run_experiment, summary_markdown
+from adaptenv.errors import ConfigError
+
+REPO = Path(__file__).resolve().parents[2]
+
+
+@pytest.fixture(scope="module")
+def tiny_policy(tmp_path_factory) -> Path:
+    import torch
+
+    from adaptenv.agents.checkpoint import save_checkpoint
+    from adaptenv.agents.network import NavNet, NetConfig
+
+    torch.manual_seed(0)
+    path = tmp_path_factory.mktemp("ckpt") / "tiny.pt"
+    save_checkpoint(path, NavNet(NetConfig(hidden=32, feature_dim=32)), {"note": "untrained test network"})
+    return path
+
+
+def test_committed_configs_load():
+    for path in sorted((REPO / "configs").glob("experiment-*.json")):
+        cfg = ExperimentConfig.load(path)
+        assert cfg.reference in cfg.methods
+        cfg.loop_config(cfg.methods[0], cfg.seeds[0]).check()
+
+
+def test_config_errors_name_file_and_field(tmp_path):
+    bad = tmp_path / "bad.json"
+    bad.write_text(json.dumps({"methods": ["ours", "magic"]}))
+    with pytest.raises(ConfigError, match="bad.json: methods: 'magic' is unknown"):
+        ExperimentConfig.load(bad)
+    bad.write_text(json.dumps({"loop": {"itterations": 3}}))
+    with pytest.raises(ConfigError, match="itterations"):
+        ExperimentConfig.load(bad)
+
+
+def test_paired_test_is_a_real_test():
+    assert paired_test([0.5, 0.6, 0.7], [0.5, 0.6, 0.7]) is None
+    p = paired_test([0.9, 0.8, 0.85, 0.95], [0.1, 0.2, 0.15, 0.05])
+    assert p is not None and p < 0.01
+    assert paired_test([0.5, 0.55, 0.45], [0.52, 0.5, 0.5]) > 0.3
+
+
+@pytest.mark.slow
+def test_small_experiment_writes_every_artifact(tiny_policy, tmp_path):
+    cfg = ExperimentConfig.load(REPO / "configs" / "experiment-small.json")
+    cfg.methods = ["none", "dr", "ours"]
+    cfg.loop["policy"] = str(tiny_policy)
+    summary = run_experiment(cfg, tmp_path)
+    for m in cfg.methods:
+        rows = (tmp_path / m / "per_seed.csv").read_text().splitlines()
+        assert rows[0] == "metric:set,seed_0,seed_1"
+        assert any(r.startswith("success:tiny,") for r in rows)
+    assert set(summary["methods"]) == set(cfg.methods)
+    assert set(summary["tests"]) == {"none", "dr"}
+    md = (tmp_path / "summary.md").read_text()
+    assert "| ours |" in md and "paired t-test" in md
+    for x in ("iteration", "env_steps"):
+        assert (tmp_path / "plots" / f"heldout_tiny_vs_{x}.png").stat().st_size > 1000
+    # a second call resumes finished runs instead of recomputing them
+    before = (tmp_path / "ours" / "seed_0" / "iterations.jsonl").read_text()
+    again = run_experiment(cfg, tmp_path)
+    assert (tmp_path / "ours" / "seed_0" / "iterations.jsonl").read_text() == before
+    assert again["methods"] == summary["methods"]
+    assert summary_markdown(again) == md
