@@ -7,23 +7,17 @@ from pathlib import Path
 
 import pytest
 
-from adaptenv.curriculum.experiment import ExperimentConfig, paired_test, run_experiment, summary_markdown
+from adaptenv.curriculum.experiment import (
+    ExperimentConfig,
+    paired_test,
+    run_experiment,
+    summary_markdown,
+)
 from adaptenv.errors import ConfigError
 
 REPO = Path(__file__).resolve().parents[2]
 
 
-@pytest.fixture(scope="module")
-def tiny_policy(tmp_path_factory) -> Path:
-    import torch
-
-    from adaptenv.agents.checkpoint import save_checkpoint
-    from adaptenv.agents.network import NavNet, NetConfig
-
-    torch.manual_seed(0)
-    path = tmp_path_factory.mktemp("ckpt") / "tiny.pt"
-    save_checkpoint(path, NavNet(NetConfig(hidden=32, feature_dim=32)), {"note": "untrained test network"})
-    return path
 
 
 def test_committed_configs_load():

@@ -17,20 +17,6 @@ from adaptenv.curriculum.records import STATE, read_iterations
 from adaptenv.errors import ConfigError
 
 
-@pytest.fixture(scope="module")
-def tiny_policy(tmp_path_factory) -> Path:
-    """A small untrained network saved as a checkpoint (the loop only needs something to fine-tune)."""
-    import torch
-
-    from adaptenv.agents.checkpoint import save_checkpoint
-    from adaptenv.agents.network import NavNet, NetConfig
-
-    torch.manual_seed(0)
-    path = tmp_path_factory.mktemp("ckpt") / "tiny.pt"
-    save_checkpoint(path, NavNet(NetConfig(hidden=32, feature_dim=32)), {"note": "untrained test network"})
-    return path
-
-
 def tiny_config(policy: Path, method: str, **kw) -> LoopConfig:
     base = dict(method=method, policy=str(policy), houses="preset:tiny", heldout={"tiny": "preset:tiny"},
                 iterations=2, scenes_per_iteration=2, edit_steps=1, finetune_frames=512, finetune_envs=16,
