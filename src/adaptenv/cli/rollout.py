@@ -15,20 +15,16 @@ _RENDER = typer.Option(None, "--render", help="Also draw the trajectory top-down
 
 
 def resolve_policy(name: str, seed: int | None = None):
-    """The policy called ``name`` (one place to extend, e.g. with checkpoints later)."""
-    from adaptenv.errors import ConfigError
-    from adaptenv.sim.rollout import expert_policy, random_policy
+    """The policy called ``name``: anything ``adaptenv.agents.registry.resolve_policy`` accepts."""
+    from adaptenv.agents.policy import as_step_policy
+    from adaptenv.agents.registry import resolve_policy as resolve_agent
 
-    if name == "expert":
-        return expert_policy()
-    if name == "random":
-        return random_policy(0 if seed is None else seed + 1)
-    raise ConfigError(f"--policy {name!r} is not a known policy; use one of {', '.join(POLICIES)}")
+    return as_step_policy(resolve_agent(name, seed=0 if seed is None else seed))
 
 
 def rollout(
     house: Path = _HOUSE,
-    policy: str = typer.Option("expert", "--policy", help=f"Who acts: {' or '.join(POLICIES)}."),
+    policy: str = typer.Option("expert", "--policy", help="Who acts: pretrained, expert, random, a checkpoint (.pt) or module:attribute."),
     target: str | None = typer.Option(None, "--target", help="Target object type (default: drawn among the solvable ones)."),
     seed: int = typer.Option(0, "--seed", help="Seed of the episode draw (and of the random policy)."),
     use_house_start: bool = typer.Option(False, "--use-house-start", help="Start at the house's metadata agent pose."),

@@ -200,7 +200,7 @@ def _finetune(net: Any, worlds: list[Any], cfg: LoopConfig, seed: int) -> tuple[
     steps = 32
     tc = TrainConfig(houses="(in memory)", frames=cfg.finetune_frames, output="", seed=seed, num_envs=cfg.finetune_envs,
                      rollout_steps=steps, chunk_len=steps, batch_chunks=64, updates_per_iter=4,
-                     buffer_frames=max(cfg.finetune_frames, steps * cfg.finetune_envs), beta_start=0.5, beta_end=0.05,
+                     buffer_frames=max(cfg.finetune_frames, steps * cfg.finetune_envs), beta_start=0.8, beta_end=0.8,
                      eval_every=0, final_eval_episodes=len(worlds), progress=False, tensorboard=False,
                      learning_rate=3e-4, save_every=10**9)
     result = train(tc, worlds=worlds, init_net=net)

@@ -1,0 +1,87 @@
+"""The settings of ``adaptenv train`` as one dataclass (kept free of heavy imports for the CLI)."""
+
+from __future__ import annotations
+
+import ast
+import inspect
+from dataclasses import dataclass
+
+
+@dataclass
+class TrainConfig:
+    """Settings of one imitation-learning run (``adaptenv train``)."""
+
+    houses: str = "preset:pretrain-train"
+    """Training houses: a folder of house JSON files, one house file, or preset:NAME."""
+    frames: int = 1_200_000
+    """Labelled environment frames to collect (the training budget)."""
+    output: str = "runs/policy.pt"
+    """Policy checkpoint to write; its training card goes next to it with .json ('' writes none)."""
+    init: str = ""
+    """Start from this checkpoint (fine-tuning) instead of random weights."""
+    seed: int = 0
+    """Seed of torch, numpy and the episode sampler."""
+    resume: bool = False
+    """Continue an interrupted run from run_dir/state.pt (same config, larger --frames allowed)."""
+    run_dir: str = ""
+    """Folder for config.json, metrics.csv, TensorBoard logs and state.pt (default runs/train/<output stem>)."""
+    num_envs: int = 256
+    """Agents simulated in parallel while collecting."""
+    rollout_steps: int = 64
+    """Steps per agent per iteration (a multiple of chunk_len)."""
+    chunk_len: int = 32
+    """Length of the training sequences the GRU is unrolled through."""
+    batch_chunks: int = 128
+    """Sequences per gradient step (batch_chunks * chunk_len frames)."""
+    updates_per_iter: int = 8
+    """Gradient steps after each collection."""
+    buffer_frames: int = 1_500_000
+    """Size of the aggregated DAgger dataset (oldest blocks are dropped first)."""
+    learning_rate: float = 1e-3
+    """Adam learning rate."""
+    anneal_lr: bool = True
+    """Decay the learning rate linearly to zero over the run."""
+    max_grad_norm: float = 1.0
+    """Gradient clipping norm."""
+    beta_start: float = 1.0
+    """Probability of executing the expert's action at the start (1 = behaviour cloning)."""
+    beta_end: float = 0.8
+    """Probability of executing the expert's action at the end of the decay."""
+    beta_decay_fraction: float = 0.5
+    """Fraction of the frames over which beta falls linearly from beta_start to beta_end."""
+    max_episode_steps: int = 300
+    """Episode cap while collecting (evaluation uses the benchmark's 600)."""
+    sample_actions: bool = True
+    """Sample the network's own motions while collecting, as NeuralPolicy does (else its most likely motion)."""
+    end_threshold: float = 0.8
+    """The network ends an episode only with at least this probability of end (collection and the saved policy)."""
+    hidden: int = 256
+    """GRU memory size."""
+    feature_dim: int = 128
+    """Size of the per-step feature vector fed to the GRU."""
+    eval_every: int = 20
+    """Evaluate the greedy policy on fresh training episodes every this many iterations (0: never)."""
+    eval_episodes: int = 96
+    """Episodes per periodic evaluation."""
+    final_eval_episodes: int = 200
+    """Episodes of the final evaluation on the training houses (recorded in the card)."""
+    save_every: int = 200
+    """Save the checkpoint and resume state every this many gradient updates."""
+    threads: int = 0
+    """Torch threads (0: half the cores, i.e. 1 on a 2-core machine; see configure_torch)."""
+    progress: bool = True
+    """Show a progress bar."""
+    tensorboard: bool = True
+    """Also log to TensorBoard when the tensorboard package is importable."""
+
+
+def field_docs(cls: type) -> dict[str, str]:
+    """The docstring under each dataclass field (CleanRL-style help text)."""
+    tree = ast.parse(inspect.getsource(cls))
+    body = tree.body[0].body  # type: ignore[attr-defined]
+    docs = {}
+    for node, nxt in zip(body, body[1:], strict=False):
+        if (isinstance(node, ast.AnnAssign) and isinstance(node.target, ast.Name)
+                and isinstance(nxt, ast.Expr) and isinstance(getattr(nxt, "value", None), ast.Constant)):
+            docs[node.target.id] = str(nxt.value.value)
+    return docs

@@ -1,0 +1,384 @@
+"""Evaluation harness: run a policy on many episodes in batch and report ObjectNav metrics.
+
+Episodes are drawn deterministically from a seed (episode k gets its own generator seeded by
+``(seed, k)`` and house ``k mod n_houses``), run B at a time through :class:`BatchSim` (a finished
+slot immediately takes the next episode), and scored with SPOC's metrics: success, SPL, SEL
+(success weighted by the expert's episode length over the agent's), collisions and episode length,
+each as mean +- standard error, with a Wilson interval for success and a normal interval for SPL.
+Trajectories are recorded for failed episodes and drawn as a grid of top-down maps.
+
+Built-in policies are deterministic per episode (networks and random actions draw from
+generators re-seeded by each episode's seed; the expert has no randomness), so results do not
+depend on the batch size or the number of workers.
+
+Example::
+
+    adaptenv evaluate --policy pretrained --houses preset:pretrain-train --episodes 200 -o runs/eval
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+import math
+from collections.abc import Callable, Sequence
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from adaptenv.agents.policy import Policy, PolicyContext, bind_policy, policy_name
+from adaptenv.sim.spec import ACTIONS, MAX_STEPS
+
+Z95 = 1.959963984540054
+
+
+@dataclass
+class EpisodeResult:
+    """Outcome of one evaluated episode (one CSV row)."""
+
+    index: int
+    house: str
+    env: int
+    target_type: str
+    seed: int
+    success: bool
+    spl: float
+    sel: float
+    steps: int
+    collisions: int
+    path_length: float
+    optimal: float
+    final_geodesic: float
+    expert_steps: int | None = None
+
+
+@dataclass
+class Recorded:
+    """Poses and actions of one episode, kept when the runner is asked to record it."""
+
+    start: tuple[float, float, float]
+    poses: list[tuple[float, float, float]] = field(default_factory=list)
+    actions: list[int] = field(default_factory=list)
+    moved: list[bool] = field(default_factory=list)
+
+
+def sample_episodes(worlds: Sequence[Any], n: int, seed: int, *, use_house_start: bool = False
+                    ) -> list[tuple[int, Any]]:
+    """``n`` (house index, Episode) pairs: house ``k % len(worlds)``, episode seed derived from ``(seed, k)``."""
+    from adaptenv.sim import task
+
+    out = []
+    for k in range(n):
+        e = k % len(worlds)
+        ep_seed = int(np.random.SeedSequence([seed, k]).generate_state(1)[0])
+        ep = task.sample_episode(worlds[e], ep_seed, use_house_start=use_house_start)
+        out.append((e, ep))
+    return out
+
+
+def _sync(ctx: PolicyContext, sim: Any) -> None:
+    """Point the policy context at the simulator's current arrays (they are replaced on reset)."""
+    ctx.worlds = sim.worlds
+    ctx.env_idx = sim.env
+    ctx.target_types = sim.target_types
+    ctx.x, ctx.z, ctx.yaw = sim.x, sim.z, sim.yaw
+
+
+def run_episodes(worlds: Sequence[Any], episodes: Sequence[tuple[int, Any]], policy: Policy, *,
+                 batch: int = 64, max_steps: int = MAX_STEPS,
+                 record: Callable[[EpisodeResult], bool] | None = None,
+                 progress: Callable[[int], None] | None = None) -> tuple[list[EpisodeResult], dict[int, Recorded]]:
+    """Run every episode with ``policy`` in a BatchSim of ``batch`` slots.
+
+    Returns results in episode order and the recordings of the episodes for which ``record``
+    returned True (all poses are tracked while running; only those are kept). ``progress`` is
+    called with the number of episodes finished at each completion.
+    """
+    from adaptenv.sim.vector import BatchSim
+
+    n = len(episodes)
+    if n == 0:
+        return [], {}
+    b = min(batch, n)
+    sim = BatchSim(worlds, max_steps=max_steps)
+    first = [episodes[i] for i in range(b)]
+    obs, _ = sim.reset([ep for _, ep in first], [e for e, _ in first])
+    ctx = PolicyContext.empty(sim.worlds, b)
+    slot_episode = np.arange(b)
+    ctx.seeds[:] = [int(getattr(ep, "seed", i) or 0) for i, (_, ep) in enumerate(first)]
+    _sync(ctx, sim)
+    bind_policy(policy, ctx)
+    state = policy.initial_state(b)
+    done = np.ones(b, dtype=bool)
+    live = np.ones(b, dtype=bool)
+    # trajectories of the running episodes: pose before each step (and the final pose), action, moved
+    poses = np.zeros((max_steps + 1, b, 3))
+    acts = np.zeros((max_steps, b), dtype=np.int64)
+    moves = np.zeros((max_steps, b), dtype=bool)
+    taken = np.zeros(b, dtype=np.int64)
+    slots = np.arange(b)
+    results: dict[int, EpisodeResult] = {}
+    recordings: dict[int, Recorded] = {}
+    next_episode = b
+    while live.any():
+        _sync(ctx, sim)
+        actions, state = policy.act(obs, state, done)
+        actions = np.asarray(actions, dtype=np.int64)
+        rows = slots[live]
+        poses[taken[rows], rows] = np.stack([sim.x[rows], sim.z[rows], sim.yaw[rows]], axis=1)
+        obs, _, terminated, truncated, info = sim.step(actions)
+        acts[taken[rows], rows] = actions[rows]
+        moves[taken[rows], rows] = sim.moved[rows]
+        taken[rows] += 1
+        finished = np.flatnonzero(live & (terminated | truncated))
+        done = np.zeros(b, dtype=bool)
+        refill, refill_eps = [], []
+        for i in finished.tolist():
+            k = int(slot_episode[i])
+            e, ep = episodes[k]
+            res = EpisodeResult(
+                index=k, house=str(worlds[e].name), env=e, target_type=ep.target_type,
+                seed=int(getattr(ep, "seed", k) or 0), success=bool(info["success"][i]),
+                spl=float(np.nan_to_num(info["spl"][i])), sel=float("nan"), steps=int(info["steps"][i]),
+                collisions=int(info["collisions"][i]), path_length=float(info["path_length"][i]),
+                optimal=float(sim.start_geodesic[i]), final_geodesic=float(info["geodesic"][i]))
+            results[k] = res
+            if record is not None and record(res):
+                t = int(taken[i])
+                poses[t, i] = (sim.x[i], sim.z[i], sim.yaw[i])
+                recordings[k] = Recorded(tuple(poses[0, i].tolist()), [tuple(p) for p in poses[: t + 1, i].tolist()],
+                                         acts[:t, i].tolist(), moves[:t, i].tolist())
+            if next_episode < n:
+                slot_episode[i] = next_episode
+                refill.append(i)
+                refill_eps.append(episodes[next_episode])
+                next_episode += 1
+            else:
+                live[i] = False
+        if refill:
+            idx = np.asarray(refill)
+            obs = sim.reset_at(idx, [ep for _, ep in refill_eps], [e for e, _ in refill_eps])
+            ctx.seeds[idx] = [int(getattr(ep, "seed", 0) or 0) for _, ep in refill_eps]
+            taken[idx] = 0
+            done[idx] = True
+        if progress is not None and finished.size:
+            progress(len(results))
+    return [results[k] for k in range(n)], recordings
+
+
+def add_sel(results: list[EpisodeResult], expert: list[EpisodeResult]) -> None:
+    """Fill SEL = success * expert_steps / max(steps, expert_steps) from the expert's runs (in place)."""
+    for r, x in zip(results, expert, strict=True):
+        r.expert_steps = x.steps if x.success else None
+        if r.success and x.success:
+            r.sel = x.steps / max(r.steps, x.steps)
+        else:
+            r.sel = 0.0 if not r.success else float("nan")
+
+
+# -- statistics ------------------------------------------------------------------------------------
+
+def mean_se(values: Sequence[float]) -> tuple[float, float]:
+    """Mean and standard error of the finite values (NaNs dropped)."""
+    v = np.asarray([x for x in values if x is not None and math.isfinite(x)], dtype=np.float64)
+    if v.size == 0:
+        return float("nan"), float("nan")
+    se = float(v.std(ddof=1) / math.sqrt(v.size)) if v.size > 1 else float("nan")
+    return float(v.mean()), se
+
+
+def wilson(successes: int, n: int, z: float = Z95) -> tuple[float, float]:
+    """Wilson score interval of a proportion (95% by default)."""
+    if n == 0:
+        return float("nan"), float("nan")
+    p = successes / n
+    denom = 1 + z * z / n
+    centre = (p + z * z / (2 * n)) / denom
+    half = z * math.sqrt(p * (1 - p) / n + z * z / (4 * n * n)) / denom
+    return max(0.0, centre - half), min(1.0, centre + half)
+
+
+def summarize(results: Sequence[EpisodeResult]) -> dict[str, Any]:
+    """Mean +- standard error of every metric, Wilson CI of success, normal CI of SPL."""
+    n = len(results)
+    wins = sum(r.success for r in results)
+    out: dict[str, Any] = {"episodes": n, "successes": wins}
+    for key in ("success", "spl", "sel", "collisions", "steps", "path_length"):
+        m, se = mean_se([float(getattr(r, key)) for r in results])
+        out[key] = m
+        out[f"{key}_se"] = se
+    out["success_ci95"] = list(wilson(wins, n))
+    out["spl_ci95"] = [out["spl"] - Z95 * out["spl_se"], out["spl"] + Z95 * out["spl_se"]]
+    return out
+
+
+def per_house(results: Sequence[EpisodeResult]) -> list[dict[str, Any]]:
+    """One row per house: episodes, success, SPL, SEL, collisions, steps (means)."""
+    rows = []
+    for house in sorted({r.house for r in results}):
+        rs = [r for r in results if r.house == house]
+        s = summarize(rs)
+        rows.append({"house": house, "episodes": len(rs), **{k: s[k] for k in
+                                                              ("success", "spl", "sel", "collisions", "steps")}})
+    return rows
+
+
+def drop(base: dict[str, Any], other: dict[str, Any], key: str = "success") -> dict[str, float]:
+    """Difference base - other of a metric with a 95% normal interval (independent samples)."""
+    d = base[key] - other[key]
+    se = math.sqrt(base[f"{key}_se"] ** 2 + other[f"{key}_se"] ** 2)
+    return {"drop": d, "se": se, "ci95": [d - Z95 * se, d + Z95 * se]}
+
+
+# -- the harness -----------------------------------------------------------------------------------
+
+@dataclass
+class EvalReport:
+    """Everything one evaluation produced (also written to the output folder)."""
+
+    policy: str
+    houses: str
+    seed: int
+    summary: dict[str, Any]
+    results: list[EpisodeResult]
+    recordings: dict[int, Recorded]
+
+
+def _evaluate_shard(args: tuple) -> tuple[list[EpisodeResult], dict[int, Recorded], list[EpisodeResult]]:
+    """Worker entry: evaluate a slice of the episodes (and the expert on it) in a fresh process."""
+    policy_spec, houses, names, episodes, batch, max_steps, with_expert = args
+    from adaptenv.agents.houses import compile_houses
+    from adaptenv.agents.network import configure_torch
+    from adaptenv.agents.registry import resolve_policy
+
+    configure_torch(1)
+    worlds = compile_houses(houses, names)
+    policy = resolve_policy(policy_spec) if isinstance(policy_spec, str) else policy_spec
+    results, recs = run_episodes(worlds, episodes, policy, batch=batch, max_steps=max_steps,
+                                 record=lambda r: not r.success)
+    expert: list[EpisodeResult] = []
+    if with_expert:
+        from adaptenv.agents.policy import ExpertPolicy
+
+        expert, _ = run_episodes(worlds, episodes, ExpertPolicy(), batch=batch, max_steps=max_steps)
+    return results, recs, expert
+
+
+def evaluate(policy: Policy | str, house_set: Any, *, episodes: int = 200, seed: int = 0, batch: int = 64,
+             workers: int = 1, max_steps: int = MAX_STEPS, with_expert: bool = True,
+             progress: Callable[[int], None] | None = None) -> EvalReport:
+    """Evaluate ``policy`` (an object, or a ``--policy`` spec when using workers) on a HouseSet.
+
+    With ``workers > 1`` the episodes are split in contiguous slices over a process pool (spawned,
+    one torch thread each); the policy must then be given as a spec string.
+    """
+    from adaptenv.agents.policy import ExpertPolicy
+    from adaptenv.agents.registry import resolve_policy
+
+    worlds = house_set.worlds
+    eps = sample_episodes(worlds, episodes, seed)
+    name = policy if isinstance(policy, str) else policy_name(policy)
+    if workers > 1:
+        import multiprocessing as mp
+        from concurrent.futures import ProcessPoolExecutor
+
+        if not isinstance(policy, str):
+            raise TypeError("evaluate(workers > 1) needs the policy as a --policy spec string")
+        bounds = np.linspace(0, len(eps), workers + 1).astype(int)
+        shards = [(policy, house_set.houses, house_set.names, eps[a:b], batch, max_steps, with_expert)
+                  for a, b in zip(bounds[:-1], bounds[1:], strict=True) if b > a]
+        results, recordings, expert = [], {}, []
+        with ProcessPoolExecutor(len(shards), mp_context=mp.get_context("spawn")) as pool:
+            offset = 0
+            for shard, (res, recs, exp) in zip(shards, pool.map(_evaluate_shard, shards), strict=True):
+                for r in res + exp:
+                    r.index += offset
+                results += res
+                expert += exp
+                recordings.update({k + offset: v for k, v in recs.items()})
+                offset += len(shard[3])
+                if progress is not None:
+                    progress(len(results))
+    else:
+        pol = resolve_policy(policy) if isinstance(policy, str) else policy
+        results, recordings = run_episodes(worlds, eps, pol, batch=batch, max_steps=max_steps,
+                                           record=lambda r: not r.success, progress=progress)
+        expert = run_episodes(worlds, eps, ExpertPolicy(), batch=batch, max_steps=max_steps)[0] if with_expert else []
+    if with_expert:
+        add_sel(results, expert)
+    summary = summarize(results)
+    if with_expert:
+        summary["expert_success"] = summarize(expert)["success"]
+    return EvalReport(name, house_set.spec, seed, summary, results, recordings)
+
+
+def trajectory_of(world: Any, result: EpisodeResult, rec: Recorded, policy: str) -> Any:
+    """Build a :class:`~adaptenv.sim.trajectory.Trajectory` from a recording (for rendering)."""
+    from adaptenv.sim.trajectory import Pose, Step, Trajectory
+
+    targets = world.instances_of(result.target_type)
+    steps = [Step(pose=Pose(x=p[0], z=p[1], yaw=p[2]), action=ACTIONS[a], moved=m)
+             for p, a, m in zip(rec.poses[:-1], rec.actions, rec.moved, strict=True)]
+    last = rec.poses[-1]
+    return Trajectory(house=str(world.name), target_type=result.target_type,
+                      target_ids=[t.object_id for t in targets],
+                      target_positions=[tuple(map(float, t.center)) for t in targets],
+                      start=Pose(x=rec.start[0], z=rec.start[1], yaw=rec.start[2]), steps=steps,
+                      final_pose=Pose(x=last[0], z=last[1], yaw=last[2]), policy=policy, seed=result.seed)
+
+
+def failure_grid(report: EvalReport, house_set: Any, *, limit: int = 12, tile: int = 360, columns: int = 4):
+    """A PIL image tiling top-down renders of the first ``limit`` failed episodes (None if none failed)."""
+    from PIL import Image, ImageDraw
+
+    from adaptenv.render.topdown import render_house
+
+    failed = [r for r in report.results if not r.success and r.index in report.recordings][:limit]
+    if not failed:
+        return None
+    rows = math.ceil(len(failed) / columns)
+    caption = 22
+    grid = Image.new("RGB", (columns * tile, rows * (tile + caption)), "white")
+    draw = ImageDraw.Draw(grid)
+    for j, r in enumerate(failed):
+        traj = trajectory_of(house_set.worlds[r.env], r, report.recordings[r.index], report.policy)
+        img = render_house(house_set.houses[r.env], trajectory=traj).convert("RGB")
+        img.thumbnail((tile, tile))
+        x, y = (j % columns) * tile, (j // columns) * (tile + caption)
+        grid.paste(img, (x + (tile - img.width) // 2, y + caption))
+        draw.text((x + 4, y + 4), f"#{r.index} {r.house} -> {r.target_type} ({r.steps} steps)", fill="black")
+    return grid
+
+
+def write_report(report: EvalReport, house_set: Any, out: Path, *, command: str = "") -> dict[str, Path]:
+    """Write summary.json, episodes.csv, houses.csv, failures.png and failed trajectories to ``out``."""
+    out.mkdir(parents=True, exist_ok=True)
+    paths = {"summary": out / "summary.json", "episodes": out / "episodes.csv", "houses": out / "houses.csv"}
+    doc = {"policy": report.policy, "houses": report.houses, "seed": report.seed, "command": command,
+           **report.summary}
+    paths["summary"].write_text(json.dumps(doc, indent=1, default=float) + "\n", encoding="utf-8")
+    rows = [asdict(r) for r in report.results]
+    _write_csv(paths["episodes"], rows)
+    _write_csv(paths["houses"], per_house(report.results))
+    grid = failure_grid(report, house_set)
+    if grid is not None:
+        paths["failures"] = out / "failures.png"
+        grid.save(paths["failures"])
+        tdir = out / "failed"
+        for r in report.results:
+            if not r.success and r.index in report.recordings:
+                trajectory_of(house_set.worlds[r.env], r, report.recordings[r.index],
+                              report.policy).save(tdir / f"episode_{r.index:04d}.json")
+    return paths
+
+
+def _write_csv(path: Path, rows: list[dict[str, Any]]) -> None:
+    if not rows:
+        path.write_text("", encoding="utf-8")
+        return
+    with path.open("w", newline="", encoding="utf-8") as f:
+        w = csv.DictWriter(f, fieldnames=list(rows[0]))
+        w.writeheader()
+        w.writerows(rows)

@@ -1,0 +1,215 @@
+"""The policy interface every agent implements: batched, recurrent, optionally privileged.
+
+A policy drives a batch of B agents at once. Each call receives one observation per agent (the
+layout of :mod:`adaptenv.sim.spec`, batched along the first axis), the recurrent state it returned
+last time, and a ``done`` mask saying which agents start a new episode with this observation (their
+memory must be reset before acting). It returns one action per agent and the next state::
+
+    policy = RandomPolicy(seed=0)
+    state = policy.initial_state(batch=4)
+    done = np.ones(4, dtype=bool)              # every agent starts an episode
+    actions, state = policy.act(obs, state, done)
+
+Policies that need the true world (the shortest-path expert) also implement ``bind(context)``:
+runners call it once with a :class:`PolicyContext` whose arrays they keep up to date (house index,
+target type, episode seed and pose of every agent). Learned policies must not use it.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from typing import Any, Protocol, runtime_checkable
+
+import numpy as np
+
+from adaptenv.errors import ConfigError
+from adaptenv.sim.spec import END, NO_ACTION
+
+State = Any
+"""Whatever a policy carries between steps (None for memoryless policies, a tensor for a GRU)."""
+
+Observation = dict[str, np.ndarray]
+"""Batched observation: ``depth`` (B, N_RAYS) float32, ``semantic`` (B, N_RAYS) int, ``target``,
+``prev_action`` and ``collided`` (B,) int."""
+
+
+@runtime_checkable
+class Policy(Protocol):
+    """A batched recurrent policy (see the module docstring for the calling convention)."""
+
+    def initial_state(self, batch: int) -> State:
+        """The memory of ``batch`` agents before their first step."""
+        ...
+
+    def act(self, obs: Observation, state: State, done: np.ndarray) -> tuple[np.ndarray, State]:
+        """Actions (B,) int64 in ``range(N_ACTIONS)`` and the next state.
+
+        ``done[i]`` is True when ``obs[i]`` is the first observation of a new episode.
+        """
+        ...
+
+
+@runtime_checkable
+class Privileged(Protocol):
+    """A policy that reads the true world through a :class:`PolicyContext` (e.g. the expert)."""
+
+    def bind(self, context: PolicyContext) -> None:
+        """Keep ``context``; its arrays are updated in place by the runner before every ``act``."""
+        ...
+
+
+@dataclass
+class PolicyContext:
+    """Privileged view of a batch, owned and kept current by the runner (harness, trainer).
+
+    Arrays have one entry per agent; the runner writes them in place (``ctx.x[:] = ...``) after
+    every step and reset, so a policy may keep a reference to the context.
+    """
+
+    worlds: Sequence[Any]
+    """The compiled houses (:class:`~adaptenv.sim.world.NavWorld`) the batch runs in."""
+    env_idx: np.ndarray
+    """int64 (B,): index into ``worlds`` of each agent's house."""
+    target_types: list[str]
+    """Target object type of each agent's episode."""
+    seeds: np.ndarray
+    """int64 (B,): seed of each agent's current episode (for per-episode randomness)."""
+    x: np.ndarray
+    z: np.ndarray
+    yaw: np.ndarray
+    extra: dict[str, Any] = field(default_factory=dict)
+
+    @classmethod
+    def empty(cls, worlds: Sequence[Any], batch: int) -> PolicyContext:
+        """A context for ``batch`` agents with zeroed arrays (the runner fills them)."""
+        return cls(worlds, np.zeros(batch, np.int64), [""] * batch, np.zeros(batch, np.int64),
+                   np.zeros(batch), np.zeros(batch), np.zeros(batch))
+
+
+def bind_policy(policy: Policy, context: PolicyContext) -> None:
+    """Give ``context`` to ``policy`` if it asks for privileged access (no-op otherwise)."""
+    bind = getattr(policy, "bind", None)
+    if callable(bind):
+        bind(context)
+
+
+def policy_name(policy: Policy) -> str:
+    """A short label for reports: the policy's ``name`` attribute or its class name."""
+    return str(getattr(policy, "name", type(policy).__name__))
+
+
+class RandomPolicy:
+    """Uniformly random motion actions (never ``end`` unless ``p_end`` > 0), seeded.
+
+    Matches :func:`adaptenv.sim.rollout.random_policy`: uniform over the six motion actions, and
+    ``end`` with probability ``p_end`` per step. When bound to a context, agent i's generator is
+    re-seeded from ``(seed, context.seeds[i])`` at every episode start, so its actions do not depend
+    on how episodes are batched or split across workers.
+    """
+
+    name = "random"
+
+    def __init__(self, seed: int = 0, p_end: float = 0.0):
+        self.seed = seed
+        self.p_end = float(p_end)
+        self._rng = np.random.default_rng(seed)
+        self._context: PolicyContext | None = None
+        self._slots: list[np.random.Generator] = []
+
+    def bind(self, context: PolicyContext) -> None:
+        self._context = context
+        self._slots = []
+
+    def initial_state(self, batch: int) -> State:
+        return None
+
+    def act(self, obs: Observation, state: State, done: np.ndarray) -> tuple[np.ndarray, State]:
+        batch = len(done)
+        if self._context is None:
+            u = self._rng.random(batch)
+            moves = self._rng.integers(0, END, size=batch, dtype=np.int64)
+            return np.where(u < self.p_end, END, moves), state
+        if len(self._slots) != batch:
+            self._slots = [np.random.default_rng(0) for _ in range(batch)]
+        for i in np.flatnonzero(done):
+            self._slots[i] = np.random.default_rng([self.seed, int(self._context.seeds[i])])
+        actions = np.array([END if self.p_end > 0 and g.random() < self.p_end else g.integers(0, END)
+                            for g in self._slots], dtype=np.int64)
+        return actions, state
+
+
+class ExpertPolicy:
+    """The shortest-path expert as a batched policy (privileged: needs :meth:`bind`)."""
+
+    name = "expert"
+
+    def __init__(self) -> None:
+        from adaptenv.sim.expert import ShortestPathExpert
+
+        self.expert = ShortestPathExpert()
+        self._context: PolicyContext | None = None
+
+    def bind(self, context: PolicyContext) -> None:
+        self._context = context
+
+    def initial_state(self, batch: int) -> State:
+        return None
+
+    def act(self, obs: Observation, state: State, done: np.ndarray) -> tuple[np.ndarray, State]:
+        ctx = self._context
+        if ctx is None:
+            raise ConfigError("the expert policy needs privileged access to the world; run it through "
+                              "adaptenv's runners (evaluate, rollout, train) which bind a PolicyContext")
+        actions = self.expert.act_batch(ctx.worlds, ctx.env_idx, ctx.target_types, ctx.x, ctx.z, ctx.yaw)
+        return np.asarray(actions, dtype=np.int64), state
+
+
+class StepPolicy:
+    """A batched policy driving one agent through the per-step callable of :mod:`adaptenv.sim.rollout`.
+
+    ``run_episode(world, episode, as_step_policy(policy))`` then works for every policy: at each call
+    the adapter scans from the pose (the same kernel as BatchSim), tracks the previous action and
+    the recurrent state, and binds a one-agent :class:`PolicyContext` for privileged policies.
+    A call with ``step == 0`` starts a new episode.
+    """
+
+    def __init__(self, policy: Policy):
+        self.policy = policy
+        self.name = policy_name(policy)
+        self._state: State = None
+        self._prev = NO_ACTION
+        self._context: PolicyContext | None = None
+
+    def __call__(self, world: Any, episode: Any, x: float, z: float, yaw: float, collided: bool, step: int) -> int:
+        from adaptenv.sim.physics import PackedGrids
+        from adaptenv.sim.scan import pack_semantic, scan
+        from adaptenv.sim.spec import class_id
+
+        first = step == 0 or self._context is None or self._context.worlds[0] is not world
+        if first:
+            self._context = PolicyContext.empty([world], 1)
+            bind_policy(self.policy, self._context)
+            self._state = self.policy.initial_state(1)
+            self._prev = NO_ACTION
+        ctx = self._context
+        ctx.x[0], ctx.z[0], ctx.yaw[0] = x, z, yaw
+        ctx.target_types[0] = episode.target_type
+        ctx.seeds[0] = int(getattr(episode, "seed", 0) or 0)
+        key = ("agents.packed_scan",)
+        if key not in world.cache:
+            world.cache[key] = (PackedGrids.from_worlds([world]), pack_semantic([world]))
+        grids, semantic = world.cache[key]
+        depth, classes = scan(grids, semantic, ctx.env_idx, ctx.x, ctx.z, ctx.yaw)
+        obs = {"depth": depth, "semantic": classes, "target": np.array([class_id(episode.target_type)]),
+               "prev_action": np.array([self._prev]), "collided": np.array([int(bool(collided))])}
+        actions, self._state = self.policy.act(obs, self._state, np.array([first]))
+        self._prev = int(actions[0])
+        return self._prev
+
+
+def as_step_policy(policy: Any) -> Any:
+    """Wrap a batched policy for :func:`adaptenv.sim.rollout.run_episode` (per-step callables pass through)."""
+    if hasattr(policy, "act") and hasattr(policy, "initial_state"):
+        return StepPolicy(policy)
+    return policy

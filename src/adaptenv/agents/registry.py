@@ -1,0 +1,100 @@
+"""Turn a ``--policy`` value into a policy: ``pretrained``, ``expert``, ``random``, a checkpoint, or code.
+
+Accepted specs (every command taking ``--policy`` uses :func:`resolve_policy`):
+
+- ``pretrained``: the checkpoint shipped in the package (``adaptenv/agents/data/pretrained.pt``).
+- ``expert``: the shortest-path expert (privileged).
+- ``random`` or ``random:SEED``: uniformly random actions.
+- a path to a checkpoint file (``*.pt``) written by ``adaptenv train``.
+- ``module:attribute`` or ``path/to/file.py:attribute``: user code. The attribute may be a policy
+  object, a policy class, or a zero-argument factory returning a policy.
+"""
+
+from __future__ import annotations
+
+import importlib
+import importlib.util
+import sys
+from importlib import resources
+from pathlib import Path
+
+from adaptenv.agents.policy import ExpertPolicy, Policy, RandomPolicy
+from adaptenv.errors import ConfigError
+
+BUILTINS = ("pretrained", "expert", "random")
+_HELP = ("expected pretrained, expert, random, a checkpoint path (.pt) or module:attribute "
+         "(e.g. examples/my_policy.py:policy)")
+POLICY_HELP = "Policy: pretrained, expert, random, a checkpoint path (.pt), or module:attribute."
+
+
+def pretrained_path() -> Path:
+    """Where the shipped checkpoint lives inside the installed package."""
+    return Path(str(resources.files("adaptenv.agents") / "data" / "pretrained.pt"))
+
+
+def load_pretrained(*, greedy: bool = False, seed: int = 0) -> Policy:
+    """The shipped pretrained policy; a missing file names the command that creates it."""
+    from adaptenv.agents.checkpoint import load_checkpoint
+
+    path = pretrained_path()
+    if not path.is_file():
+        raise ConfigError(f"{path}: the pretrained checkpoint is not installed; create it with "
+                          "`adaptenv train --houses preset:pretrain-train -o src/adaptenv/agents/data/pretrained.pt`")
+    policy = load_checkpoint(path).policy(greedy=greedy, seed=seed)
+    policy.name = "pretrained"
+    return policy
+
+
+def resolve_policy(spec: str, *, seed: int = 0) -> Policy:
+    """Build the policy named by ``spec`` (see the module docstring); unknown specs raise ConfigError."""
+    spec = spec.strip()
+    if spec == "pretrained":
+        return load_pretrained(seed=seed)
+    if spec == "expert":
+        return ExpertPolicy()
+    if spec == "random" or spec.startswith("random:"):
+        tail = spec.partition(":")[2]
+        if tail and not tail.isdigit():
+            raise ConfigError(f"--policy {spec!r}: the random seed must be an integer, e.g. random:3")
+        return RandomPolicy(seed=int(tail) if tail else seed)
+    path = Path(spec)
+    if path.suffix in (".pt", ".pth") or (path.is_file() and ":" not in spec):
+        from adaptenv.agents.checkpoint import load_checkpoint
+
+        return load_checkpoint(path).policy(seed=seed)
+    if ":" in spec:
+        return _load_user_policy(spec)
+    raise ConfigError(f"--policy {spec!r}: unknown policy; {_HELP}")
+
+
+def _load_user_policy(spec: str) -> Policy:
+    """Import ``module:attribute`` (or ``file.py:attribute``) and make a policy of it."""
+    target, _, attr = spec.rpartition(":")
+    if not target or not attr:
+        raise ConfigError(f"--policy {spec!r}: unknown policy; {_HELP}")
+    if target.endswith(".py"):
+        file = Path(target)
+        if not file.is_file():
+            raise ConfigError(f"--policy {spec!r}: no such file {file}; check the path")
+        name = f"adaptenv_user_policy_{abs(hash(str(file.resolve())))}"
+        module_spec = importlib.util.spec_from_file_location(name, file)
+        if module_spec is None or module_spec.loader is None:
+            raise ConfigError(f"--policy {spec!r}: cannot import {file} as a Python module")
+        module = importlib.util.module_from_spec(module_spec)
+        sys.modules[name] = module
+        module_spec.loader.exec_module(module)
+    else:
+        try:
+            module = importlib.import_module(target)
+        except ImportError as exc:
+            raise ConfigError(f"--policy {spec!r}: cannot import module {target!r} ({exc}); "
+                              "check it is on PYTHONPATH or pass a file path like my_policy.py:policy") from None
+    if not hasattr(module, attr):
+        raise ConfigError(f"--policy {spec!r}: module {target!r} has no attribute {attr!r}")
+    obj = getattr(module, attr)
+    if isinstance(obj, type) or (callable(obj) and not isinstance(obj, Policy)):
+        obj = obj()
+    if not isinstance(obj, Policy):
+        raise ConfigError(f"--policy {spec!r}: {attr!r} is not a policy; it needs initial_state(batch) "
+                          "and act(obs, state, done) (see docs/agent.md)")
+    return obj

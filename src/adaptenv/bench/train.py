@@ -1,0 +1,141 @@
+"""``adaptenv bench train``: the throughput of imitation learning on this machine.
+
+Figures (median of repeated timings, houses of the ``pretrain-train`` preset, warm caches):
+
+- labelled frames/s: BatchSim steps plus the expert's label for every agent (target >= 20,000/s);
+- DAgger collection frames/s: the same plus the policy's own forward pass (what ``train`` collects at);
+- gradient frames/s: cross-entropy steps on (chunk_len, batch_chunks) sequences (target >= 10,000/s);
+- inference steps/s of the policy at batch 256, and its parameter count.
+
+Each throughput is given per wall-clock second and per CPU-second of this process (all threads,
+``time.process_time``), with the load average before and after: on a shared machine the wall
+figures fall with the load, the CPU figures much less.
+"""
+
+from __future__ import annotations
+
+import os
+import statistics
+import time
+from collections.abc import Callable
+
+import numpy as np
+
+LABEL_TARGET = 20_000
+GRAD_TARGET = 10_000
+
+
+def wall_and_cpu(fn: Callable[[], object], repeats: int, warmup: int = 1) -> tuple[float, float]:
+    """Median wall seconds and median CPU seconds (this process, all threads) of ``fn()``."""
+    for _ in range(warmup):
+        fn()
+    walls, cpus = [], []
+    for _ in range(repeats):
+        w, c = time.perf_counter(), time.process_time()
+        fn()
+        walls.append(time.perf_counter() - w)
+        cpus.append(time.process_time() - c)
+    return statistics.median(walls), statistics.median(cpus)
+
+
+def run(*, as_json: bool = False, envs: int = 256, steps: int = 200, houses: str = "preset:pretrain-train") -> dict:
+    """Measure and print the figures (table or JSON); returns them."""
+    import torch
+    import torch.nn.functional as F
+
+    from adaptenv.agents.config import TrainConfig
+    from adaptenv.agents.houses import load_house_set
+    from adaptenv.agents.network import (
+        NavNet,
+        NetConfig,
+        configure_torch,
+        count_parameters,
+        obs_to_tensors,
+    )
+    from adaptenv.bench import emit
+    from adaptenv.sim import task
+    from adaptenv.sim.expert import ShortestPathExpert
+    from adaptenv.sim.vector import BatchSim
+
+    threads = configure_torch()
+    cfg = TrainConfig()
+    worlds = load_house_set(houses).worlds
+    rng = np.random.default_rng(0)
+    expert = ShortestPathExpert()
+    sim = BatchSim(worlds, max_steps=cfg.max_episode_steps)
+    net = NavNet(NetConfig(hidden=cfg.hidden, feature_dim=cfg.feature_dim)).eval()
+
+    def new(n: int):
+        envs_ = rng.integers(0, len(worlds), n)
+        return [task.sample_episode(worlds[e], rng) for e in envs_.tolist()], envs_
+
+    eps, env_idx = new(envs)
+    sim.reset(eps, env_idx)
+    h = net.initial_state(envs)
+    first = torch.zeros(envs, dtype=torch.bool)
+
+    def collect(with_policy: bool) -> None:
+        nonlocal h
+        obs = sim.observe()
+        for _ in range(steps):
+            labels = expert.act_batch(sim.worlds, sim.env, sim.target_types, sim.x, sim.z, sim.yaw)
+            if with_policy:
+                with torch.no_grad():
+                    _, h = net.step(obs_to_tensors(obs), first, h)
+            obs, _, terminated, truncated, _ = sim.step(labels)
+            done = np.flatnonzero(terminated | truncated)
+            if done.size:
+                e, idx = new(done.size)
+                obs = sim.reset_at(done, e, idx)
+
+    for _ in range(3):  # warm the per-(house, target) caches of every house
+        collect(False)
+    load_before = os.getloadavg()[0]
+    t_label, c_label = wall_and_cpu(lambda: collect(False), repeats=3, warmup=0)
+    t_collect, c_collect = wall_and_cpu(lambda: collect(True), repeats=3, warmup=0)
+
+    L, N = cfg.chunk_len, cfg.batch_chunks
+    obs = sim.observe()
+    seq = {k: torch.as_tensor(np.broadcast_to(v, (L, *v.shape))[:, :N].copy()) for k, v in obs.items()}
+    seq = obs_to_tensors({k: v.numpy() for k, v in seq.items()})
+    labels = torch.randint(0, 7, (L, N))
+    done = torch.zeros(L, N, dtype=torch.bool)
+    train_net = NavNet(NetConfig(hidden=cfg.hidden, feature_dim=cfg.feature_dim))
+    opt = torch.optim.Adam(train_net.parameters(), lr=1e-4)
+
+    def grad_step() -> None:
+        logits, _ = train_net(seq, done, torch.zeros(N, cfg.hidden))
+        loss = F.cross_entropy(logits.reshape(-1, logits.shape[-1]), labels.reshape(-1))
+        opt.zero_grad()
+        loss.backward()
+        opt.step()
+
+    t_grad, c_grad = wall_and_cpu(grad_step, repeats=7, warmup=2)
+
+    bobs = {k: np.resize(v, (256, *v.shape[1:])) for k, v in sim.observe().items()}
+    policy_h = net.initial_state(256)
+    d256 = torch.zeros(256, dtype=torch.bool)
+
+    def infer() -> None:
+        with torch.no_grad():
+            net.step(obs_to_tensors(bobs), d256, policy_h)
+
+    t_inf, c_inf = wall_and_cpu(infer, repeats=50, warmup=5)
+    figures = {
+        "labelled_frames_per_s": envs * steps / t_label,
+        "labelled_frames_per_cpu_s": envs * steps / c_label,
+        "dagger_collect_frames_per_s": envs * steps / t_collect,
+        "dagger_collect_frames_per_cpu_s": envs * steps / c_collect,
+        "gradient_frames_per_s": L * N / t_grad,
+        "gradient_frames_per_cpu_s": L * N / c_grad,
+        "inference_steps_per_s_b256": 256 / t_inf,
+        "inference_steps_per_cpu_s_b256": 256 / c_inf,
+        "parameters": count_parameters(net),
+        "envs": envs, "houses": len(worlds), "torch_threads": threads,
+        "label_target_met": bool(envs * steps / t_label >= LABEL_TARGET),
+        "gradient_target_met": bool(L * N / t_grad >= GRAD_TARGET),
+        "load_average_1min_before": load_before, "load_average_1min_after": os.getloadavg()[0],
+    }
+    emit("imitation-learning throughput", figures, as_json,
+         notes=[f"targets: labelled >= {LABEL_TARGET:,}/s, gradient >= {GRAD_TARGET:,}/s (2 cores)"])
+    return figures

@@ -1,0 +1,157 @@
+"""``adaptenv train`` (imitation learning), ``adaptenv evaluate`` (the harness), ``adaptenv bench train``."""
+
+from __future__ import annotations
+
+import inspect
+import shlex
+from dataclasses import MISSING, fields
+from pathlib import Path
+
+import typer
+
+from adaptenv.cli._common import JSON_OPTION
+
+_SHORT = {"output": ["-o"], "seed": ["-s"]}
+_HOUSES_OPTION = typer.Option(..., "--houses", help="Folder of house JSON files, a house file, or preset:NAME; "
+                              "repeat to compare sets (the first is the baseline of the drop).")
+_OUT_OPTION = typer.Option(Path("runs/eval"), "-o", "--out", help="Output folder (one subfolder per house set).")
+
+
+def _train_command():
+    """Build ``adaptenv train`` from TrainConfig: one option per field, its docstring as the help."""
+    from adaptenv.agents.config import TrainConfig, field_docs
+
+    docs = field_docs(TrainConfig)
+    params = []
+    for f in fields(TrainConfig):
+        default = f.default if f.default is not MISSING else None
+        flag = "--" + f.name.replace("_", "-")
+        decls = [f"{flag}/--no-{f.name.replace('_', '-')}"] if f.type in ("bool", bool) else [flag]
+        decls += _SHORT.get(f.name, [])
+        kind = {"bool": bool, "int": int, "float": float, "str": str}.get(str(f.type), str)
+        params.append(inspect.Parameter(f.name, inspect.Parameter.KEYWORD_ONLY, annotation=kind,
+                                        default=typer.Option(default, *decls, help=docs.get(f.name, ""))))
+
+    def train(**kwargs) -> None:
+        """Train a navigation policy by behaviour cloning + DAgger from the shortest-path expert."""
+        from rich.console import Console
+
+        from adaptenv.agents.train import TrainConfig
+        from adaptenv.agents.train import train as run_training
+
+        cfg = TrainConfig(**kwargs)
+        command = train_command_line(cfg)
+        result = run_training(cfg, command=command)
+        card = result.card
+        Console().print(
+            f"trained on {card['n_houses']} houses ({card['houses']}): {card['frames']:,} frames in "
+            f"{card['wall_time_s']:.0f} s; success on fresh training episodes "
+            f"{card['final_train_success']:.1%} (n={card['final_eval_episodes']})"
+            + (f"; wrote [bold]{cfg.output}[/]" if cfg.output else ""))
+
+    train.__signature__ = inspect.Signature(params)  # type: ignore[attr-defined]
+    return train
+
+
+def evaluate(
+    policy: str = typer.Option("pretrained", "--policy", "-p",
+                               help="Policy: pretrained, expert, random, a checkpoint path (.pt), or module:attribute."),
+    houses: list[str] = _HOUSES_OPTION,
+    episodes: int = typer.Option(200, "--episodes", "-n", min=1, help="Episodes per house set."),
+    seed: int = typer.Option(0, "--seed", "-s", help="Seed of the episodes (same seed, same results)."),
+    workers: int = typer.Option(1, "--workers", "-w", min=1, help="Worker processes (episodes are split among them)."),
+    batch: int = typer.Option(64, "--batch", min=1, help="Episodes simulated at once per process."),
+    out: Path = _OUT_OPTION,
+) -> None:
+    """Evaluate a policy: success, SPL, SEL, collisions, length (mean +- s.e.), per-house CSV, failure maps."""
+    import json
+
+    from rich.console import Console
+    from rich.progress import Progress
+    from rich.table import Table
+
+    from adaptenv.agents.evaluate import drop, write_report
+    from adaptenv.agents.evaluate import evaluate as run_eval
+    from adaptenv.agents.houses import load_house_set
+    from adaptenv.agents.network import configure_torch
+    from adaptenv.agents.registry import resolve_policy
+
+    configure_torch()
+    console = Console()
+    command = shlex.join(["adaptenv", "evaluate", "--policy", policy, *[a for h in houses for a in ("--houses", h)],
+                          "--episodes", str(episodes), "--seed", str(seed), "--workers", str(workers),
+                          "--batch", str(batch), "-o", str(out)])
+    resolved = resolve_policy(policy, seed=seed)  # fail early on a bad --policy
+    summaries = []
+    for spec in houses:
+        house_set = load_house_set(spec)
+        with Progress(console=console, transient=True) as bar:
+            task = bar.add_task(f"{policy} on {spec}", total=episodes)
+            report = run_eval(policy if workers > 1 else resolved, house_set, episodes=episodes, seed=seed,
+                              batch=batch, workers=workers,
+                              progress=lambda k, task=task: bar.update(task, completed=k))
+        report.policy = policy
+        sub = out / _slug(spec) if len(houses) > 1 else out
+        paths = write_report(report, house_set, sub, command=command)
+        summaries.append((spec, report.summary, paths))
+    table = Table(title=f"{policy}: {episodes} episodes per set, seed {seed}")
+    for col in ("houses", "success [95% CI]", "SPL [95% CI]", "SEL", "collisions", "length"):
+        table.add_column(col, justify="left" if col == "houses" else "right")
+    for spec, s, _ in summaries:
+        table.add_row(spec, f"{s['success']:.3f} [{s['success_ci95'][0]:.3f}, {s['success_ci95'][1]:.3f}]",
+                      f"{s['spl']:.3f} [{s['spl_ci95'][0]:.3f}, {s['spl_ci95'][1]:.3f}]",
+                      f"{s['sel']:.3f} +- {s['sel_se']:.3f}", f"{s['collisions']:.1f} +- {s['collisions_se']:.1f}",
+                      f"{s['steps']:.0f} +- {s['steps_se']:.0f}")
+    console.print(table)
+    if len(summaries) > 1:
+        base_spec, base, _ = summaries[0]
+        drops = {}
+        for spec, s, _ in summaries[1:]:
+            d_s, d_p = drop(base, s, "success"), drop(base, s, "spl")
+            drops[spec] = {"success": d_s, "spl": d_p}
+            console.print(f"drop {base_spec} -> {spec}: success {d_s['drop']:+.3f} "
+                          f"[{d_s['ci95'][0]:+.3f}, {d_s['ci95'][1]:+.3f}], SPL {d_p['drop']:+.3f} "
+                          f"[{d_p['ci95'][0]:+.3f}, {d_p['ci95'][1]:+.3f}]")
+        out.mkdir(parents=True, exist_ok=True)
+        (out / "comparison.json").write_text(json.dumps(
+            {"policy": policy, "episodes": episodes, "seed": seed, "command": command,
+             "sets": {spec: s for spec, s, _ in summaries}, "drop_from": base_spec, "drops": drops},
+            indent=1, default=float) + "\n", encoding="utf-8")
+    console.print(f"wrote results to [bold]{out}[/]")
+
+
+def train_command_line(cfg) -> str:
+    """The ``adaptenv train`` command reproducing ``cfg`` (options that differ from the defaults)."""
+    from adaptenv.agents.config import TrainConfig
+
+    default = TrainConfig()
+    args = ["adaptenv", "train"]
+    for f in fields(cfg):
+        value = getattr(cfg, f.name)
+        if value == getattr(default, f.name) and f.name not in ("houses", "frames", "output", "seed"):
+            continue
+        flag = "--" + f.name.replace("_", "-")
+        if isinstance(value, bool):
+            args.append(flag if value else f"--no-{f.name.replace('_', '-')}")
+        else:
+            args += [flag, str(value)]
+    return shlex.join(args)
+
+
+def _slug(spec: str) -> str:
+    return "".join(c if c.isalnum() or c in "-_" else "_" for c in spec.replace("preset:", "")).strip("_") or "houses"
+
+
+def bench_train(as_json: bool = JSON_OPTION,
+                envs: int = typer.Option(256, "--envs", help="Agents simulated at once."),
+                steps: int = typer.Option(200, "--steps", help="Steps timed per measurement.")) -> None:
+    """Training throughput: labelled frames/s, gradient frames/s, inference steps/s, parameter count."""
+    from adaptenv.bench.train import run
+
+    run(as_json=as_json, envs=envs, steps=steps)
+
+
+def register(app: typer.Typer, bench: typer.Typer) -> None:
+    app.command("train")(_train_command())
+    app.command("evaluate")(evaluate)
+    bench.command("train")(bench_train)

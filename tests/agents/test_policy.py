@@ -1,0 +1,178 @@
+"""Policy interface, neural network, checkpoints and the --policy registry."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import torch
+
+from adaptenv.agents.checkpoint import load_checkpoint, save_checkpoint
+from adaptenv.agents.network import NavNet, NetConfig, NeuralPolicy, count_parameters
+from adaptenv.agents.policy import Policy, PolicyContext, RandomPolicy, bind_policy
+from adaptenv.agents.registry import resolve_policy
+from adaptenv.errors import ConfigError
+from adaptenv.sim.spec import N_ACTIONS, N_RAYS, NO_ACTION, n_classes
+
+
+def fake_obs(batch: int, seed: int = 0) -> dict[str, np.ndarray]:
+    """A random but well-formed batched observation."""
+    rng = np.random.default_rng(seed)
+    return {"depth": rng.random((batch, N_RAYS), dtype=np.float32),
+            "semantic": rng.integers(0, n_classes(), (batch, N_RAYS)),
+            "target": rng.integers(4, n_classes(), batch),
+            "prev_action": rng.integers(0, NO_ACTION + 1, batch),
+            "collided": rng.integers(0, 2, batch)}
+
+
+def small_net(seed: int = 0) -> NavNet:
+    torch.manual_seed(seed)
+    return NavNet(NetConfig(hidden=32, feature_dim=32, conv_channels=8))
+
+
+def rollout_actions(policy, steps: int = 5, batch: int = 6) -> np.ndarray:
+    state = policy.initial_state(batch)
+    done = np.ones(batch, dtype=bool)
+    out = []
+    for t in range(steps):
+        actions, state = policy.act(fake_obs(batch, seed=t), state, done)
+        out.append(actions)
+        done = np.zeros(batch, dtype=bool)
+    return np.stack(out)
+
+
+def test_random_policy_is_seeded_and_in_range():
+    a = rollout_actions(RandomPolicy(seed=3))
+    assert np.array_equal(a, rollout_actions(RandomPolicy(seed=3)))
+    assert not np.array_equal(a, rollout_actions(RandomPolicy(seed=4)))
+    assert a.min() >= 0 and a.max() < N_ACTIONS
+
+
+def test_bound_random_policy_depends_only_on_episode_seed():
+    """Per-episode seeding: the same episode gets the same actions whatever its slot."""
+    def run(seeds):
+        policy = RandomPolicy(seed=1)
+        ctx = PolicyContext.empty([], len(seeds))
+        ctx.seeds[:] = seeds
+        bind_policy(policy, ctx)
+        state = policy.initial_state(len(seeds))
+        done = np.ones(len(seeds), dtype=bool)
+        acts = []
+        for _ in range(8):
+            a, state = policy.act(fake_obs(len(seeds)), state, done)
+            acts.append(a)
+            done[:] = False
+        return np.stack(acts)
+
+    a = run([10, 11, 12])
+    b = run([12, 10])
+    assert np.array_equal(a[:, 0], b[:, 1]) and np.array_equal(a[:, 2], b[:, 0])
+
+
+def test_network_shapes_and_done_resets_memory():
+    net = small_net()
+    assert count_parameters(net) > 0
+    policy = NeuralPolicy(net)
+    assert isinstance(policy, Policy)
+    obs = fake_obs(4)
+    h = policy.initial_state(4)
+    _, h1 = policy.act(obs, h, np.ones(4, dtype=bool))
+    _, h2 = policy.act(obs, h1, np.zeros(4, dtype=bool))
+    _, h3 = policy.act(obs, h2, np.ones(4, dtype=bool))
+    assert h1.shape == (4, 32)
+    assert not torch.allclose(h1, h2)
+    assert torch.allclose(h1, h3)  # done wipes the memory: same as a fresh start
+
+
+def test_sequence_forward_matches_stepping():
+    net = small_net().eval()
+    T, B = 6, 3
+    obs_seq = [fake_obs(B, seed=t) for t in range(T)]
+    done = np.zeros((T, B), dtype=bool)
+    done[0] = True
+    done[3, 1] = True
+    from adaptenv.agents.network import obs_to_tensors
+
+    seq = {k: torch.stack([obs_to_tensors(o)[k] for o in obs_seq]) for k in obs_seq[0]}
+    with torch.no_grad():
+        logits, _ = net(seq, torch.as_tensor(done), net.initial_state(B))
+        h = net.initial_state(B)
+        for t in range(T):
+            step_logits, h = net.step(obs_to_tensors(obs_seq[t]), torch.as_tensor(done[t]), h)
+            torch.testing.assert_close(step_logits, logits[t], rtol=1e-5, atol=1e-5)
+
+
+def test_checkpoint_roundtrip_gives_identical_actions(tmp_path):
+    net = small_net(seed=5)
+    path = save_checkpoint(tmp_path / "p.pt", net, {"frames": 123})
+    ckpt = load_checkpoint(path)
+    assert ckpt.meta["frames"] == 123
+    a = rollout_actions(NeuralPolicy(net))
+    b = rollout_actions(ckpt.policy())
+    assert np.array_equal(a, b)
+    c = rollout_actions(resolve_policy(str(path)))
+    assert np.array_equal(a, c)
+
+
+def test_bad_checkpoint_is_one_clear_error(tmp_path):
+    bad = tmp_path / "bad.pt"
+    bad.write_bytes(b"not a checkpoint")
+    with pytest.raises(ConfigError, match="bad.pt"):
+        load_checkpoint(bad)
+    with pytest.raises(ConfigError, match="no such checkpoint"):
+        resolve_policy(str(tmp_path / "missing.pt"))
+
+
+def test_registry_builtins_and_unknown():
+    assert isinstance(resolve_policy("random"), RandomPolicy)
+    assert resolve_policy("random:7").seed == 7
+    with pytest.raises(ConfigError, match="unknown policy"):
+        resolve_policy("walk-randomly")
+    with pytest.raises(ConfigError, match="no attribute"):
+        resolve_policy("adaptenv.agents.policy:nope")
+    with pytest.raises(ConfigError, match="not a policy"):
+        resolve_policy("adaptenv.sim.spec:ACTIONS")
+
+
+def test_registry_loads_user_policy_from_module_and_file(tmp_path):
+    file = tmp_path / "mine.py"
+    file.write_text(
+        "import numpy as np\n"
+        "class Spinner:\n"
+        "    def initial_state(self, batch):\n        return None\n"
+        "    def act(self, obs, state, done):\n"
+        "        return np.full(len(done), 3, dtype=np.int64), state\n"
+        "policy = Spinner()\n"
+        "def make():\n    return Spinner()\n")
+    for spec in (f"{file}:policy", f"{file}:Spinner", f"{file}:make"):
+        policy = resolve_policy(spec)
+        actions, _ = policy.act(fake_obs(2), policy.initial_state(2), np.ones(2, dtype=bool))
+        assert actions.tolist() == [3, 3]
+    assert isinstance(resolve_policy("adaptenv.agents.policy:RandomPolicy"), RandomPolicy)
+
+
+def test_choose_actions_ends_only_when_confident():
+    from adaptenv.agents.network import choose_actions
+    from adaptenv.sim.spec import END
+
+    p = torch.tensor([[0.1, 0.0, 0.0, 0.0, 0.0, 0.0, 0.9],   # confident end
+                      [0.5, 0.0, 0.0, 0.0, 0.0, 0.0, 0.5],   # unsure: a motion (the only one)
+                      [0.0, 0.0, 0.3, 0.3, 0.0, 0.0, 0.4]])  # motions 2 or 3 by the uniform draw
+    logits = torch.log(p + 1e-12)
+    assert choose_actions(logits, None, 0.8).tolist() == [END, 0, 2]
+    assert choose_actions(logits, np.array([0.2, 0.2, 0.2]), 0.8).tolist() == [END, 0, 2]
+    assert choose_actions(logits, np.array([0.9, 0.9, 0.9]), 0.8).tolist() == [END, 0, 3]
+    assert choose_actions(logits, np.array([0.9, 0.9, 0.9]), 0.45).tolist() == [END, END, 3]
+
+
+def test_shipped_pretrained_checkpoint_loads_with_its_card():
+    import json
+
+    from adaptenv.agents.registry import pretrained_path
+
+    policy = resolve_policy("pretrained")
+    assert policy.name == "pretrained" and policy.end_threshold == 0.8
+    card = json.loads(pretrained_path().with_suffix(".json").read_text())
+    assert card["houses"] == "preset:pretrain-train" and card["final_train_success"] >= 0.8
+    assert card["wall_time_s"] < 20 * 60 and card["command"].startswith("adaptenv train")
+    actions = rollout_actions(policy)
+    assert actions.min() >= 0 and actions.max() < N_ACTIONS

@@ -1,0 +1,107 @@
+"""Imitation training: the loss falls, runs resume after an interruption, fine-tuning returns a policy."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from adaptenv.agents.checkpoint import load_checkpoint
+from adaptenv.agents.train import SequenceBuffer, TrainConfig, beta_at, field_docs, finetune, train
+from adaptenv.errors import ConfigError
+
+
+def tiny_config(tmp_path, **overrides) -> TrainConfig:
+    """A few-thousand-frame run on the tiny preset with a small network."""
+    settings = dict(houses="preset:tiny", frames=4096, output=str(tmp_path / "p.pt"), run_dir=str(tmp_path / "run"),
+                    num_envs=16, rollout_steps=32, chunk_len=16, batch_chunks=16, updates_per_iter=8,
+                    hidden=32, feature_dim=32, learning_rate=3e-3, eval_every=0, final_eval_episodes=6,
+                    save_every=16, progress=False, tensorboard=False, max_episode_steps=100, threads=1)
+    settings.update(overrides)
+    return TrainConfig(**settings)
+
+
+def test_every_config_field_has_help():
+    docs = field_docs(TrainConfig)
+    assert set(docs) == set(TrainConfig.__dataclass_fields__)
+    assert all(len(d) > 10 for d in docs.values())
+
+
+def test_beta_schedule_and_config_checks(tmp_path):
+    cfg = tiny_config(tmp_path, beta_start=1.0, beta_end=0.2, beta_decay_fraction=0.5)
+    assert beta_at(cfg, 0) == 1.0
+    assert beta_at(cfg, 1024) == pytest.approx(0.6)
+    assert beta_at(cfg, 4096) == pytest.approx(0.2)
+    with pytest.raises(ConfigError, match="multiple of --chunk-len"):
+        train(tiny_config(tmp_path, rollout_steps=20))
+    with pytest.raises(ConfigError, match="--resume"):
+        train(tiny_config(tmp_path, run_dir=str(tmp_path / "nothing"), resume=True))
+
+
+def test_buffer_samples_aligned_chunks():
+    buf = SequenceBuffer(capacity_blocks=2, steps=8, envs=3, chunk_len=4, hidden=2, n_rays=1)
+    for k in range(3):  # the third block overwrites the first
+        block = {"label": np.full((8, 3), k, np.uint8), "target": np.arange(8, dtype=np.uint8)[:, None].repeat(3, 1),
+                 "h0": np.full((2, 3, 2), k, np.float16)}
+        buf.add(block)
+    assert buf.size == 2 and buf.frames == 48
+    batch = buf.sample(50, np.random.default_rng(0))
+    assert batch["label"].shape == (4, 50)
+    assert set(batch["label"].unique().tolist()) <= {1, 2}
+    starts = batch["target"][0]
+    assert set(starts.tolist()) <= {0, 4}  # chunks start at multiples of chunk_len
+    assert (batch["target"] - starts == np.arange(4)[:, None]).all()
+    assert (batch["h0"][:, 0] == batch["label"][0].float()).all()  # stored state of that block
+
+
+@pytest.mark.slow
+def test_training_lowers_the_loss_and_writes_its_outputs(tmp_path):
+    cfg = tiny_config(tmp_path)
+    result = train(cfg, command="test")
+    losses = [r["losses/loss"] for r in result.rows if "losses/loss" in r]
+    assert len(losses) == 8
+    assert np.mean(losses[-2:]) < losses[0] - 0.2
+    card = json.loads((tmp_path / "p.json").read_text())
+    assert card["frames"] == 4096 and card["command"] == "test" and 0.0 <= card["final_train_success"] <= 1.0
+    assert json.loads((tmp_path / "run" / "config.json").read_text())["frames"] == 4096
+    header = (tmp_path / "run" / "metrics.csv").read_text().splitlines()[0]
+    assert "losses/loss" in header and "eval/success" in header
+    assert load_checkpoint(tmp_path / "p.pt").meta["frames"] == 4096
+
+
+@pytest.mark.slow
+def test_resume_after_interruption_continues_from_the_checkpoint(tmp_path, monkeypatch):
+    cfg = tiny_config(tmp_path, save_every=8)  # a save after every iteration (8 updates)
+    calls = {"n": 0}
+    real_add = SequenceBuffer.add
+
+    def interrupted_add(self, block):
+        calls["n"] += 1
+        if calls["n"] == 4:
+            raise KeyboardInterrupt
+        real_add(self, block)
+
+    monkeypatch.setattr(SequenceBuffer, "add", interrupted_add)
+    with pytest.raises(KeyboardInterrupt):
+        train(cfg)
+    monkeypatch.setattr(SequenceBuffer, "add", real_add)
+    import torch
+
+    saved = torch.load(tmp_path / "run" / "state.pt", weights_only=False)
+    assert saved["frames"] == 3 * 512 and saved["iteration"] == 3 and saved["buffer"]["size"] == 3
+    result = train(tiny_config(tmp_path, resume=True))
+    iterations = [r["iteration"] for r in result.rows if "losses/loss" in r]
+    assert iterations == list(range(4, 9))  # continues after the saved iteration
+    assert result.card["frames"] == 4096 and result.card["updates"] == 64
+
+
+@pytest.mark.slow
+def test_finetune_returns_a_new_policy(tiny_set, tmp_path):
+    base = train(tiny_config(tmp_path, frames=1024, output="", run_dir=""))
+    before = {k: v.clone() for k, v in base.net.state_dict().items()}
+    policy = finetune(base.policy(), tiny_set.houses, 1024, num_envs=16, rollout_steps=32, chunk_len=16,
+                      batch_chunks=16, updates_per_iter=4, final_eval_episodes=4, tensorboard=False, threads=1)
+    assert policy.net is not base.net
+    assert any(not (v == policy.net.state_dict()[k]).all() for k, v in before.items())
+    assert all((v == base.net.state_dict()[k]).all() for k, v in before.items())  # the input is untouched
