@@ -8,7 +8,14 @@ import numpy as np
 import pytest
 
 from adaptenv.sim.physics import PackedGrids
-from adaptenv.sim.scan import RAY_OFFSETS_DEG, pack_semantic, scan, scan_world
+from adaptenv.sim.scan import (
+    RAY_OFFSETS_DEG,
+    free_squares,
+    pack_semantic,
+    pack_squares,
+    scan,
+    scan_world,
+)
 from adaptenv.sim.spec import (
     AGENT_RADIUS,
     CLASS_DOOR,
@@ -135,22 +142,63 @@ def test_batched_scan_matches_single_scans_across_houses(real_house):
         np.testing.assert_array_equal(classes[i], c1)
 
 
-def test_numba_scan_agrees_with_a_slow_reference_on_random_poses(real_house):
-    world = compile_world(real_house)
-    rng = np.random.default_rng(0)
+def _agreement_with_reference(world, n: int, seed: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Scan ``n`` random poses where the agent fits; per ray: depth within 2 cells of the reference,
+    same class as the reference, and the depths."""
+    rng = np.random.default_rng(seed)
     rows, cols = np.nonzero(world.grid.clearance >= AGENT_RADIUS)
-    pick = rng.integers(len(rows), size=60)
+    pick = rng.integers(len(rows), size=n)
     xs, zs = world.grid.cell_center(rows[pick], cols[pick])
-    xs, zs = xs + rng.uniform(-0.02, 0.02, 60), zs + rng.uniform(-0.02, 0.02, 60)
-    yaws = rng.uniform(0.0, 360.0, 60)
+    xs, zs = xs + rng.uniform(-0.02, 0.02, n), zs + rng.uniform(-0.02, 0.02, n)
+    yaws = rng.uniform(0.0, 360.0, n)
     grids, sem = PackedGrids.from_worlds([world]), pack_semantic([world])
-    depth, classes = scan(grids, sem, np.zeros(60, np.int64), xs, zs, yaws)
+    depth, classes = scan(grids, sem, np.zeros(n, np.int64), xs, zs, yaws, squares=pack_squares([world]))
     close, same = [], []
-    for i in range(60):
+    for i in range(n):
         ref_d, ref_c = reference_scan(world, xs[i], zs[i], yaws[i])
         close.append(np.abs(depth[i] - ref_d) * MAX_RANGE <= 2 * RES)
         same.append(classes[i] == ref_c)
-    close, same = np.concatenate(close), np.concatenate(same)
-    assert close.mean() >= 0.98, f"only {close.mean():.3f} of rays within 2 cells"
-    assert same.mean() >= 0.97, f"only {same.mean():.3f} of rays agree on the class"
+    return np.concatenate(close), np.concatenate(same), depth
+
+
+def test_numba_scan_agrees_with_a_slow_reference_on_random_poses(real_house):
+    close, same, depth = _agreement_with_reference(compile_world(real_house), 60, 0)
+    assert close.mean() >= 0.995, f"only {close.mean():.4f} of rays within 2 cells"
+    assert same.mean() >= 0.99, f"only {same.mean():.4f} of rays agree on the class"
     assert np.all(depth >= 0) and np.all(depth <= 1)
+
+
+def test_numba_scan_agrees_with_a_slow_reference_in_a_cluttered_house():
+    from adaptenv.bench.sim import clutter_house
+
+    world = compile_world(clutter_house(200, seed=0))
+    close, same, depth = _agreement_with_reference(world, 60, 1)
+    assert (depth < 1.0).mean() > 0.5, "the clutter should stop most rays within range"
+    assert close.mean() >= 0.995, f"only {close.mean():.4f} of rays within 2 cells"
+    assert same.mean() >= 0.99, f"only {same.mean():.4f} of rays agree on the class"
+
+
+def _square_is_free(blocked: np.ndarray, r: int, c: int, su: int, sv: int, side: int) -> bool:
+    """Whether the side x side square of cells cornered at (r, c), extending by (su, sv), is on the raster and free."""
+    rs = [r + sv * k for k in range(side)]
+    cs = [c + su * k for k in range(side)]
+    if min(rs + cs) < 0 or max(rs) >= blocked.shape[0] or max(cs) >= blocked.shape[1]:
+        return False  # cells off the raster count as obstacles
+    return not blocked[np.ix_(rs, cs)].any()
+
+
+def test_free_squares_are_the_largest_free_squares_in_each_quadrant():
+    rng = np.random.default_rng(3)
+    blocked = rng.random((13, 17)) < 0.15
+    sq = free_squares(blocked)
+    assert sq.shape == (4, 13, 17) and sq.dtype == np.uint8
+    for q in range(4):
+        su, sv = (-1 if q & 1 else 1), (-1 if q & 2 else 1)
+        for r in range(13):
+            for c in range(17):
+                s = int(sq[q, r, c])
+                if blocked[r, c]:
+                    assert s == 0
+                else:
+                    assert _square_is_free(blocked, r, c, su, sv, s), (q, r, c, s)
+                    assert not _square_is_free(blocked, r, c, su, sv, s + 1), (q, r, c, s)

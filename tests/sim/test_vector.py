@@ -88,16 +88,57 @@ def test_serial_and_parallel_kernels_agree(real_world):
     eps = [task.sample_episode(real_world, rng) for _ in range(80)]
     actions = rng.integers(0, END, size=(15, 80))
     out = []
-    for parallel in (False, True):
-        sim = BatchSim([real_world], parallel=parallel)
+    for kwargs in ({"parallel": False}, {"parallel": True}, {"threads": 1}, {"threads": 2}):
+        sim = BatchSim([real_world], **kwargs)
         sim.reset(eps)
         for a in actions:
             obs, reward, *_ = sim.step(a)
         out.append((obs, reward, sim.x.copy()))
-    for key in out[0][0]:
-        np.testing.assert_array_equal(out[0][0][key], out[1][0][key])
-    np.testing.assert_array_equal(out[0][1], out[1][1])
-    np.testing.assert_array_equal(out[0][2], out[1][2])
+    for other in out[1:]:
+        for key in out[0][0]:
+            np.testing.assert_array_equal(out[0][0][key], other[0][key])
+        np.testing.assert_array_equal(out[0][1], other[1])
+        np.testing.assert_array_equal(out[0][2], other[2])
+
+
+def test_thread_choice_is_explicit_and_auto_picks_serial_for_small_batches_or_one_thread(small_world):
+    import numba
+
+    from adaptenv.sim.vector import PARALLEL_MIN_BATCH
+
+    assert BatchSim([small_world], threads=1).threads_for(4096) == 1
+    assert BatchSim([small_world], parallel=False).threads_for(4096) == 1
+    auto = BatchSim([small_world])
+    assert auto.threads_for(PARALLEL_MIN_BATCH - 1) == 1
+    previous = numba.get_num_threads()
+    try:
+        numba.set_num_threads(1)
+        assert auto.threads_for(4096) == 1
+        if numba.config.NUMBA_NUM_THREADS >= 2:
+            numba.set_num_threads(2)
+            assert auto.threads_for(4096) == 2
+            assert BatchSim([small_world], threads=2).threads_for(1) == 2
+    finally:
+        numba.set_num_threads(previous)
+    with pytest.raises(ValueError, match="threads"):
+        BatchSim([small_world], threads=0)
+
+
+def test_kernel_leaves_numba_thread_count_as_it_found_it(small_world):
+    import numba
+
+    if numba.config.NUMBA_NUM_THREADS < 2:
+        pytest.skip("needs 2 numba threads")
+    rng = np.random.default_rng(4)
+    sim = BatchSim([small_world], threads=2)
+    sim.reset([task.sample_episode(small_world, rng) for _ in range(3)])
+    previous = numba.get_num_threads()
+    try:
+        numba.set_num_threads(1)
+        sim.step(np.full(3, ROTATE_RIGHT))
+        assert numba.get_num_threads() == 1
+    finally:
+        numba.set_num_threads(previous)
 
 
 def test_reward_follows_the_best_so_far_distance(small_world):

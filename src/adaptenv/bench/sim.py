@@ -7,7 +7,9 @@ that ends (``end`` or the 600-step cap) is replaced by a freshly drawn one, and 
 measured too. Each throughput is the median of ``repeats`` runs of about ``seconds`` each, given
 both per wall-clock second and per CPU-second of the process (all threads), with the load average
 before and after, because wall-clock figures drop when other processes share the machine. The
-clutter comparison runs one thread, so its CPU-time ratio is the per-step cost ratio.
+batch figure is given for both kernels (serial, and multi-threaded on 2 threads) along with the
+thread count BatchSim's default picks. The clutter comparison runs one thread, so its CPU-time
+ratio is the per-step cost ratio.
 """
 
 from __future__ import annotations
@@ -63,13 +65,16 @@ def random_actions(rng: np.random.Generator, n: int, p_end: float) -> np.ndarray
 
 
 def batch_rate(worlds: list, batch: int, seconds: float, repeats: int, seed: int, p_end: float,
-               parallel: bool | None = None) -> tuple[float, float]:
-    """Agent steps per (wall, CPU) second of BatchSim, resetting finished slots with freshly drawn episodes."""
+               threads: int | None = None) -> tuple[float, float]:
+    """Agent steps per (wall, CPU) second of BatchSim, resetting finished slots with freshly drawn episodes.
+
+    ``threads`` is BatchSim's: 1 the serial kernel, 2 the multi-threaded one on 2 threads, None its default.
+    """
     from adaptenv.sim.vector import BatchSim, EpisodeSampler
 
     rng = np.random.default_rng(seed)
     sampler = EpisodeSampler(worlds)
-    sim = BatchSim(worlds, parallel=parallel)
+    sim = BatchSim(worlds, threads=threads)
     sim.reset(*sampler.draw(rng, batch))
 
     def chunk() -> int:
@@ -187,9 +192,14 @@ def run(batch: int = 1024, seconds: float = 2.0, repeats: int = 5, seed: int = 0
     fig["numba_threads"] = numba.get_num_threads()
     fig["batch"] = batch
     fig["p_end"] = p_end
-    fig["batch_steps_per_s"], fig["batch_steps_per_cpu_s"] = batch_rate([real], batch, seconds, repeats, seed, p_end)
+    from adaptenv.sim.vector import BatchSim
+
+    fig["batch_threads_default"] = BatchSim([real]).threads_for(batch)
+    threads = min(2, numba.get_num_threads())
+    fig["batch_steps_per_s_threads2"], fig["batch_steps_per_cpu_s_threads2"] = batch_rate(
+        [real], batch, seconds, repeats, seed, p_end, threads=threads)
     fig["batch_steps_per_s_serial"], fig["batch_steps_per_cpu_s_serial"] = batch_rate(
-        [real], batch, seconds, repeats, seed, p_end, parallel=False)
+        [real], batch, seconds, repeats, seed, p_end, threads=1)
     fig["batch_steps_per_s_uniform7"], fig["batch_steps_per_cpu_s_uniform7"] = batch_rate(
         [real], batch, seconds, repeats, seed, 1.0 / 7.0)
     fig["env_steps_per_s"], fig["env_steps_per_cpu_s"] = env_rate(real_house, seconds, repeats, seed, p_end)
@@ -197,8 +207,8 @@ def run(batch: int = 1024, seconds: float = 2.0, repeats: int = 5, seed: int = 0
     fig["minigrid_fourrooms_steps_per_s"] = mg[0] if mg is not None else "minigrid not installed"
     fig["minigrid_fourrooms_steps_per_cpu_s"] = mg[1] if mg is not None else "minigrid not installed"
     # clutter: one thread, so the CPU-time ratio is the per-step cost ratio whatever the load
-    w10, c10 = batch_rate([sparse], batch, seconds, repeats, seed, p_end, parallel=False)
-    w200, c200 = batch_rate([dense], batch, seconds, repeats, seed, p_end, parallel=False)
+    w10, c10 = batch_rate([sparse], batch, seconds, repeats, seed, p_end, threads=1)
+    w200, c200 = batch_rate([dense], batch, seconds, repeats, seed, p_end, threads=1)
     fig["clutter10_batch_steps_per_s_serial"], fig["clutter10_batch_steps_per_cpu_s_serial"] = w10, c10
     fig["clutter200_batch_steps_per_s_serial"], fig["clutter200_batch_steps_per_cpu_s_serial"] = w200, c200
     fig["clutter_cost_ratio_200_vs_10_wall"] = w10 / w200
@@ -214,12 +224,16 @@ def run(batch: int = 1024, seconds: float = 2.0, repeats: int = 5, seed: int = 0
     ok = lambda good: "met" if good else "MISSED"  # noqa: E731
     all_key = next(k for k in fig if k.startswith("real_bytes_all_"))
     notes = [
-        f"targets: batch >= {TARGET_BATCH_STEPS:,} steps/s: wall {ok(fig['batch_steps_per_s'] >= TARGET_BATCH_STEPS)}, "
-        f"per CPU-second {ok(fig['batch_steps_per_cpu_s'] >= TARGET_BATCH_STEPS)}; "
+        f"targets: batch >= {TARGET_BATCH_STEPS:,} steps/s: serial kernel wall "
+        f"{ok(fig['batch_steps_per_s_serial'] >= TARGET_BATCH_STEPS)}, 2 threads wall "
+        f"{ok(fig['batch_steps_per_s_threads2'] >= TARGET_BATCH_STEPS)}, best per CPU-second "
+        f"{ok(max(fig['batch_steps_per_cpu_s_serial'], fig['batch_steps_per_cpu_s_threads2']) >= TARGET_BATCH_STEPS)}; "
         f"env >= {TARGET_ENV_STEPS:,} steps/s ({ok(fig['env_steps_per_s'] >= TARGET_ENV_STEPS)}); "
         f"clutter CPU ratio <= {TARGET_CLUTTER_RATIO} ({ok(fig['clutter_cost_ratio_200_vs_10_cpu'] <= TARGET_CLUTTER_RATIO)}); "
         f"memory <= 4 MiB: one target {ok(fig['real_bytes_one_target'] <= TARGET_BYTES)}, "
         f"all targets {ok(fig[all_key] <= TARGET_BYTES)}",
+        f"BatchSim's default (threads=None) runs {fig['batch_threads_default']} thread(s) at batch {batch}; "
+        "the serial kernel wins whenever other processes keep the second core busy",
         f"actions: six motions uniformly, end with p={p_end} ('uniform7': all seven uniformly); "
         "finished episodes are replaced by freshly drawn ones inside the timed loop",
         "steps per CPU-second count the CPU time of every thread of this process (time.process_time); "

@@ -1,9 +1,9 @@
 """BatchSim: B ObjectNav episodes stepped at once, in one compiled loop, houses mixed freely.
 
 Physics (``physics``), the scan (``scan``) and the geodesic-distance lookup behind the reward run
-in a single numba kernel over agents (``prange`` over 2+ cores for large batches); per-agent state
-lives in NumPy arrays. Only the rare agents that issue ``end`` go through Python, to be judged by
-``task.is_success``.
+in a single numba kernel over agents, serial or multi-threaded (``prange``; see
+``BatchSim.threads_for`` for the choice); per-agent state lives in NumPy arrays. Only the rare
+agents that issue ``end`` go through Python, to be judged by ``task.is_success``.
 """
 
 from __future__ import annotations
@@ -20,7 +20,7 @@ import numpy as np
 from adaptenv.errors import AdaptenvError
 from adaptenv.sim import geodesic, metrics, physics, scan, task
 from adaptenv.sim.physics import _MOVE_DELTA, _YAW_DELTA, PackedGrids, _move_one
-from adaptenv.sim.scan import RAY_COS, RAY_SIN, _scan_one, pack_semantic
+from adaptenv.sim.scan import RAY_COS, RAY_SIN, _scan_one, pack_semantic, pack_squares
 from adaptenv.sim.spec import (
     AGENT_RADIUS,
     END,
@@ -39,7 +39,7 @@ STEP_PENALTY = -0.01
 SUCCESS_REWARD = 10.0
 """Reward added when ``end`` is issued with a target in sight within SUCCESS_DISTANCE."""
 PARALLEL_MIN_BATCH = 64
-"""Batches at least this large use the multi-threaded kernel; smaller ones avoid its start-up cost."""
+"""With ``threads=None``, batches smaller than this use the serial kernel (threads cost more than they save)."""
 
 
 @numba.njit(cache=True)
@@ -79,7 +79,7 @@ def _make_agent_step(stamp: str):
     """The per-agent step kernel, keyed in numba's cache by ``stamp`` (its only closure variable)."""
 
     @numba.njit(cache=True)
-    def _agent_step(i, stepping, clear, sem, dist, offs, hs, ws, x0s, z0s, ress,
+    def _agent_step(i, stepping, clear, sem, sq, dist, offs, hs, ws, x0s, z0s, ress,
                     env, doff, x, z, yaw, steps, collisions, prev_action, path, geo, best, moved, done,
                     actions, radius, yaw_delta, move_delta, ray_cos, ray_sin, max_range, max_steps,
                     reward, terminated, truncated, depth, classes):
@@ -115,7 +115,7 @@ def _make_agent_step(stamp: str):
             truncated[i] = False
         if d < best[i]:
             best[i] = d
-        _scan_one(clear, sem, off, h, w, x0, z0, res, x[i], z[i], yaw[i], ray_cos, ray_sin, max_range, depth, classes,
+        _scan_one(sq, sem, off, h, w, x0, z0, res, x[i], z[i], yaw[i], ray_cos, ray_sin, max_range, depth, classes,
                   i)
 
     return _agent_step
@@ -130,25 +130,25 @@ def _make_loops(stamp: str):
     only ``stamp``: numba's cache key must not include a dispatcher object)."""
 
     @numba.njit(cache=True)
-    def _run_serial(idx, stepping, clear, sem, dist, offs, hs, ws, x0s, z0s, ress,
+    def _run_serial(idx, stepping, clear, sem, sq, dist, offs, hs, ws, x0s, z0s, ress,
                     env, doff, x, z, yaw, steps, collisions, prev_action, path, geo, best, moved, done,
                     actions, radius, yaw_delta, move_delta, ray_cos, ray_sin, max_range, max_steps,
                     reward, terminated, truncated, depth, classes):
         _ = stamp
         for k in range(idx.shape[0]):
-            _agent_step(idx[k], stepping, clear, sem, dist, offs, hs, ws, x0s, z0s, ress,
+            _agent_step(idx[k], stepping, clear, sem, sq, dist, offs, hs, ws, x0s, z0s, ress,
                         env, doff, x, z, yaw, steps, collisions, prev_action, path, geo, best, moved, done,
                         actions, radius, yaw_delta, move_delta, ray_cos, ray_sin, max_range, max_steps,
                         reward, terminated, truncated, depth, classes)
 
     @numba.njit(cache=True, parallel=True)
-    def _run_parallel(idx, stepping, clear, sem, dist, offs, hs, ws, x0s, z0s, ress,
+    def _run_parallel(idx, stepping, clear, sem, sq, dist, offs, hs, ws, x0s, z0s, ress,
                       env, doff, x, z, yaw, steps, collisions, prev_action, path, geo, best, moved, done,
                       actions, radius, yaw_delta, move_delta, ray_cos, ray_sin, max_range, max_steps,
                       reward, terminated, truncated, depth, classes):
         _ = stamp
         for k in numba.prange(idx.shape[0]):
-            _agent_step(idx[k], stepping, clear, sem, dist, offs, hs, ws, x0s, z0s, ress,
+            _agent_step(idx[k], stepping, clear, sem, sq, dist, offs, hs, ws, x0s, z0s, ress,
                         env, doff, x, z, yaw, steps, collisions, prev_action, path, geo, best, moved, done,
                         actions, radius, yaw_delta, move_delta, ray_cos, ray_sin, max_range, max_steps,
                         reward, terminated, truncated, depth, classes)
@@ -206,17 +206,27 @@ class BatchSim:
     """
 
     def __init__(self, worlds: Sequence, *, max_steps: int = MAX_STEPS, radius: float = AGENT_RADIUS,
-                 max_range: float = MAX_RANGE, parallel: bool | None = None) -> None:
+                 max_range: float = MAX_RANGE, threads: int | None = None, parallel: bool | None = None) -> None:
+        """``threads``: 1 runs the serial kernel, n >= 2 the multi-threaded one on n numba threads, None
+        chooses per call (:meth:`threads_for`). ``parallel`` is the older spelling: False is
+        ``threads=1``, True the multi-threaded kernel on numba's current thread count."""
         if not worlds:
             raise ValueError("BatchSim needs at least one NavWorld")
+        if threads is not None and not 1 <= int(threads) <= numba.config.NUMBA_NUM_THREADS:
+            raise ValueError(f"threads must be None or in [1, {numba.config.NUMBA_NUM_THREADS}] (numba's "
+                             f"NUMBA_NUM_THREADS), got {threads}")
         self.worlds = list(worlds)
         self.grids = PackedGrids.from_worlds(self.worlds)
         self.semantic = pack_semantic(self.worlds)
+        self.squares = pack_squares(self.worlds)
+        """The scan's free squares (``scan.pack_squares``), aligned with ``grids``."""
         self.max_steps = int(max_steps)
         self.radius = float(radius)
         self.max_range = float(max_range)
+        self.threads = None if threads is None else int(threads)
+        """Threads of the kernel: 1 (serial), n >= 2 (multi-threaded), or None (auto, see :meth:`threads_for`)."""
         self.parallel = parallel
-        """Multi-threaded kernel: True, False, or None for batches of at least PARALLEL_MIN_BATCH."""
+        """Older spelling of ``threads`` (used only when ``threads`` is None): True, False or None."""
         self._fields = numba.typed.List.empty_list(numba.types.float32[::1])
         self._field_offset: dict[tuple[int, str], int] = {}
         self._targets: dict[tuple[int, str], np.ndarray] = {}
@@ -316,11 +326,41 @@ class BatchSim:
 
     def _run(self, idx: np.ndarray, actions: np.ndarray, stepping: bool) -> None:
         """The compiled kernel over agents ``idx``: act (if stepping), reward, distance, scan."""
+        threads = self.threads_for(idx.shape[0])
+        forced_parallel = self.threads is None and self.parallel is True  # the older spelling's meaning
+        if threads == 1 and not forced_parallel:
+            self._kernel(_run_serial, idx, actions, stepping)
+            return
+        previous = numba.get_num_threads()
+        if threads != previous:
+            numba.set_num_threads(threads)
+        try:
+            self._kernel(_run_parallel, idx, actions, stepping)
+        finally:
+            if threads != previous:
+                numba.set_num_threads(previous)
+
+    def threads_for(self, batch: int) -> int:
+        """Threads the kernel uses for ``batch`` agents (1 = the serial kernel).
+
+        ``threads`` when set; otherwise 1 for batches under PARALLEL_MIN_BATCH or when numba has a
+        single thread (``numba.get_num_threads()``), else numba's thread count. The multi-threaded
+        kernel loses to the serial one when other processes keep the other cores busy: on a shared
+        machine pass ``threads=1`` (or set ``NUMBA_NUM_THREADS=1``). Results do not depend on it.
+        """
+        if self.threads is not None:
+            return self.threads
+        if self.parallel is not None:
+            return numba.get_num_threads() if self.parallel else 1
+        if batch < PARALLEL_MIN_BATCH:
+            return 1
+        return numba.get_num_threads()
+
+    def _kernel(self, kernel, idx: np.ndarray, actions: np.ndarray, stepping: bool) -> None:
+        """Call ``kernel`` (``_run_serial`` or ``_run_parallel``) on the packed state."""
         g = self.grids
-        parallel = idx.shape[0] >= PARALLEL_MIN_BATCH if self.parallel is None else self.parallel
-        kernel = _run_parallel if parallel else _run_serial
-        kernel(idx, stepping, g.clearance, self.semantic, self._fields, g.offset, g.height, g.width, g.x0, g.z0,
-               g.resolution, self.env, self._doff, self.x, self.z, self.yaw, self.steps, self.collisions,
+        kernel(idx, stepping, g.clearance, self.semantic, self.squares, self._fields, g.offset, g.height, g.width,
+               g.x0, g.z0, g.resolution, self.env, self._doff, self.x, self.z, self.yaw, self.steps, self.collisions,
                self.prev_action, self.path_length, self.geodesic, self.best, self.moved, self.done,
                actions, self.radius, _YAW_DELTA, _MOVE_DELTA, RAY_COS, RAY_SIN, self.max_range, self.max_steps,
                self._reward, self._terminated, self._truncated, self._depth, self._classes)
@@ -393,7 +433,7 @@ class BatchSim:
     def nbytes(self) -> int:
         """Memory of the arrays BatchSim holds that no world holds too: packed rasters of several
         worlds (one world's are used in place) and distance fields no longer in their world's cache."""
-        own = sum(a.nbytes for a in (self.grids.clearance, self.semantic) if a.base is None)
+        own = sum(a.nbytes for a in (self.grids.clearance, self.semantic, self.squares) if a.base is None)
         held = {id(a) for w in self.worlds for a in w.cache.values() if isinstance(a, np.ndarray)}
         own += sum(f.nbytes for f in self._fields if id(f.base) not in held)
         return int(own)
