@@ -1,0 +1,530 @@
+"""Write the HTML report of a run or an experiment as a self-contained folder of files.
+
+The folder holds ``index.html`` (CSS inlined, no scripts, no external fonts or URLs), the learning
+curves under ``plots/``, copies of the renders under ``img/``, copies of the raw records under
+``data/`` and, for an experiment, one run report per (method, seed) under ``runs/``. Every piece
+of text read from files is HTML-escaped.
+
+Example:
+    >>> from adaptenv.report.html import build_report
+    >>> build_report(Path("runs/accel/seed_0"))  # doctest: +SKIP
+    PosixPath('runs/accel/seed_0/report/index.html')
+"""
+
+from __future__ import annotations
+
+import html
+import json
+import os
+import re
+import shutil
+from collections.abc import Iterable
+from pathlib import Path
+from urllib.parse import quote
+
+from adaptenv.curriculum.records import (
+    ITERATIONS,
+    ITERATIONS_CSV,
+    RUN_INFO,
+    IterationRecord,
+    SetMetrics,
+)
+from adaptenv.errors import AdaptenvError
+from adaptenv.report.data import (
+    EditRow,
+    ExperimentData,
+    GalleryEntry,
+    RunData,
+    Stat,
+    detect,
+    final_stat,
+    last_with,
+    load_experiment,
+    load_gallery,
+    load_run,
+)
+
+GENERATOR = "adaptenv report"
+INDEX = "index.html"
+_OWNED = ("img", "plots", "runs", "data")
+"""Sub-folders a report owns; cleared before a report is rewritten in place."""
+CSS_FILE = Path(__file__).parent / "static" / "report.css"
+
+
+def esc(value: object) -> str:
+    """HTML-escape any value's text (quotes too, so it is safe inside attributes)."""
+    return html.escape(str(value), quote=True)
+
+
+def safe_name(text: str) -> str:
+    """A file-name-safe version of an id from a file (letters, digits, '.', '_', '-')."""
+    return re.sub(r"[^A-Za-z0-9._-]+", "_", text).strip("._") or "item"
+
+
+def href(path: Path, base: Path) -> str:
+    """URL of ``path`` relative to folder ``base`` (both inside the report), percent-encoded."""
+    return quote(Path(os.path.relpath(path, base)).as_posix())
+
+
+# --------------------------------------------------------------------------- numbers
+
+def num(x: float | int | None, digits: int = 3) -> str:
+    if x is None:
+        return "–"
+    if isinstance(x, int):
+        return f"{x:,}"
+    return f"{x:.{digits}f}"
+
+
+def pct(x: float | None) -> str:
+    return "–" if x is None else f"{100 * x:.1f}%"
+
+
+def metric_text(metric: str, value: float | None) -> str:
+    return pct(value) if metric == "success" else num(value)
+
+
+def stat_cell(metric: str, stat: Stat | None, best: bool = False) -> str:
+    """A ``<td>`` with mean and, when known, '± SE' in a muted span."""
+    if stat is None:
+        return "<td>–</td>"
+    se = "" if stat.se is None else f' <span class="se">± {metric_text(metric, stat.se)}</span>'
+    return f'<td{" class=best" if best else ""}>{metric_text(metric, stat.mean)}{se}</td>'
+
+
+def set_cell(metric: str, m: SetMetrics | None) -> str:
+    if m is None:
+        return "<td>–</td>"
+    se_val = getattr(m, f"{metric}_se")
+    se = f' <span class="se">± {metric_text(metric, se_val)}</span>' if se_val else ""
+    return f"<td>{metric_text(metric, getattr(m, metric))}{se}</td>"
+
+
+def stars(p: float) -> str:
+    return "***" if p < 0.001 else "**" if p < 0.01 else "*" if p < 0.05 else ""
+
+
+# --------------------------------------------------------------------------- page parts
+
+def page(title: str, subtitle: str, nav: list[tuple[str, str]], body: str) -> str:
+    """A whole HTML document with the stylesheet inlined."""
+    css = CSS_FILE.read_text(encoding="utf-8")
+    links = "".join(f'<a href="{esc(h)}">{esc(t)}</a>' for t, h in nav)
+    return ("<!doctype html>\n<html lang=\"en\"><head><meta charset=\"utf-8\">"
+            "<meta name=\"viewport\" content=\"width=device-width, initial-scale=1\">"
+            f"<meta name=\"generator\" content=\"{GENERATOR}\"><title>{esc(title)}</title>"
+            f"<style>\n{css}</style></head>\n<body>\n"
+            f"<header class=\"top\"><div class=\"wrap\"><h1>{esc(title)}</h1><p>{subtitle}</p></div></header>\n"
+            f"<nav class=\"toc\"><div class=\"wrap\">{links}</div></nav>\n"
+            f"<main class=\"wrap\">\n{body}\n</main>\n"
+            "<footer><div class=\"wrap\">Written by <code>adaptenv report</code>. "
+            "Works offline: every file this page uses is inside its folder.</div></footer>\n</body></html>\n")
+
+
+def block(anchor: str, title: str, content: str) -> str:
+    return f'<section class="block" id="{esc(anchor)}"><h2>{esc(title)}</h2>\n{content}\n</section>'
+
+
+def table(head: str, rows: Iterable[str]) -> str:
+    return f'<div class="tablewrap"><table><thead>{head}</thead><tbody>{"".join(rows)}</tbody></table></div>'
+
+
+def cards(items: list[tuple[str, str]]) -> str:
+    return '<div class="cards">' + "".join(
+        f'<div class="card"><div class="k">{esc(k)}</div><div class="v">{esc(v)}</div></div>' for k, v in items) + "</div>"
+
+
+def warnings_box(warnings: list[str], title: str = "Problems met while reading the records") -> str:
+    if not warnings:
+        return ""
+    items = "".join(f"<li>{esc(w)}</li>" for w in warnings)
+    return f'<div class="callout"><strong>{esc(title)}</strong><ul>{items}</ul></div>'
+
+
+def plot_img(path: Path | None, base: Path, alt: str) -> str:
+    if path is None:
+        return '<p class="note">No held-out evaluations yet, so there is nothing to plot.</p>'
+    w, h = _image_size(path) or (0, 0)
+    size = f' width="{w}" height="{h}"' if w else ""
+    return f'<img class="plot" src="{href(path, base)}" alt="{esc(alt)}" loading="lazy" decoding="async"{size}>'
+
+
+def _image_size(path: Path) -> tuple[int, int] | None:
+    """Pixel size of an image file, or None when it is not a readable image."""
+    from PIL import Image, UnidentifiedImageError
+
+    try:
+        with Image.open(path) as im:
+            im.verify()
+            return im.size
+    except (OSError, UnidentifiedImageError, ValueError, SyntaxError):
+        return None
+
+
+class Assets:
+    """Copies files into the report folder under unique, safe names and hands back their URLs."""
+
+    def __init__(self, root: Path, page_dir: Path):
+        self.root, self.page_dir = root, page_dir
+        self.used: set[Path] = set()
+
+    def copy(self, src: Path, folder: str, name: str) -> Path:
+        stem, dot, ext = name.rpartition(".")
+        dest = self.root / folder / (safe_name(stem)[:60] + dot + safe_name(ext) if dot else safe_name(name)[:60])
+        stem, suffix, k = dest.stem, dest.suffix, 1
+        while dest in self.used:
+            k += 1
+            dest = dest.with_name(f"{stem}-{k}{suffix}")
+        self.used.add(dest)
+        dest.parent.mkdir(parents=True, exist_ok=True)
+        shutil.copyfile(src, dest)
+        return dest
+
+    def image(self, src: Path | None, folder: str, name: str, alt: str) -> str:
+        """An ``<img>`` (lazy, with its size, linking to the full image) or a placeholder when unusable."""
+        if src is None:
+            return f'<div class="missing">{esc(alt)}: no render recorded</div>'
+        size = _image_size(src)
+        if size is None:
+            return f'<div class="missing">{esc(alt)}: render unreadable</div>'
+        dest = self.copy(src, folder, name)
+        url = href(dest, self.page_dir)
+        return (f'<a href="{url}"><img src="{url}" alt="{esc(alt)}" loading="lazy" decoding="async" '
+                f'width="{size[0]}" height="{size[1]}"></a>')
+
+    def link(self, src: Path, folder: str = "data") -> str:
+        dest = self.copy(src, folder, src.name)
+        return f'<a href="{href(dest, self.page_dir)}">{esc(src.name)}</a>'
+
+
+# --------------------------------------------------------------------------- gallery
+
+def outcome_html(analysis) -> str:
+    o = analysis.outcome
+    badge = '<span class="badge ok">success</span>' if o.success else (
+        f'<span class="badge bad">failure{": " + esc(o.failure_mode) if o.failure_mode else ""}</span>')
+    spl = f", SPL {num(o.spl, 2)}" if o.spl is not None else ""
+    source = f' <span class="muted">(analysis by {esc(analysis.source)})</span>' if analysis.source else ""
+    return (f"<p>{badge} {esc(o.summary)} <span class=\"muted\">({o.steps} steps{spl})</span>{source}</p>"
+            f'<p class="note">{esc(analysis.task)}</p>')
+
+
+def analysis_html(analysis) -> str:
+    """Outcome, concerns and suggestions as readable lists."""
+    if analysis is None:
+        return '<h5>Analysis</h5><p class="note">No analysis recorded for this scene.</p>'
+    concerns = []
+    for c in analysis.concerns:
+        where = f" near grid ({c.where.x:.0f}, {c.where.y:.0f})" if c.where else ""
+        steps = (f", steps {c.steps[0]}–{c.steps[-1]}" if len(c.steps) > 1 and c.steps[0] != c.steps[-1]
+                 else f", step {c.steps[0]}" if c.steps else "")
+        objs = f" <span class=\"muted\">objects: {esc(', '.join(c.objects))}</span>" if c.objects else ""
+        concerns.append(f'<li><span class="kind">{esc(c.kind)}</span> {esc(c.description)} '
+                        f'<span class="muted">[{esc(c.id)}, severity {c.severity:.2f}{esc(where)}{esc(steps)}]</span>{objs}</li>')
+    suggestions = []
+    for s in analysis.suggestions:
+        addr = f"addresses {', '.join(s.addresses)}" if s.addresses else "general difficulty"
+        suggestions.append(f'<li><span class="kind">{esc(s.kind)}</span> {esc(s.description)} '
+                           f'<span class="muted">[{esc(s.id)}, priority {s.priority:.2f}, {esc(addr)}]</span></li>')
+    return ("<h5>Analysis</h5>" + outcome_html(analysis)
+            + "<h5>Concerns</h5>" + (f"<ul>{''.join(concerns)}</ul>" if concerns else '<p class="note">none</p>')
+            + "<h5>Suggestions</h5>" + (f"<ol>{''.join(suggestions)}</ol>" if suggestions else '<p class="note">none</p>'))
+
+
+def _move(d: tuple[float, float]) -> str:
+    return f"({d[0]:+.1f}, {d[1]:+.1f})"
+
+
+def _verdict(e: EditRow) -> str:
+    if not e.accepted:
+        return '<span class="badge bad">rejected</span>' if e.object_id != "-" else f'<span class="badge na">{esc(e.stop_reason)}</span>'
+    if e.verified is True:
+        how = f" ({esc(e.verification)})" if e.verification and e.verification != "none" else ""
+        return f'<span class="badge ok">verified{how}</span>'
+    if e.verified is False:
+        return '<span class="badge bad">failed check</span>'
+    return '<span class="badge na">accepted, not verified</span>'
+
+
+def edits_html(entry: GalleryEntry) -> str:
+    """The edit table: object, requested vs achieved move (grid units), rotation, stop reason, verification."""
+    gen = f' <span class="muted">(generator: {esc(entry.generator)})</span>' if entry.generator else ""
+    if not entry.edits:
+        return f'<h5>Edits</h5><p class="note">No edits recorded for this scene.{gen}</p>'
+    head = ("<tr><th>#</th><th class=l>object</th><th>requested (dx, dy)</th><th>achieved (dx, dy)</th>"
+            "<th>rotation</th><th class=l>stop reason</th><th class=l>verification</th><th class=l>note</th></tr>")
+    rows = []
+    for k, e in enumerate(entry.edits, 1):
+        if e.object_id == "-":
+            rows.append(f"<tr><td>{k}</td><td class=l>–</td><td>–</td><td>–</td><td>–</td><td class=l>–</td>"
+                        f"<td class=l>{_verdict(e)}</td><td class=wrap-text>{esc(e.note)}</td></tr>")
+            continue
+        rot = "–" if e.rotation is None else f"{e.rotation:.0f}° ({e.yaw_before:.0f}°→{e.yaw_after:.0f}°)"
+        stop = esc(e.stop_reason) + (f' <span class="muted">by {esc(e.blocked_by)}</span>' if e.blocked_by else "")
+        note = " ".join(x for x in (e.note, f"intent: {e.intent}" if e.intent else "") if x)
+        rows.append(f"<tr><td>{k}</td><td class=l><code>{esc(e.object_id)}</code></td><td>{_move(e.requested)}</td>"
+                    f"<td>{_move(e.achieved)}</td><td>{esc(rot)}</td><td class=l>{stop}</td>"
+                    f"<td class=l>{_verdict(e)}</td><td class=wrap-text>{esc(note)}</td></tr>")
+    return (f"<h5>Edits{gen}</h5>" + table(head, rows)
+            + '<p class="note">Moves in grid units of the normalized 0..100 map (+dx right, +dy up); '
+              "rotation is the requested absolute yaw (yaw before → after).</p>")
+
+
+def scene_html(entry: GalleryEntry, assets: Assets, t: int, k: int) -> str:
+    folder = f"img/iter_{t:04d}/{k:02d}_{safe_name(entry.scene)[:40]}"
+    before = assets.image(entry.before, folder, "before.png", f"{entry.scene}, before")
+    after = assets.image(entry.after, folder, "after.png", f"{entry.scene}, after")
+    summary = f' <span class="muted">— {esc(entry.summary)}</span>' if entry.summary else ""
+    return (f'<article class="scene" id="iter-{t}-scene-{k}"><h4><code>{esc(entry.scene)}</code>{summary}</h4>'
+            f'<div class="pair"><figure>{before}<figcaption>before: pi_t in e_t</figcaption></figure>'
+            f"<figure>{after}<figcaption>after: the edited scene</figcaption></figure></div>"
+            f'<div class="cols"><div>{analysis_html(entry.analysis)}</div><div>{edits_html(entry)}</div></div>'
+            f"{warnings_box(entry.warnings, 'Missing or unreadable files')}</article>")
+
+
+def gallery_html(run: RunData, assets: Assets) -> str:
+    parts = []
+    for r in reversed(run.iterations):
+        if not r.gallery:
+            continue
+        scenes = "".join(scene_html(load_gallery(run.path, item), assets, r.iteration, k)
+                         for k, item in enumerate(r.gallery, 1))
+        n = len(r.gallery)
+        parts.append(f'<details class="iter" id="iter-{r.iteration}" open><summary>Iteration {r.iteration} '
+                     f'<span class="muted">— {n} adapted scene{"s" if n != 1 else ""}</span></summary>'
+                     f'<div class="body">{scenes}</div></details>')
+    if not parts:
+        return '<p class="note">No adapted scenes were recorded in the finished iterations.</p>'
+    return '<p class="note">Latest iteration first. Click a render to open it at full size.</p>' + "".join(parts)
+
+
+# --------------------------------------------------------------------------- run page
+
+def results_table(run: RunData) -> str:
+    sets = run.sets
+    head = ('<tr><th>iteration</th><th>env steps</th><th>grad updates</th><th>edits</th>'
+            '<th>train success</th><th>train SPL</th>'
+            + "".join(f"<th>{esc(s)} success</th><th>{esc(s)} SPL</th>" for s in sets)
+            + "<th>wall time</th></tr>")
+    rows = []
+    for r in run.iterations:
+        anchor = f'<a href="#iter-{r.iteration}">{r.iteration}</a>' if r.gallery else str(r.iteration)
+        rows.append(f"<tr><td>{anchor}</td><td>{num(r.env_steps)}</td><td>{num(r.grad_updates)}</td>"
+                    f"<td>{num(r.edits)}</td>{set_cell('success', r.train)}{set_cell('spl', r.train)}"
+                    + "".join(set_cell("success", r.heldout.get(s)) + set_cell("spl", r.heldout.get(s)) for s in sets)
+                    + f"<td>{_duration(r.wall_time_s)}</td></tr>")
+    return table(head, rows) + ('<p class="note">Env steps, gradient updates and edits are cumulative. Train figures '
+                                "are pi_t on its training scenes; held-out figures are pi_{t+1}; ± is the "
+                                "standard error over episodes when recorded.</p>")
+
+
+def _duration(s: float) -> str:
+    if s <= 0:
+        return "–"
+    return f"{s:.0f} s" if s < 120 else f"{s / 60:.1f} min" if s < 7200 else f"{s / 3600:.1f} h"
+
+
+def key_figures(run: RunData) -> str:
+    last = run.last
+    if last is None:
+        return ""
+    items = [("iterations", str(len(run.iterations))), ("env steps", num(last.env_steps)),
+             ("gradient updates", num(last.grad_updates)), ("edits", num(last.edits))]
+    for s in run.sets:
+        if (r := last_with(run, s)) is not None:
+            items.append((f"{s}: success / SPL", f"{pct(r.heldout[s].success)} / {num(r.heldout[s].spl, 2)}"))
+    return cards(items)
+
+
+def run_meta(run: RunData) -> str:
+    parts = []
+    if run.info is not None:
+        if run.info.command:
+            parts.append(f"<p><strong>Command:</strong> <code>{esc(run.info.command)}</code></p>")
+        if run.info.config:
+            cfg = json.dumps(run.info.config, indent=2, sort_keys=True, default=str)
+            parts.append(f"<details><summary>Config ({len(run.info.config)} fields)</summary><pre>{esc(cfg)}</pre></details>")
+    return "".join(parts)
+
+
+def write_run_report(run: RunData, out: Path, *, back: tuple[str, str] | None = None) -> Path:
+    """Write one run's report into ``out`` (index.html plus its files); returns index.html's path."""
+    from adaptenv.report.plots import run_curves
+
+    out.mkdir(parents=True, exist_ok=True)
+    assets = Assets(out, out)
+    subtitle = f"Run folder: {esc(run.path)}"
+    if back is not None:
+        subtitle = f'<a href="{esc(back[1])}">← {esc(back[0])}</a> · ' + subtitle
+    files = [p for p in (run.path / RUN_INFO, run.path / ITERATIONS, run.path / ITERATIONS_CSV) if p.is_file()]
+    data_links = " · ".join(assets.link(p) for p in files)
+    overview = key_figures(run) + run_meta(run) + (f'<p class="note">Raw records: {data_links}</p>' if files else "")
+    body = [warnings_box(run.warnings)]
+    if not run.iterations:
+        body.append(block("overview", "Overview", overview + (
+            '<div class="callout empty"><strong>No iterations have finished yet.</strong> '
+            f"This run has no records in {ITERATIONS}; the report fills in once the loop finishes its first "
+            "iteration (run <code>adaptenv report</code> again).</div>")))
+        nav = [("Overview", "#overview")]
+    else:
+        plot = run_curves(run, out / "plots" / "curves.png")
+        body += [block("overview", "Overview", overview),
+                 block("curves", "Learning curves", plot_img(plot, out, "held-out success and SPL against iterations "
+                                                                        "and environment steps")),
+                 block("results", "Results per iteration", results_table(run)),
+                 block("gallery", "Gallery: before and after each adaptation", gallery_html(run, assets))]
+        nav = [("Overview", "#overview"), ("Learning curves", "#curves"), ("Results", "#results"),
+               ("Gallery", "#gallery")]
+    if back is not None:
+        nav.insert(0, (f"← {back[0]}", back[1]))
+    index = out / INDEX
+    index.write_text(page(f"Run report: {run.label}", subtitle, nav, "\n".join(b for b in body if b)), encoding="utf-8")
+    return index
+
+
+# --------------------------------------------------------------------------- experiment page
+
+def summary_table(exp: ExperimentData) -> str:
+    """Per method: seeds, final iteration, env steps, gradient updates, then per set success and SPL (mean ± SE)."""
+    sets, show_p = exp.sets, bool(exp.pvalues)
+    stats = {(m, s, k): final_stat(runs, s, k) for m, runs in exp.runs.items() for s in sets for k in ("success", "spl")}
+    best = {}
+    for s in sets:
+        for k in ("success", "spl"):
+            means = [st.mean for m in exp.methods if (st := stats[(m, s, k)]) is not None]
+            best[(s, k)] = max(means) if len(means) > 1 else None
+    per_set = 3 if show_p else 2
+    head = ('<tr><th class=l rowspan=2>method</th><th rowspan=2>seeds</th><th rowspan=2>iterations</th>'
+            '<th rowspan=2>env steps</th><th rowspan=2>grad updates</th>'
+            + "".join(f"<th colspan={per_set} class=l>held-out: {esc(s)}</th>" for s in sets) + "</tr><tr>"
+            + "".join("<th>success</th><th>SPL</th>" + ("<th class=l>significance</th>" if show_p else "") for _ in sets)
+            + "</tr>")
+    rows = []
+    for m, runs in exp.runs.items():
+        lasts = [r.last for r in runs if r.last is not None]
+        iters = mean_text([x.iteration for x in lasts], 1)
+        steps = mean_text([x.env_steps for x in lasts], 0)
+        grads = mean_text([x.grad_updates for x in lasts], 0)
+        cells = [f"<td class=l><strong>{esc(m)}</strong></td><td>{len(runs)}</td><td>{iters}</td><td>{steps}</td>"
+                 f"<td>{grads}</td>"]
+        for s in sets:
+            for k in ("success", "spl"):
+                st = stats[(m, s, k)]
+                cells.append(stat_cell(k, st, best=st is not None and best[(s, k)] is not None and st.mean == best[(s, k)]))
+            if show_p:
+                cells.append(f"<td class=l>{esc(pvalue_text(exp, m, s))}</td>")
+        rows.append("<tr>" + "".join(cells) + "</tr>")
+    notes = ["Each run's latest evaluation of a set, averaged over seeds; ± is the standard error over seeds "
+             "(shown with two or more seeds); the best mean per column is bold."]
+    if show_p:
+        base = f" against {esc(exp.baseline)}" if exp.baseline else ""
+        test = f" ({esc(exp.test)})" if exp.test else ""
+        notes.append(f"Significance{base}{test} is taken from summary.json: * p &lt; 0.05, ** p &lt; 0.01, "
+                     "*** p &lt; 0.001.")
+    return table(head, rows) + "".join(f'<p class="note">{n}</p>' for n in notes)
+
+
+def mean_text(values: list[float], digits: int) -> str:
+    if not values:
+        return "–"
+    mean = sum(values) / len(values)
+    return f"{mean:,.{digits}f}" if digits else f"{round(mean):,}"
+
+
+def pvalue_text(exp: ExperimentData, method: str, set_name: str) -> str:
+    parts = []
+    for metric, label in (("success", "success"), ("spl", "SPL"), ("", "")):
+        p = exp.pvalues.get((method, set_name, metric))
+        if p is not None:
+            parts.append(f"{label + ' ' if label else ''}p={p:.3g}{stars(p)}")
+    return ", ".join(parts) or "–"
+
+
+def runs_table(exp: ExperimentData, links: dict[Path, str]) -> str:
+    sets = exp.sets
+    head = ("<tr><th class=l>method</th><th>seed</th><th>iterations</th><th>env steps</th><th>grad updates</th>"
+            + "".join(f"<th>{esc(s)} success</th><th>{esc(s)} SPL</th>" for s in sets)
+            + "<th class=l>report</th></tr>")
+    rows = []
+    for m, runs in exp.runs.items():
+        for run in runs:
+            last: IterationRecord | None = run.last
+            seed = run.info.seed if run.info else run.path.name
+            cells = (f"<td class=l>{esc(m)}</td><td>{esc(seed)}</td><td>{len(run.iterations)}</td>"
+                     f"<td>{num(last.env_steps) if last else '–'}</td><td>{num(last.grad_updates) if last else '–'}</td>")
+            for s in sets:
+                r = last_with(run, s)
+                cells += set_cell("success", r.heldout[s] if r else None) + set_cell("spl", r.heldout[s] if r else None)
+            warn = f' <span class="muted">({len(run.warnings)} warning{"s" if len(run.warnings) != 1 else ""})</span>' \
+                if run.warnings else ""
+            cells += f'<td class=l><a href="{esc(links[run.path])}">run report</a>{warn}</td>'
+            rows.append(f"<tr>{cells}</tr>")
+    return table(head, rows)
+
+
+def write_experiment_report(exp: ExperimentData, out: Path) -> Path:
+    """Write the experiment report (summary, curves per set, per-run reports) into ``out``."""
+    from adaptenv.report.plots import experiment_curves
+
+    out.mkdir(parents=True, exist_ok=True)
+    assets = Assets(out, out)
+    links: dict[Path, str] = {}
+    for m, runs in exp.runs.items():
+        for run in runs:
+            run_out = out / "runs" / safe_name(m) / safe_name(run.path.name)
+            index = write_run_report(run, run_out, back=("experiment", href(out / INDEX, run_out)))
+            links[run.path] = href(index, out)
+    n_runs = sum(len(r) for r in exp.runs.values())
+    seeds = sorted({r.info.seed for runs in exp.runs.values() for r in runs if r.info is not None})
+    overview = cards([("methods", str(len(exp.runs))), ("runs", str(n_runs)), ("seeds", str(len(seeds))),
+                      ("held-out sets", str(len(exp.sets)))])
+    if exp.files:
+        overview += '<p class="note">Data: ' + " · ".join(assets.link(p) for p in exp.files) + "</p>"
+    body = [warnings_box(exp.warnings), block("overview", "Overview", overview)]
+    nav = [("Overview", "#overview")]
+    if not any(run.iterations for runs in exp.runs.values() for run in runs):
+        body.append('<div class="callout empty"><strong>No run has finished an iteration yet.</strong> '
+                    "The summary and curves appear once runs write iterations.jsonl.</div>")
+    else:
+        curves = []
+        for s in exp.sets:
+            plot = experiment_curves(exp.runs, s, out / "plots" / f"curves_{safe_name(s)}.png")
+            curves.append(f"<h3>{esc(s)}</h3>" + plot_img(plot, out, f"{s}: success and SPL per method"))
+        body += [block("summary", "Summary", summary_table(exp)),
+                 block("curves", "Learning curves", "".join(curves) or '<p class="note">No held-out evaluations yet.</p>')]
+        nav += [("Summary", "#summary"), ("Learning curves", "#curves")]
+    body.append(block("runs", "Runs", runs_table(exp, links)))
+    nav.append(("Runs", "#runs"))
+    title = f"Experiment report: {exp.path.resolve().name}"
+    subtitle = f"Experiment folder: {esc(exp.path)} · methods: {esc(', '.join(exp.methods))}"
+    index = out / INDEX
+    index.write_text(page(title, subtitle, nav, "\n".join(b for b in body if b)), encoding="utf-8")
+    return index
+
+
+# --------------------------------------------------------------------------- entry point
+
+def _prepare_out(out: Path, source: Path) -> None:
+    """Create the output folder; clear the sub-folders of an earlier report there (never anything else)."""
+    if out.resolve() == source.resolve():
+        raise AdaptenvError(f"{out}: the report cannot be written into the folder it reads; "
+                            "pass another -o folder (default: <folder>/report)")
+    if out.exists() and not out.is_dir():
+        raise AdaptenvError(f"{out}: exists and is not a folder; pass a folder to -o")
+    index = out / INDEX
+    if index.is_file() and f'content="{GENERATOR}"' in index.read_text(encoding="utf-8", errors="replace")[:2000]:
+        for name in _OWNED:
+            if (out / name).is_dir():
+                shutil.rmtree(out / name)
+    out.mkdir(parents=True, exist_ok=True)
+
+
+def build_report(path: Path, out: Path | None = None) -> Path:
+    """Write the report of a run or experiment folder (default into ``<path>/report``); returns index.html."""
+    path = Path(path)
+    kind = detect(path)
+    out = Path(out) if out is not None else path / "report"
+    _prepare_out(out, path)
+    if kind == "run":
+        return write_run_report(load_run(path), out)
+    return write_experiment_report(load_experiment(path), out)
