@@ -20,8 +20,10 @@ from adaptenv.curriculum.records import ITERATIONS, RUN_INFO, GalleryItem, Itera
 from adaptenv.errors import AdaptenvError
 
 SUMMARY = "summary.json"
+DATA_SUFFIXES = (".json", ".csv", ".md")
+"""Experiment files copied into the report and linked (summary.json, summary.md, per-seed CSVs)."""
 METRICS = ("success", "spl")
-_P_KEYS = frozenset({"p", "p_value", "p_values", "pvalue", "pvalues", "p-value", "p-values"})
+_P_KEYS = frozenset({"p", "p_value", "p_values", "pvalue", "pvalues", "p-value", "p-values", "tests"})
 _SEED_DIR = re.compile(r"^seed_(-?\d+)$")
 
 Kind = Literal["run", "experiment"]
@@ -97,6 +99,9 @@ class ExperimentData:
     pvalues: dict[tuple[str, str, str], float] = field(default_factory=dict)
     """(method, set, metric or '') -> p-value, as found in summary.json."""
     baseline: str | None = None
+    """summary.json's ``baseline``: every method was compared with this one."""
+    reference: str | None = None
+    """summary.json's ``reference``: this method was compared with every other (runner's layout)."""
     test: str | None = None
     files: list[Path] = field(default_factory=list)
     """Top-level data files to copy into the report (summary.json, CSVs)."""
@@ -251,7 +256,8 @@ def load_experiment(path: Path) -> ExperimentData:
     path = Path(path)
     runs = {m: [load_run(d) for d in dirs] for m, dirs in experiment_runs(path).items()}
     exp = ExperimentData(path, runs)
-    exp.files = sorted(p for p in path.iterdir() if p.is_file() and p.suffix.lower() in (".json", ".csv"))
+    exp.files = sorted(p for p in path.iterdir() if p.is_file() and p.suffix.lower() in DATA_SUFFIXES)
+    exp.files += sorted(p for m in runs for p in (path / m).iterdir() if p.is_file() and p.suffix.lower() in DATA_SUFFIXES)
     if (path / SUMMARY).is_file():
         try:
             exp.summary = json.loads((path / SUMMARY).read_text(encoding="utf-8"))
@@ -260,13 +266,16 @@ def load_experiment(path: Path) -> ExperimentData:
         else:
             exp.pvalues = find_pvalues(exp.summary, exp.methods, exp.sets)
             if isinstance(exp.summary, dict):
-                for key in ("baseline", "reference"):
-                    if isinstance(exp.summary.get(key), str):
-                        exp.baseline = exp.summary[key]
+                exp.baseline = _text(exp.summary.get("baseline"))
+                exp.reference = _text(exp.summary.get("reference"))
                 for key in ("test", "significance_test"):
                     if isinstance(exp.summary.get(key), str):
                         exp.test = exp.summary[key]
     return exp
+
+
+def _text(x: Any) -> str | None:
+    return x if isinstance(x, str) else None
 
 
 def _number(x: Any) -> bool:
@@ -277,9 +286,10 @@ def find_pvalues(doc: Any, methods: list[str], sets: list[str]) -> dict[tuple[st
     """Every p-value in a summary document, keyed (method, set, metric); metric '' when not stated.
 
     A number counts as a p-value when its key, or a key above it, is ``p``/``p_value``/``pvalue``
-    (plural too). Method, set and metric come from ``method``/``set``/``metric`` fields of the
-    enclosing objects, or from keys on the way down that equal a method name, a set name, or
-    ``success``/``spl``. Values that cannot be placed on a method and a set are ignored.
+    (plural too) or ``tests``. Method, set and metric come from ``method``/``set``/``metric`` fields
+    of the enclosing objects, or from keys on the way down that equal a method name, a set name, or
+    ``success``/``spl``, alone or joined by ':' (the experiment runner's ``"success:unseen"``).
+    Values that cannot be placed on a method and a set are ignored (so are nulls).
     """
     out: dict[tuple[str, str, str], float] = {}
     known_m, known_s = set(methods), set(sets)
@@ -295,12 +305,13 @@ def find_pvalues(doc: Any, methods: list[str], sets: list[str]) -> dict[tuple[st
             for k, v in node.items():
                 sub = dict(ctx)
                 k = str(k)
-                if k in known_m:
-                    sub["method"] = k
-                elif k in known_s:
-                    sub["set"] = k
-                elif k.lower() in METRICS:
-                    sub["metric"] = k.lower()
+                for part in k.split(":"):
+                    if part in known_m:
+                        sub["method"] = part
+                    elif part in known_s:
+                        sub["set"] = part
+                    elif part.lower() in METRICS:
+                        sub["metric"] = part.lower()
                 walk(v, sub, is_p or k.lower() in _P_KEYS)
         elif isinstance(node, list):
             for v in node:

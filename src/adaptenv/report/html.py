@@ -146,7 +146,7 @@ def plot_img(path: Path | None, base: Path, alt: str) -> str:
         return '<p class="note">No held-out evaluations yet, so there is nothing to plot.</p>'
     w, h = _image_size(path) or (0, 0)
     size = f' width="{w}" height="{h}"' if w else ""
-    return f'<img class="plot" src="{href(path, base)}" alt="{esc(alt)}" loading="lazy" decoding="async"{size}>'
+    return f'<img class="plot" src="{href(path, base)}" alt="{esc(alt)}"{size}>'
 
 
 def _image_size(path: Path) -> tuple[int, int] | None:
@@ -170,7 +170,8 @@ class Assets:
 
     def copy(self, src: Path, folder: str, name: str) -> Path:
         stem, dot, ext = name.rpartition(".")
-        dest = self.root / folder / (safe_name(stem)[:60] + dot + safe_name(ext) if dot else safe_name(name)[:60])
+        sub = Path(*[safe_name(part) for part in Path(folder).parts])
+        dest = self.root / sub / (safe_name(stem)[:60] + dot + safe_name(ext) if dot else safe_name(name)[:60])
         stem, suffix, k = dest.stem, dest.suffix, 1
         while dest in self.used:
             k += 1
@@ -189,12 +190,12 @@ class Assets:
             return f'<div class="missing">{esc(alt)}: render unreadable</div>'
         dest = self.copy(src, folder, name)
         url = href(dest, self.page_dir)
-        return (f'<a href="{url}"><img src="{url}" alt="{esc(alt)}" loading="lazy" decoding="async" '
+        return (f'<a href="{url}"><img src="{url}" alt="{esc(alt)}" loading="lazy" '
                 f'width="{size[0]}" height="{size[1]}"></a>')
 
-    def link(self, src: Path, folder: str = "data") -> str:
+    def link(self, src: Path, folder: str = "data", label: str | None = None) -> str:
         dest = self.copy(src, folder, src.name)
-        return f'<a href="{href(dest, self.page_dir)}">{esc(src.name)}</a>'
+        return f'<a href="{href(dest, self.page_dir)}">{esc(label or src.name)}</a>'
 
 
 # --------------------------------------------------------------------------- gallery
@@ -204,8 +205,9 @@ def outcome_html(analysis) -> str:
     badge = '<span class="badge ok">success</span>' if o.success else (
         f'<span class="badge bad">failure{": " + esc(o.failure_mode) if o.failure_mode else ""}</span>')
     spl = f", SPL {num(o.spl, 2)}" if o.spl is not None else ""
+    figures = "" if f"{o.steps} steps" in o.summary else f' <span class="muted">({o.steps} steps{spl})</span>'
     source = f' <span class="muted">(analysis by {esc(analysis.source)})</span>' if analysis.source else ""
-    return (f"<p>{badge} {esc(o.summary)} <span class=\"muted\">({o.steps} steps{spl})</span>{source}</p>"
+    return (f"<p>{badge} {esc(o.summary)}{figures}{source}</p>"
             f'<p class="note">{esc(analysis.task)}</p>')
 
 
@@ -215,7 +217,7 @@ def analysis_html(analysis) -> str:
         return '<h5>Analysis</h5><p class="note">No analysis recorded for this scene.</p>'
     concerns = []
     for c in analysis.concerns:
-        where = f" near grid ({c.where.x:.0f}, {c.where.y:.0f})" if c.where else ""
+        where = f", near grid ({c.where.x:.0f}, {c.where.y:.0f})" if c.where else ""
         steps = (f", steps {c.steps[0]}–{c.steps[-1]}" if len(c.steps) > 1 and c.steps[0] != c.steps[-1]
                  else f", step {c.steps[0]}" if c.steps else "")
         objs = f" <span class=\"muted\">objects: {esc(', '.join(c.objects))}</span>" if c.objects else ""
@@ -226,9 +228,10 @@ def analysis_html(analysis) -> str:
         addr = f"addresses {', '.join(s.addresses)}" if s.addresses else "general difficulty"
         suggestions.append(f'<li><span class="kind">{esc(s.kind)}</span> {esc(s.description)} '
                            f'<span class="muted">[{esc(s.id)}, priority {s.priority:.2f}, {esc(addr)}]</span></li>')
-    return ("<h5>Analysis</h5>" + outcome_html(analysis)
+    return ("<h5>Analysis</h5>" + outcome_html(analysis) + '<div class="cols"><div>'
             + "<h5>Concerns</h5>" + (f"<ul>{''.join(concerns)}</ul>" if concerns else '<p class="note">none</p>')
-            + "<h5>Suggestions</h5>" + (f"<ol>{''.join(suggestions)}</ol>" if suggestions else '<p class="note">none</p>'))
+            + "</div><div><h5>Suggestions</h5>"
+            + (f"<ol>{''.join(suggestions)}</ol>" if suggestions else '<p class="note">none</p>') + "</div></div>")
 
 
 def _move(d: tuple[float, float]) -> str:
@@ -243,6 +246,8 @@ def _verdict(e: EditRow) -> str:
         return f'<span class="badge ok">verified{how}</span>'
     if e.verified is False:
         return '<span class="badge bad">failed check</span>'
+    if not e.verification:  # an EditLog: validation kept the edit, verification not recorded
+        return '<span class="badge ok">accepted</span>'
     return '<span class="badge na">accepted, not verified</span>'
 
 
@@ -252,7 +257,7 @@ def edits_html(entry: GalleryEntry) -> str:
     if not entry.edits:
         return f'<h5>Edits</h5><p class="note">No edits recorded for this scene.{gen}</p>'
     head = ("<tr><th>#</th><th class=l>object</th><th>requested (dx, dy)</th><th>achieved (dx, dy)</th>"
-            "<th>rotation</th><th class=l>stop reason</th><th class=l>verification</th><th class=l>note</th></tr>")
+            "<th>rotation</th><th class=l>stop reason</th><th class=l>result</th><th class=l>note</th></tr>")
     rows = []
     for k, e in enumerate(entry.edits, 1):
         if e.object_id == "-":
@@ -260,7 +265,7 @@ def edits_html(entry: GalleryEntry) -> str:
                         f"<td class=l>{_verdict(e)}</td><td class=wrap-text>{esc(e.note)}</td></tr>")
             continue
         rot = "–" if e.rotation is None else f"{e.rotation:.0f}° ({e.yaw_before:.0f}°→{e.yaw_after:.0f}°)"
-        stop = esc(e.stop_reason) + (f' <span class="muted">by {esc(e.blocked_by)}</span>' if e.blocked_by else "")
+        stop = esc(e.stop_reason) + (f'<br><span class="muted">by {esc(e.blocked_by)}</span>' if e.blocked_by else "")
         note = " ".join(x for x in (e.note, f"intent: {e.intent}" if e.intent else "") if x)
         rows.append(f"<tr><td>{k}</td><td class=l><code>{esc(e.object_id)}</code></td><td>{_move(e.requested)}</td>"
                     f"<td>{_move(e.achieved)}</td><td>{esc(rot)}</td><td class=l>{stop}</td>"
@@ -278,7 +283,7 @@ def scene_html(entry: GalleryEntry, assets: Assets, t: int, k: int) -> str:
     return (f'<article class="scene" id="iter-{t}-scene-{k}"><h4><code>{esc(entry.scene)}</code>{summary}</h4>'
             f'<div class="pair"><figure>{before}<figcaption>before: pi_t in e_t</figcaption></figure>'
             f"<figure>{after}<figcaption>after: the edited scene</figcaption></figure></div>"
-            f'<div class="cols"><div>{analysis_html(entry.analysis)}</div><div>{edits_html(entry)}</div></div>'
+            f'<div class="analysis">{analysis_html(entry.analysis)}</div><div class="edits">{edits_html(entry)}</div>'
             f"{warnings_box(entry.warnings, 'Missing or unreadable files')}</article>")
 
 
@@ -302,10 +307,9 @@ def gallery_html(run: RunData, assets: Assets) -> str:
 
 def results_table(run: RunData) -> str:
     sets = run.sets
-    head = ('<tr><th>iteration</th><th>env steps</th><th>grad updates</th><th>edits</th>'
-            '<th>train success</th><th>train SPL</th>'
-            + "".join(f"<th>{esc(s)} success</th><th>{esc(s)} SPL</th>" for s in sets)
-            + "<th>wall time</th></tr>")
+    head = ('<tr><th rowspan=2>iteration</th><th rowspan=2>env steps</th><th rowspan=2>grad updates</th>'
+            '<th rowspan=2>edits</th>' + "".join(f"<th colspan=2 class=group>{esc(s)}</th>" for s in ["train", *sets])
+            + "<th rowspan=2>wall time</th></tr><tr>" + "<th>success</th><th>SPL</th>" * (1 + len(sets)) + "</tr>")
     rows = []
     for r in run.iterations:
         anchor = f'<a href="#iter-{r.iteration}">{r.iteration}</a>' if r.gallery else str(r.iteration)
@@ -328,7 +332,7 @@ def key_figures(run: RunData) -> str:
     last = run.last
     if last is None:
         return ""
-    items = [("iterations", str(len(run.iterations))), ("env steps", num(last.env_steps)),
+    items = [("iteration", str(last.iteration)), ("env steps", num(last.env_steps)),
              ("gradient updates", num(last.grad_updates)), ("edits", num(last.edits))]
     for s in run.sets:
         if (r := last_with(run, s)) is not None:
@@ -396,7 +400,7 @@ def summary_table(exp: ExperimentData) -> str:
     per_set = 3 if show_p else 2
     head = ('<tr><th class=l rowspan=2>method</th><th rowspan=2>seeds</th><th rowspan=2>iterations</th>'
             '<th rowspan=2>env steps</th><th rowspan=2>grad updates</th>'
-            + "".join(f"<th colspan={per_set} class=l>held-out: {esc(s)}</th>" for s in sets) + "</tr><tr>"
+            + "".join(f"<th colspan={per_set} class=group>held-out: {esc(s)}</th>" for s in sets) + "</tr><tr>"
             + "".join("<th>success</th><th>SPL</th>" + ("<th class=l>significance</th>" if show_p else "") for _ in sets)
             + "</tr>")
     rows = []
@@ -417,10 +421,11 @@ def summary_table(exp: ExperimentData) -> str:
     notes = ["Each run's latest evaluation of a set, averaged over seeds; ± is the standard error over seeds "
              "(shown with two or more seeds); the best mean per column is bold."]
     if show_p:
-        base = f" against {esc(exp.baseline)}" if exp.baseline else ""
         test = f" ({esc(exp.test)})" if exp.test else ""
-        notes.append(f"Significance{base}{test} is taken from summary.json: * p &lt; 0.05, ** p &lt; 0.01, "
-                     "*** p &lt; 0.001.")
+        what = (f"compares {esc(exp.reference)} with the method of each row" if exp.reference
+                else f"compares each method with {esc(exp.baseline)}" if exp.baseline else "")
+        notes.append(f"Significance{test} is taken from summary.json{': ' + what if what else ''}; "
+                     "* p &lt; 0.05, ** p &lt; 0.01, *** p &lt; 0.001.")
     return table(head, rows) + "".join(f'<p class="note">{n}</p>' for n in notes)
 
 
@@ -428,7 +433,7 @@ def mean_text(values: list[float], digits: int) -> str:
     if not values:
         return "–"
     mean = sum(values) / len(values)
-    return f"{mean:,.{digits}f}" if digits else f"{round(mean):,}"
+    return f"{mean:,.{digits}f}" if digits and mean != round(mean) else f"{round(mean):,}"
 
 
 def pvalue_text(exp: ExperimentData, method: str, set_name: str) -> str:
@@ -442,9 +447,10 @@ def pvalue_text(exp: ExperimentData, method: str, set_name: str) -> str:
 
 def runs_table(exp: ExperimentData, links: dict[Path, str]) -> str:
     sets = exp.sets
-    head = ("<tr><th class=l>method</th><th>seed</th><th>iterations</th><th>env steps</th><th>grad updates</th>"
-            + "".join(f"<th>{esc(s)} success</th><th>{esc(s)} SPL</th>" for s in sets)
-            + "<th class=l>report</th></tr>")
+    head = ("<tr><th class=l rowspan=2>method</th><th rowspan=2>seed</th><th rowspan=2>iterations</th>"
+            "<th rowspan=2>env steps</th><th rowspan=2>grad updates</th>"
+            + "".join(f"<th colspan=2 class=group>{esc(s)}</th>" for s in sets)
+            + "<th class=l rowspan=2>report</th></tr><tr>" + "<th>success</th><th>SPL</th>" * len(sets) + "</tr>")
     rows = []
     for m, runs in exp.runs.items():
         for run in runs:
@@ -479,7 +485,9 @@ def write_experiment_report(exp: ExperimentData, out: Path) -> Path:
     overview = cards([("methods", str(len(exp.runs))), ("runs", str(n_runs)), ("seeds", str(len(seeds))),
                       ("held-out sets", str(len(exp.sets)))])
     if exp.files:
-        overview += '<p class="note">Data: ' + " · ".join(assets.link(p) for p in exp.files) + "</p>"
+        links_ = [assets.link(p, str(Path("data") / p.parent.relative_to(exp.path)), p.relative_to(exp.path).as_posix())
+                  for p in exp.files]
+        overview += '<p class="note">Data: ' + " · ".join(links_) + "</p>"
     body = [warnings_box(exp.warnings), block("overview", "Overview", overview)]
     nav = [("Overview", "#overview")]
     if not any(run.iterations for runs in exp.runs.values() for run in runs):

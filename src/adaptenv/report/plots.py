@@ -71,7 +71,7 @@ def _figure(lines_by_metric: dict[str, Sequence[Line]], title: str, path: Path) 
     fig.suptitle(title, fontsize=11, x=0.01, ha="left")
     fig.legend(list(handles.values()), list(handles), loc="upper right", ncols=min(len(handles), 4), fontsize=8,
                frameon=False)
-    fig.tight_layout(rect=(0, 0, 1, 0.93))
+    fig.subplots_adjust(left=0.075, right=0.985, bottom=0.09, top=0.9, wspace=0.06, hspace=0.16)
     path.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(path, format="png", metadata={"Software": None})
     return path
@@ -99,7 +99,7 @@ def experiment_curves(runs: dict[str, list[RunData]], set_name: str, path: Path)
     for metric in ("success", "spl"):
         lines[metric] = [Line(method, [_point(p) for p in curve(method_runs, set_name, metric)])
                          for method, method_runs in runs.items()]
-    return _figure(lines, f"held-out set '{set_name}': mean over seeds +- standard error", path)
+    return _figure(lines, f"held-out set '{set_name}': mean over seeds ± standard error", path)
 
 
 def _point(p: tuple[int, float, Stat]) -> tuple[float, float, float, float | None]:
