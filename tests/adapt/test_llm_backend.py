@@ -3,12 +3,10 @@
 from __future__ import annotations
 
 import base64
-import importlib.util
 import io
 import json
 import subprocess
 import sys
-from pathlib import Path
 
 import httpx2
 import pytest
@@ -32,20 +30,7 @@ from adaptenv.adapt.llm import (
     resolve_api_key,
 )
 from adaptenv.errors import AdaptenvError, ConfigError
-
-
-def _load_server_module():
-    """Import tests/adapt/llm_server.py by path (tests are not a package under importlib mode)."""
-    name = "adaptenv_tests_llm_server"
-    if name not in sys.modules:
-        spec = importlib.util.spec_from_file_location(name, Path(__file__).with_name("llm_server.py"))
-        module = importlib.util.module_from_spec(spec)
-        sys.modules[name] = module
-        spec.loader.exec_module(module)
-    return sys.modules[name]
-
-
-srv = _load_server_module()
+from tests.adapt import llm_server as srv
 
 KEY = "sk-test-SECRET-0123456789abcdef"
 IDS = ["Sofa|1", "Chair|2"]

@@ -2,10 +2,7 @@
 
 from __future__ import annotations
 
-import importlib.util
 import json
-import sys
-from pathlib import Path
 
 import httpx2
 import numpy as np
@@ -18,20 +15,9 @@ from adaptenv.adapt.llm import ChatCompletionsBackend, LLMConfig, move_tool
 from adaptenv.sim.rollout import expert_policy, run_episode
 from adaptenv.sim.task import Episode
 from adaptenv.sim.world import compile_world
+from tests.adapt import llm_server as srv
 from tests.sim import helpers as H
 
-
-def _load_server_module():
-    name = "adaptenv_tests_llm_server"
-    if name not in sys.modules:
-        spec = importlib.util.spec_from_file_location(name, Path(__file__).with_name("llm_server.py"))
-        module = importlib.util.module_from_spec(spec)
-        sys.modules[name] = module
-        spec.loader.exec_module(module)
-    return sys.modules[name]
-
-
-srv = _load_server_module()
 IDS = ["GarbageCan|0", "Desk|1", "CoffeeTable|2"]
 
 

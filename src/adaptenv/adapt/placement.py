@@ -457,6 +457,28 @@ def _result(ctx: PlacementContext, object_id: str, d: np.ndarray, yaw: float | N
                            reason, by, rot_by, steps, message)
 
 
+def _rotate_first(ctx: PlacementContext, object_id: str, d: np.ndarray, yaw: float | None, step: float
+                  ) -> PlacementResult | tuple[int, np.ndarray, float, float, bool, str | None]:
+    """Check the request and turn in place when the turned footprint is free (the paper's first stage).
+
+    Returns the ``invalid`` result for a bad request, else (index, start, old yaw, yaw to march with,
+    whether it turned, what blocked the turn).
+    """
+    bad = _check_request(ctx, object_id, d, yaw, step)
+    if bad:
+        return PlacementResult(object_id, (float(d[0]), float(d[1])), (0.0, 0.0), yaw, (0.0, 0.0), (0.0, 0.0),
+                               float("nan"), float("nan"), False, "invalid", None, None, 0, bad)
+    i = ctx.index[object_id]
+    start = ctx.centers[i].copy()
+    yaw0 = float(ctx.yaws[i])
+    if not _yaw_changes(yaw0, yaw):
+        return i, start, yaw0, yaw0, False, None
+    why = _blocked_at(ctx, i, start, float(yaw) % 360.0)
+    if why is None:
+        return i, start, yaw0, float(yaw) % 360.0, True, None
+    return i, start, yaw0, yaw0, False, why[1]
+
+
 def place(ctx: PlacementContext, object_id: str, dx: float, dz: float, yaw: float | None = None, *,
           step: float = DEFAULT_STEP) -> PlacementResult:
     """Collision-aware placement of one object: turn in place if free, then march along (dx, dz) m.
@@ -469,20 +491,10 @@ def place(ctx: PlacementContext, object_id: str, dx: float, dz: float, yaw: floa
         step: the march step delta (m).
     """
     d = np.array([dx, dz], dtype=float)
-    bad = _check_request(ctx, object_id, d, yaw, step)
-    if bad:
-        return PlacementResult(object_id, (float(dx), float(dz)), (0.0, 0.0), yaw, (0.0, 0.0), (0.0, 0.0),
-                               float("nan"), float("nan"), False, "invalid", None, None, 0, bad)
-    i = ctx.index[object_id]
-    start = ctx.centers[i].copy()
-    yaw0 = float(ctx.yaws[i])
-    cur_yaw, rotated, rot_by = yaw0, False, None
-    if _yaw_changes(yaw0, yaw):
-        why = _blocked_at(ctx, i, start, float(yaw) % 360.0)
-        if why is None:
-            cur_yaw, rotated = float(yaw) % 360.0, True
-        else:
-            rot_by = why[1]
+    first = _rotate_first(ctx, object_id, d, yaw, step)
+    if isinstance(first, PlacementResult):
+        return first
+    i, start, yaw0, cur_yaw, rotated, rot_by = first
     poses = _march_poses(start, d, step)
     reason, by, k_stop = "reached", None, len(poses)
     if len(poses):
@@ -529,20 +541,10 @@ def reference_place(ctx: PlacementContext, object_id: str, dx: float, dz: float,
                     step: float = DEFAULT_STEP) -> PlacementResult:
     """The paper's march as a plain loop, one pose at a time against every obstacle (for tests)."""
     d = np.array([dx, dz], dtype=float)
-    bad = _check_request(ctx, object_id, d, yaw, step)
-    if bad:
-        return PlacementResult(object_id, (float(dx), float(dz)), (0.0, 0.0), yaw, (0.0, 0.0), (0.0, 0.0),
-                               float("nan"), float("nan"), False, "invalid", None, None, 0, bad)
-    i = ctx.index[object_id]
-    start = ctx.centers[i].copy()
-    yaw0 = float(ctx.yaws[i])
-    cur_yaw, rotated, rot_by = yaw0, False, None
-    if _yaw_changes(yaw0, yaw):
-        why = _blocked_at(ctx, i, start, float(yaw) % 360.0)
-        if why is None:
-            cur_yaw, rotated = float(yaw) % 360.0, True
-        else:
-            rot_by = why[1]
+    first = _rotate_first(ctx, object_id, d, yaw, step)
+    if isinstance(first, PlacementResult):
+        return first
+    i, start, yaw0, cur_yaw, rotated, rot_by = first
     dist = float(np.hypot(*d))
     reason, by, pos, k = "reached", None, start.copy(), 0
     while dist > 0:
