@@ -74,6 +74,24 @@ def test_same_seed_same_results(tiny_policy, tmp_path):
     assert figures(a) == figures(b)
 
 
+@pytest.mark.slow
+@pytest.mark.parametrize("method", ["ours", "accel"])
+def test_a_process_pool_gives_the_same_results_as_in_process(method, tiny_policy, tmp_path):
+    from adaptenv.curriculum.executor import make_executor
+
+    cfg = tiny_config(tiny_policy, method)
+    local = run_loop(cfg, tmp_path / "local")
+    with make_executor("process", workers=2) as ex:
+        pooled = run_loop(cfg, tmp_path / "pool", executor=ex)
+    assert figures(pooled) == figures(local)
+    assert records_scenes(tmp_path / "pool") == records_scenes(tmp_path / "local")
+
+
+def records_scenes(run: Path) -> list[tuple[str, str]]:
+    """Every scene file of a run with its content, so generation in workers is compared too."""
+    return [(p.name, p.read_text()) for p in sorted((run / "scenes").glob("*.json"))]
+
+
 def test_refuses_a_non_empty_folder_without_resume(tiny_policy, tmp_path):
     (tmp_path / "x").mkdir()
     (tmp_path / "x" / "something").write_text("1")

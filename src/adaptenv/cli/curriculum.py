@@ -7,6 +7,7 @@ from pathlib import Path
 
 import typer
 
+from adaptenv.curriculum.executor import ADDRESS_OPTION, EXECUTOR_OPTION, WORKERS_OPTION
 from adaptenv.errors import ConfigError
 
 
@@ -34,15 +35,23 @@ def loop(
     scenes: int = typer.Option(8, "--scenes", min=1, help="Scenes rolled out and made per iteration."),
     edit_steps: int = typer.Option(5, "--edit-steps", min=0, help="Single-object edits per adapted scene."),
     finetune_frames: int = typer.Option(16_384, "--finetune-frames", min=1, help="DAgger frames per iteration."),
+    finetune_lr: float = typer.Option(1e-4, "--finetune-lr", min=0.0, help="Adam learning rate of fine-tuning."),
     heldout_episodes: int = typer.Option(100, "--heldout-episodes", min=1, help="Episodes per held-out set."),
     heldout: list[str] = typer.Option(None, "--heldout", help="Held-out set NAME=HOUSES (repeatable); default: "
                                       "rearranged=preset:pretrain-rearranged and unseen=preset:pretrain-unseen."),
     model: str = typer.Option(None, "--model", help="LLM model for ours-llm."),
     base_url: str = typer.Option(None, "--base-url", help="OpenAI-compatible server URL for ours-llm."),
+    executor: str = EXECUTOR_OPTION,
+    workers: int = WORKERS_OPTION,
+    address: str = ADDRESS_OPTION,
 ) -> None:
-    """Run the closed loop: evaluate, analyze (F), generate (G), fine-tune, measure held-out success."""
+    """Run the closed loop: evaluate, analyze (F), generate (G), fine-tune, measure held-out success.
+
+    Rollouts, held-out evaluation and scene generation run on --executor (same results on each).
+    """
     from rich.console import Console
 
+    from adaptenv.curriculum.executor import ExecutorOptions
     from adaptenv.curriculum.loop import LoopConfig, run_loop
 
     console = Console()
@@ -52,9 +61,11 @@ def loop(
                **({"base_url": base_url} if base_url else {})}
     cfg = LoopConfig(method=method, policy=policy, houses=houses, iterations=iterations, seed=seed,
                      scenes_per_iteration=scenes, edit_steps=edit_steps, finetune_frames=finetune_frames,
+                     finetune_lr=finetune_lr,
                      heldout_episodes=heldout_episodes, llm=llm, **({"heldout": h} if (h := _heldout(heldout)) else {}))
-    records = run_loop(cfg, out, resume=resume, progress=lambda text: console.print(f"[dim]{text}[/]"),
-                       command=" ".join(["adaptenv"] + sys.argv[1:]))
+    with ExecutorOptions(executor, workers, address).make() as ex:
+        records = run_loop(cfg, out, resume=resume, executor=ex, progress=lambda text: console.print(f"[dim]{text}[/]"),
+                           command=" ".join(["adaptenv"] + sys.argv[1:]))
     from rich.table import Table
 
     table = Table(title=f"{method} seed {seed}: held-out success per iteration")
@@ -71,11 +82,14 @@ def loop(
 def experiment(
     config: Path = typer.Option(..., "--config", help="Experiment config JSON (see configs/)."),
     out: Path = typer.Option(None, "-o", "--out", help="Experiment folder (default runs/<config name>)."),
-    executor: str = typer.Option("inprocess", "--executor", help="inprocess, process or ray."),
-    workers: int = typer.Option(1, "--workers", min=1, help="Parallel runs (process or ray executor)."),
-    address: str = typer.Option(None, "--address", help="Ray cluster address (ray executor)."),
+    executor: str = EXECUTOR_OPTION,
+    workers: int = WORKERS_OPTION,
+    address: str = ADDRESS_OPTION,
 ) -> None:
-    """Run methods x seeds (resuming finished runs), then write CSVs, the summary table and plots."""
+    """Run methods x seeds (resuming finished runs), then write CSVs, the summary table and plots.
+
+    With --executor process|ray the (method, seed) runs go to the workers, one run per worker.
+    """
     from rich.console import Console
 
     from adaptenv.curriculum.executor import make_executor
@@ -84,7 +98,7 @@ def experiment(
     console = Console()
     cfg = ExperimentConfig.load(config)
     out = out or Path("runs") / config.stem
-    ex = None if executor == "inprocess" and workers == 1 else make_executor(executor, workers, address)
+    ex = None if executor == "inprocess" else make_executor(executor, workers, address)
     try:
         run_experiment(cfg, out, executor=ex, command=" ".join(["adaptenv"] + sys.argv[1:]),
                        progress=lambda text: console.print(f"[dim]{text}[/]"))

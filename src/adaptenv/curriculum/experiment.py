@@ -74,9 +74,9 @@ def run_dir(out: Path, method: str, seed: int) -> Path:
     return Path(out) / method / f"seed_{seed}"
 
 
-def _run_one(args: tuple[dict[str, Any], str, dict[str, Any] | None, str]) -> str:
+def _run_one(args: tuple[dict[str, Any], str, str]) -> str:
     """Worker entry point (picklable): run or resume one (method, seed)."""
-    loop_fields, folder, _unused, command = args
+    loop_fields, folder, command = args
     cfg = LoopConfig(**loop_fields)
     run_loop(cfg, folder, resume=True, command=command)
     return folder
@@ -88,7 +88,7 @@ def run_experiment(cfg: ExperimentConfig, out: str | Path, *, executor: Any = No
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     atomic_write_text(out / "experiment.json", json.dumps(asdict(cfg), indent=1))
-    jobs = [(asdict(cfg.loop_config(m, s)), str(run_dir(out, m, s)), None, command) for m in cfg.methods
+    jobs = [(asdict(cfg.loop_config(m, s)), str(run_dir(out, m, s)), command) for m in cfg.methods
             for s in cfg.seeds]
     if executor is None:
         for i, job in enumerate(jobs):

@@ -74,6 +74,9 @@ class LoopConfig:
     """Labelled frames of DAgger fine-tuning per iteration (identical for every method)."""
     finetune_envs: int = 64
     """Parallel agents while fine-tuning."""
+    finetune_lr: float = 1e-4
+    """Adam learning rate of fine-tuning, annealed to zero over each iteration's frames (3e-4 lowered
+    held-out success of the ``none`` baseline in a 3-iteration probe; 1e-4 kept it level)."""
     replay_fraction: float = 0.5
     """Share of the fine-tuning scenes drawn from earlier scenes so the policy does not forget."""
     heldout_episodes: int = 100
@@ -162,34 +165,25 @@ def _set_metrics(results: list[Any]) -> SetMetrics:
     return SetMetrics(success=s, spl=spl, collisions=col, episodes=len(results), success_se=s_se, spl_se=spl_se)
 
 
-def rollout_scenes(store: SceneStore, names: list[str], policy: Any, seed: int) -> tuple[list[Any], list[Any]]:
-    """One episode of ``policy`` in each named scene: results and trajectories (with metrics)."""
-    from adaptenv.agents.evaluate import run_episodes, trajectory_of
-    from adaptenv.sim import task
-    from adaptenv.sim.metrics import episode_metrics
+def rollout_scenes(store: SceneStore, names: list[str], weights: Any, seed: int, executor: Any
+                   ) -> tuple[list[Any], list[Any]]:
+    """One episode of the policy in each named scene: results and trajectories (with metrics)."""
+    from adaptenv.curriculum.jobs import RolloutJob, run_rollout
 
-    worlds = [store.world(n) for n in names]
-    episodes = [(i, task.sample_episode(w, int(np.random.SeedSequence([seed, i]).generate_state(1)[0])))
-                for i, w in enumerate(worlds)]
-    results, recs = run_episodes(worlds, episodes, policy, batch=max(1, len(worlds)), record=lambda r: True)
-    trajs = []
-    for r in results:
-        traj = trajectory_of(worlds[r.env], r, recs[r.index], "policy")
-        traj.metrics = episode_metrics(worlds[r.env], traj)
-        trajs.append(traj)
-    return results, trajs
+    jobs = [RolloutJob(weights, store.house(n), n, int(np.random.SeedSequence([seed, i]).generate_state(1)[0]))
+            for i, n in enumerate(names)]
+    pairs = executor.map(run_rollout, jobs, desc="rollouts")
+    return [r for r, _ in pairs], [traj for _, traj in pairs]
 
 
-def evaluate_sets(policy: Any, sets: dict[str, Any], episodes: int, seed: int) -> dict[str, SetMetrics]:
+def evaluate_sets(weights: Any, specs: dict[str, str], episodes: int, seed: int, executor: Any) -> dict[str, SetMetrics]:
     """Held-out figures of a policy on each set, on the same episodes every call (paired comparisons)."""
-    from adaptenv.agents.evaluate import run_episodes, sample_episodes
+    from adaptenv.curriculum.jobs import eval_jobs, run_eval
 
-    out = {}
-    for name, hs in sets.items():
-        eps = sample_episodes(hs.worlds, episodes, seed)
-        results, _ = run_episodes(hs.worlds, eps, policy, batch=min(episodes, 128))
-        out[name] = _set_metrics(results)
-    return out
+    tagged = eval_jobs(weights, specs, episodes, seed)
+    chunks = executor.map(run_eval, [job for _, job in tagged], desc="held-out evaluation")
+    return {name: _set_metrics([r for (n, _), rs in zip(tagged, chunks, strict=True) if n == name for r in rs])
+            for name in specs}
 
 
 def _finetune(net: Any, worlds: list[Any], cfg: LoopConfig, seed: int) -> tuple[Any, dict[str, Any]]:
@@ -202,7 +196,7 @@ def _finetune(net: Any, worlds: list[Any], cfg: LoopConfig, seed: int) -> tuple[
                      rollout_steps=steps, chunk_len=steps, batch_chunks=64, updates_per_iter=4,
                      buffer_frames=max(cfg.finetune_frames, steps * cfg.finetune_envs), beta_start=0.8, beta_end=0.8,
                      eval_every=0, final_eval_episodes=len(worlds), progress=False, tensorboard=False,
-                     learning_rate=3e-4, save_every=10**9)
+                     learning_rate=cfg.finetune_lr, save_every=10**9)
     result = train(tc, worlds=worlds, init_net=net)
     return result.net, result.card
 
@@ -241,32 +235,19 @@ def _fresh_houses(store: SceneStore, state: LoopState, seed: int, t: int, k: int
     return out
 
 
-def _make_fg(cfg: LoopConfig) -> tuple[Any, Any]:
-    """Analyzer F and generator G of the method (built-in or LLM)."""
-    from adaptenv.adapt.analysis import BuiltinAnalyzer, LLMAnalyzer
-    from adaptenv.adapt.generators import make_generator
-
-    if cfg.method == "ours-llm":
-        from adaptenv.adapt.llm import LLMConfig, make_backend
-
-        backend = make_backend(LLMConfig(**cfg.llm))
-        return LLMAnalyzer(backend), make_generator("llm", backend=backend)
-    return BuiltinAnalyzer(), make_generator("builtin")
-
-
-def run_loop(cfg: LoopConfig, run_dir: str | Path, *, resume: bool = False, heldout_sets: dict[str, Any] | None = None,
+def run_loop(cfg: LoopConfig, run_dir: str | Path, *, resume: bool = False, executor: Any = None,
              progress: Any = None, command: str = "") -> list[IterationRecord]:
     """Run (or resume) one method for ``cfg.iterations`` iterations; returns every iteration's record.
 
-    ``heldout_sets`` (name -> HouseSet) may be passed to share compiled sets between runs;
+    Rollouts, held-out evaluation and scene generation go through ``executor`` (in process when
+    None; see :mod:`adaptenv.curriculum.executor`); every executor gives the same results.
     ``progress(text)`` is called with one line per finished stage.
     """
-    from adaptenv.adapt.generators import GenerationContext
-    from adaptenv.adapt.generators.random_perturbation import random_single_edits
     from adaptenv.agents.checkpoint import load_checkpoint, save_checkpoint
     from adaptenv.agents.houses import load_house_set
-    from adaptenv.agents.network import NeuralPolicy
     from adaptenv.agents.registry import resolve_policy
+    from adaptenv.curriculum.executor import InProcessExecutor
+    from adaptenv.curriculum.jobs import GenerateJob, PolicyWeights, run_generate
     cfg.check()
     run_dir = Path(run_dir)
     say = progress or (lambda text: None)
@@ -287,7 +268,7 @@ def run_loop(cfg: LoopConfig, run_dir: str | Path, *, resume: bool = False, held
     atomic_write_text(run_dir / "run.json", RunInfo(method=cfg.method, seed=cfg.seed, config=asdict(cfg),
                                                     command=command).model_dump_json(indent=1))
     store = SceneStore(run_dir / "scenes")
-    sets = heldout_sets if heldout_sets is not None else {k: load_house_set(v) for k, v in cfg.heldout.items()}
+    ex = executor if executor is not None else InProcessExecutor()
     bcfg = lb.LevelBufferConfig(capacity=cfg.buffer_capacity, min_fill=0.0, replay_prob=1.0).check()
 
     if state.iteration == 0 and not records:
@@ -301,14 +282,15 @@ def run_loop(cfg: LoopConfig, run_dir: str | Path, *, resume: bool = False, held
         save_checkpoint(iteration_dir(run_dir, 0) / "policy.pt", policy.net, {"iteration": 0})
         say("evaluating pi_0 on the held-out sets")
         records = [IterationRecord(iteration=0, env_steps=0, grad_updates=0, edits=0,
-                                   heldout=evaluate_sets(policy, sets, cfg.heldout_episodes, cfg.seed))]
+                                   heldout=evaluate_sets(PolicyWeights.of(policy.net), cfg.heldout,
+                                                         cfg.heldout_episodes, cfg.seed, ex))]
         _checkpoint(run_dir, cfg, state, records)
     n = cfg.scenes_per_iteration
 
     for t in range(state.iteration + 1, cfg.iterations + 1):
         start = time.perf_counter()
         net = load_checkpoint(iteration_dir(run_dir, t - 1) / "policy.pt").net
-        policy = NeuralPolicy(net)
+        weights = PolicyWeights.of(net)
         shutil.rmtree(iteration_dir(run_dir, t), ignore_errors=True)  # a killed attempt at t starts over
         buf = lb.LevelBufferState.from_dict(state.buffer) if state.buffer else lb.empty_state()
         new: list[str] = []
@@ -327,22 +309,24 @@ def run_loop(cfg: LoopConfig, run_dir: str | Path, *, resume: bool = False, held
             replayed = [buf.level_ids[i] for i in idx]  # gradient steps go to these parents
             buf = lb.update_scores(buf, list(idx), [buf.scores[i] for i in idx], t)
             plans = lb.select_parents(buf, idx, _rng(cfg.seed, t, 2))
+            made = ex.map(run_generate, [GenerateJob("random", store.house(p.parent_id), p.parent_id, cfg.edit_steps,
+                                                     (p.seed,)) for p in plans], desc="ACCEL edits")
             rolled = []
-            for k, plan in enumerate(plans):
-                child, log = random_single_edits(store.house(plan.parent_id), cfg.edit_steps,
-                                                 np.random.default_rng(plan.seed))
-                name = store.put(f"{plan.parent_id.split('~')[0]}~t{t:02d}c{k:02d}", child)
-                state.edits += sum(1 for e in log.edits if e.accepted and e.changed)
+            for k, (plan, g) in enumerate(zip(plans, made, strict=True)):
+                name = store.put(f"{plan.parent_id.split('~')[0]}~t{t:02d}c{k:02d}", g.house)
+                state.edits += g.edits
                 rolled.append(name)
                 if len(gallery) < cfg.gallery:
-                    gallery.append(_gallery_item(run_dir, t, name, store.house(plan.parent_id), child, None, None, log))
+                    gallery.append(_gallery_item(run_dir, t, name, store.house(plan.parent_id), g.house, None, None,
+                                                 g.edit_log))
         elif cfg.method == "dr":
             rolled = _fresh_houses(store, state, cfg.seed, t, n)
         else:
             first = (t - 1) * n % len(state.pool)
             rolled = [state.pool[(first + k) % len(state.pool)] for k in range(min(n, len(state.pool)))]
         say(f"t={t}: rolling out pi_{t - 1} in {len(rolled)} scenes")
-        results, trajs = rollout_scenes(store, rolled, policy, int(np.random.SeedSequence([cfg.seed, t, 4]).generate_state(1)[0]))
+        results, trajs = rollout_scenes(store, rolled, weights,
+                                        int(np.random.SeedSequence([cfg.seed, t, 4]).generate_state(1)[0]), ex)
         state.env_steps += sum(r.steps for r in results)
         train_metrics = _set_metrics(results)
 
@@ -363,28 +347,17 @@ def run_loop(cfg: LoopConfig, run_dir: str | Path, *, resume: bool = False, held
         else:
             if cfg.method == "dr":
                 new = rolled
-            elif cfg.method == "random":
-                for k, name in enumerate(rolled):
-                    child, log = random_single_edits(store.house(name), cfg.edit_steps, _rng(cfg.seed, t, 100 + k))
-                    state.edits += sum(1 for e in log.edits if e.accepted and e.changed)
-                    new.append(store.put(f"{name.split('~')[0]}~t{t:02d}r{k:02d}", child))
+            else:  # random edits, or the paper's analysis F then generator G (ours, ours-llm)
+                kind, tag = ("random", "r") if cfg.method == "random" else (cfg.method, "a")
+                jobs = [GenerateJob(kind, store.house(name), name, cfg.edit_steps, (cfg.seed, t, 100 + k),
+                                    trajectory=traj, llm=cfg.llm)
+                        for k, (name, traj) in enumerate(zip(rolled, trajs, strict=True))]
+                for k, (name, g) in enumerate(zip(rolled, ex.map(run_generate, jobs, desc="generation"), strict=True)):
+                    state.edits += g.edits
+                    new.append(store.put(f"{name.split('~')[0]}~t{t:02d}{tag}{k:02d}", g.house))
                     if len(gallery) < cfg.gallery:
-                        gallery.append(_gallery_item(run_dir, t, new[-1], store.house(name), child, trajs[k], None, log))
-            else:  # ours, ours-llm
-                analyzer, generator = _make_fg(cfg)
-                from adaptenv.sim.task import Episode
-
-                for k, (name, traj) in enumerate(zip(rolled, trajs, strict=True)):
-                    analysis = analyzer.analyze(traj, store.world(name))
-                    episode = Episode(traj.target_type, (traj.start.x, traj.start.z, traj.start.yaw), traj.seed)
-                    ctx = GenerationContext(episode=episode, trajectory=traj, policy=None, render=False)
-                    gen = generator.generate(store.house(name), analysis, steps=cfg.edit_steps, context=ctx,
-                                             rng=_rng(cfg.seed, t, 100 + k))
-                    state.edits += len(gen.applied)
-                    new.append(store.put(f"{name.split('~')[0]}~t{t:02d}a{k:02d}", gen.house))
-                    if len(gallery) < cfg.gallery:
-                        gallery.append(_gallery_item(run_dir, t, new[-1], store.house(name), gen.house, traj,
-                                                     analysis, gen.edit_log))
+                        gallery.append(_gallery_item(run_dir, t, new[-1], store.house(name), g.house, trajs[k],
+                                                     g.analysis, g.edit_log))
             if cfg.method in EDITING:  # adapted scenes replace their parents in the pool
                 pool = list(state.pool)
                 for parent, child in zip(rolled, new, strict=True):
@@ -407,7 +380,7 @@ def run_loop(cfg: LoopConfig, run_dir: str | Path, *, resume: bool = False, held
 
         # 4. held-out evaluation of pi_{t+1}
         say(f"t={t}: evaluating on the held-out sets")
-        heldout = evaluate_sets(NeuralPolicy(net), sets, cfg.heldout_episodes, cfg.seed)
+        heldout = evaluate_sets(PolicyWeights.of(net), cfg.heldout, cfg.heldout_episodes, cfg.seed, ex)
         state.buffer = buf.to_dict() if cfg.method in ("plr", "accel") else None
         state.iteration = t
         records.append(IterationRecord(iteration=t, env_steps=state.env_steps, grad_updates=state.grad_updates,
