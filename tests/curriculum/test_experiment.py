@@ -13,11 +13,10 @@ from adaptenv.curriculum.experiment import (
     run_experiment,
     summary_markdown,
 )
+from adaptenv.curriculum.records import read_iterations
 from adaptenv.errors import ConfigError
 
 REPO = Path(__file__).resolve().parents[2]
-
-
 
 
 def test_committed_configs_load():
@@ -56,6 +55,15 @@ def test_small_experiment_writes_every_artifact(tiny_policy, tmp_path):
         assert any(r.startswith("success:tiny,") for r in rows)
     assert set(summary["methods"]) == set(cfg.methods)
     assert set(summary["tests"]) == {"none", "dr"}
+    # the paper's Delta R: final held-out success minus pi_0's on the same episodes, per seed
+    for m in cfg.methods:
+        for s in cfg.seeds:
+            recs = read_iterations(tmp_path / m / f"seed_{s}")
+            gain = recs[-1].heldout["tiny"].success - recs[0].heldout["tiny"].success
+            row = next(r for r in (tmp_path / m / "per_seed.csv").read_text().splitlines()
+                       if r.startswith("success_gain:tiny,"))
+            assert float(row.split(",")[1 + cfg.seeds.index(s)]) == pytest.approx(gain, abs=1e-5)
+    assert "success_gain:tiny" in summary["tests"]["none"]
     md = (tmp_path / "summary.md").read_text()
     assert "| ours |" in md and "paired t-test" in md
     for x in ("iteration", "env_steps"):

@@ -212,6 +212,8 @@ def test_find_pvalues_reads_nested_and_flat_shapes():
     flat = [{"method": "dr", "set": "rearranged", "p": 0.04}, {"method": "x", "set": "unseen", "p": 0.1}]
     assert find_pvalues(flat, methods, sets) == {("dr", "rearranged", ""): 0.04}
     assert find_pvalues({"ours": {"unseen": {"success": {"mean": 0.3}}}}, methods, sets) == {}
+    runner = {"tests": {"dr": {"success:unseen": 0.03, "success_gain:unseen": 0.5}}}
+    assert find_pvalues(runner, methods, sets) == {("dr", "unseen", "success"): 0.03}
     runner = {"methods": {"dr": {"success:unseen": {"mean": 0.4, "se": 0.1, "n": 3}}}, "reference": "ours",
               "tests": {"dr": {"success:unseen": 0.03, "spl:unseen": None}}}
     assert find_pvalues(runner, methods, sets) == {("dr", "unseen", "success"): 0.03}

@@ -101,6 +101,7 @@ def test_fields_are_cached(real_house):
     w = compile_world(real_house)
     assert distance_field(w, "Bed") is distance_field(w, "Bed")
     assert ("distance", "Bed") in w.cache and w.cache[("distance", "Bed")].dtype == np.float32
+    assert distance_field(w, "Bed").shape == w.grid.shape
 
 
 @pytest.mark.parametrize("target", ["Toilet", "Sofa"])

@@ -25,6 +25,9 @@ from adaptenv.curriculum.records import atomic_write_text, read_iterations
 from adaptenv.errors import ConfigError
 
 METRICS = ("success", "spl", "collisions")
+#: Figures of the summary table and its tests: the held-out metrics and the paper's Delta R
+#: (``success_gain``: final held-out success minus that of pi_0 on the same episodes).
+TESTED = (*METRICS, "success_gain")
 
 
 @dataclass
@@ -118,6 +121,8 @@ def final_figures(out: Path, cfg: ExperimentConfig) -> dict[str, dict[int, dict[
                 continue
             last = recs[-1]
             row = {f"{k}:{name}": getattr(v, k) for name, v in last.heldout.items() for k in METRICS}
+            row.update({f"success_gain:{name}": v.success - recs[0].heldout[name].success
+                        for name, v in last.heldout.items() if name in recs[0].heldout})
             row.update({"env_steps:all": float(last.env_steps), "grad_updates:all": float(last.grad_updates),
                         "edits:all": float(last.edits), "iterations:all": float(last.iteration)})
             table.setdefault(m, {})[s] = row
@@ -160,7 +165,7 @@ def summarize(out: str | Path, cfg: ExperimentConfig | None = None) -> dict[str,
             continue
         common = sorted(set(ref) & set(seeds))
         summary["tests"][m] = {key: paired_test([ref[s][key] for s in common], [seeds[s][key] for s in common])
-                               for key in metrics if key.split(":")[0] in METRICS}
+                               for key in metrics if key.split(":")[0] in TESTED}
     atomic_write_text(out / "summary.json", json.dumps(summary, indent=1, default=float))
     atomic_write_text(out / "summary.md", summary_markdown(summary))
     _plots(out, cfg)
@@ -169,7 +174,7 @@ def summarize(out: str | Path, cfg: ExperimentConfig | None = None) -> dict[str,
 
 def summary_markdown(summary: dict[str, Any]) -> str:
     """The results table: mean +- SE per method and held-out figure, p-value of ours vs each method."""
-    keys = sorted({k for v in summary["methods"].values() for k in v if k.split(":")[0] in METRICS})
+    keys = sorted({k for v in summary["methods"].values() for k in v if k.split(":")[0] in TESTED})
     ref = summary["reference"]
     head = "| method | " + " | ".join(keys) + " | env steps | updates |"
     lines = [head, "|" + "---|" * (len(keys) + 3)]

@@ -289,7 +289,8 @@ def find_pvalues(doc: Any, methods: list[str], sets: list[str]) -> dict[tuple[st
     (plural too) or ``tests``. Method, set and metric come from ``method``/``set``/``metric`` fields
     of the enclosing objects, or from keys on the way down that equal a method name, a set name, or
     ``success``/``spl``, alone or joined by ':' (the experiment runner's ``"success:unseen"``).
-    Values that cannot be placed on a method and a set are ignored (so are nulls).
+    Values that cannot be placed on a method and a set are ignored (so are nulls), and so are
+    p-values of other metrics (``"success_gain:unseen"``).
     """
     out: dict[tuple[str, str, str], float] = {}
     known_m, known_s = set(methods), set(sets)
@@ -310,7 +311,7 @@ def find_pvalues(doc: Any, methods: list[str], sets: list[str]) -> dict[tuple[st
                         sub["method"] = part
                     elif part in known_s:
                         sub["set"] = part
-                    elif part.lower() in METRICS:
+                    elif part.lower() in METRICS or ":" in k:  # "success_gain:unseen" names another metric
                         sub["metric"] = part.lower()
                 walk(v, sub, is_p or k.lower() in _P_KEYS)
         elif isinstance(node, list):
@@ -318,7 +319,8 @@ def find_pvalues(doc: Any, methods: list[str], sets: list[str]) -> dict[tuple[st
                 walk(v, ctx, is_p)
         elif is_p and _number(node) and ctx.get("method") in known_m and ctx.get("set") in known_s:
             metric = ctx.get("metric", "").lower()
-            out[(ctx["method"], ctx["set"], metric if metric in METRICS else "")] = float(node)
+            if metric in METRICS or not metric:
+                out[(ctx["method"], ctx["set"], metric)] = float(node)
 
     walk(doc, {}, False)
     return out

@@ -5,13 +5,18 @@ The geodesic distance is a shortest path over navigable cells (clearance >= AGEN
 res*sqrt(5)), never cutting a corner (a move needs every cell its segment crosses to be
 navigable). Knight moves cut the metric's worst error against the true Euclidean shortest path
 from 8.2% (8 neighbours) to 2.7%. Navigable connectivity is unchanged (4-connected components).
-Fields are cached per target type in ``world.cache``; once a type's distance field exists its
-success region is not kept (it is exactly the field's zeros).
+Fields are cached per target type in ``world.cache``, compactly: only the values on navigable cells
+(the only cells a field can be finite on), numbered by one :class:`CellIndex` per world that every
+type shares, so a field costs 4 bytes per navigable cell instead of 4 per cell; the values are
+exactly the full field's. Once a type's field exists its success region is not kept either (it is
+exactly the field's zeros).
 """
 
 from __future__ import annotations
 
 import math
+import weakref
+from dataclasses import dataclass
 
 import numba
 import numpy as np
@@ -166,9 +171,9 @@ def success_region(world: NavWorld, target_type: str) -> np.ndarray:
     Exactly the cells where :func:`adaptenv.sim.task.visible_instances` with a 360-degree field of
     view is non-empty at the cell centre (same sample points, same line-of-sight walk).
     """
-    field = world.cache.get(("distance", target_type))
-    if field is not None:  # the region is exactly where the field is 0 (its sources; every step costs > 0)
-        return field == 0.0
+    values = world.cache.get(("distance", target_type))
+    if values is not None:  # the region is exactly where the field is 0 (its sources; every step costs > 0)
+        return _expand(world, values == 0.0, False)
     key = ("region", target_type)
     if key not in world.cache:
         world.cache[key] = _compute_region(world, target_type)
@@ -186,21 +191,102 @@ def _compute_region(world: NavWorld, target_type: str) -> np.ndarray:
 
 
 def navigable(world: NavWorld) -> np.ndarray:
-    """bool (H, W): cells where the agent disc fits (cached)."""
-    key = ("navigable",)
+    """bool (H, W): cells where the agent disc fits (recomputed from the clearance: one comparison per
+    cell; the cached :func:`cell_index` holds the same information for the simulator)."""
+    return world.grid.navigable(AGENT_RADIUS)
+
+
+CHUNK_BITS = 7
+CHUNK = 1 << CHUNK_BITS
+"""Cells per chunk of :class:`CellIndex` (128: ranks within a chunk fit in a byte)."""
+NOT_NAVIGABLE = 255
+"""``CellIndex.rank`` of a cell that is not navigable (holds no field value)."""
+
+
+@dataclass(frozen=True)
+class CellIndex:
+    """Row-major numbering of a world's navigable cells, shared by all its compact distance fields.
+
+    Flat cell ``i`` (``row * W + col``) holds entry ``start[i // CHUNK] + rank[i]`` of a compact field,
+    or no entry (the field is inf there) when ``rank[i] == NOT_NAVIGABLE``: 1 byte a cell, the same as
+    a navigable mask, plus 4 bytes per CHUNK cells.
+    """
+
+    rank: np.ndarray
+    """uint8 (H * W,): the cell's rank among the navigable cells of its chunk, NOT_NAVIGABLE if none."""
+    start: np.ndarray
+    """int64 (ceil(H * W / CHUNK),): navigable cells before each chunk."""
+    cells: int
+    """Navigable cells (the length of every compact field)."""
+
+    @classmethod
+    def from_mask(cls, nav: np.ndarray) -> CellIndex:
+        """Number the True cells of ``nav`` (bool (H, W)) in row-major order."""
+        flat = np.ascontiguousarray(nav, dtype=np.bool_).reshape(-1)
+        chunks = -(-flat.size // CHUNK)
+        padded = np.zeros(chunks * CHUNK, dtype=np.bool_)
+        padded[:flat.size] = flat
+        padded = padded.reshape(chunks, CHUNK)
+        within = np.cumsum(padded, axis=1, dtype=np.int32) - 1
+        rank = np.where(padded, within, NOT_NAVIGABLE).astype(np.uint8).reshape(-1)[:flat.size].copy()
+        count = padded.sum(axis=1, dtype=np.int64)
+        start = np.concatenate([[0], np.cumsum(count)[:-1]]).astype(np.int64)
+        return cls(rank, start, int(count.sum()))
+
+    @property
+    def mask(self) -> np.ndarray:
+        """bool (H * W,): the navigable cells."""
+        return self.rank != NOT_NAVIGABLE
+
+    def entry(self, flat: np.ndarray) -> np.ndarray:
+        """int64: the compact-field entry of each flat cell index, -1 where the cell is not navigable."""
+        r = self.rank[flat]
+        return np.where(r != NOT_NAVIGABLE, self.start[flat // CHUNK] + r, -1)
+
+
+def cell_index(world: NavWorld) -> CellIndex:
+    """The world's :class:`CellIndex` of navigable cells (cached in ``world.cache``)."""
+    key = ("cells",)
     if key not in world.cache:
-        world.cache[key] = world.grid.navigable(AGENT_RADIUS)
+        world.cache[key] = CellIndex.from_mask(navigable(world))
     return world.cache[key]
+
+
+def compact_field(world: NavWorld, target_type: str) -> np.ndarray:
+    """float32 (cells,): the distance field on the navigable cells, in :func:`cell_index` order (cached).
+
+    This is what ``world.cache`` keeps; :func:`distance_field` expands it to the grid.
+    """
+    key = ("distance", target_type)
+    if key not in world.cache:
+        index = cell_index(world)
+        region = success_region(world, target_type)
+        full = shortest_paths(navigable(world), region, world.grid.resolution)[0]
+        world.cache[key] = np.ascontiguousarray(full.reshape(-1)[index.mask])
+        world.cache.pop(("region", target_type), None)  # now derived from the field: saves H*W bytes
+    return world.cache[key]
+
+
+def _expand(world: NavWorld, values: np.ndarray, fill) -> np.ndarray:
+    """A per-navigable-cell array spread over the grid (H, W), ``fill`` elsewhere."""
+    out = np.full(world.grid.shape, fill, dtype=values.dtype)
+    out.reshape(-1)[cell_index(world).mask] = values
+    return out
 
 
 def distance_field(world: NavWorld, target_type: str) -> np.ndarray:
-    """float32 (H, W): geodesic distance (m) to the success region; 0 inside, inf where unreachable."""
-    key = ("distance", target_type)
-    if key not in world.cache:
-        region = success_region(world, target_type)
-        world.cache[key] = shortest_paths(navigable(world), region, world.grid.resolution)[0]
-        world.cache.pop(("region", target_type), None)  # now derived from the field: saves H*W bytes
-    return world.cache[key]
+    """float32 (H, W): geodesic distance (m) to the success region; 0 inside, inf where unreachable.
+
+    Expanded from :func:`compact_field`; while a caller holds the array, later calls return that same
+    array (a weak reference in ``world.cache``, which holds no memory), so it is not rebuilt.
+    """
+    key = ("distance_grid", target_type)
+    ref = world.cache.get(key)
+    full = ref() if ref is not None else None
+    if full is None:
+        full = _expand(world, compact_field(world, target_type), np.float32(np.inf))
+        world.cache[key] = weakref.ref(full)
+    return full
 
 
 def field_at(world: NavWorld, field: np.ndarray, x, z) -> np.ndarray:
@@ -210,13 +296,18 @@ def field_at(world: NavWorld, field: np.ndarray, x, z) -> np.ndarray:
     3x3 neighbourhood of field + distance to that cell's centre, so a continuous agent standing
     on a cell edge never reads inf; points with no finite neighbour read inf.
     """
+    return _read_at(world, lambda r, c: field[r, c], x, z)
+
+
+def _read_at(world: NavWorld, read, x, z) -> np.ndarray:
+    """:func:`field_at` with the field given as ``read(rows, cols)`` (in-bounds cells -> values)."""
     g = world.grid
     x, z = np.asarray(x, dtype=float), np.asarray(z, dtype=float)
     row, col = g.to_cell(x, z)
     h, w = g.shape
     inside = g.in_bounds(row, col)
     out = np.full(np.shape(row), np.inf, dtype=np.float64)
-    out[inside] = field[row[inside], col[inside]]
+    out[inside] = read(row[inside], col[inside])
     bad = ~np.isfinite(out)
     if bad.any():
         rb, cb, xb, zb = row[bad], col[bad], x[bad], z[bad]
@@ -226,7 +317,7 @@ def field_at(world: NavWorld, field: np.ndarray, x, z) -> np.ndarray:
                 rr, cc = rb + dr, cb + dc
                 ok = (rr >= 0) & (rr < h) & (cc >= 0) & (cc < w)
                 val = np.full(rb.shape, np.inf)
-                val[ok] = field[rr[ok], cc[ok]]
+                val[ok] = read(rr[ok], cc[ok])
                 cx, cz = g.cell_center(rr, cc)
                 best = np.minimum(best, val + np.hypot(cx - xb, cz - zb))
         out[bad] = best
@@ -234,8 +325,18 @@ def field_at(world: NavWorld, field: np.ndarray, x, z) -> np.ndarray:
 
 
 def geodesic_distance(world: NavWorld, target_type: str, x, z):
-    """Geodesic distance (m) from world points to the target's success region (float for scalars)."""
-    out = field_at(world, distance_field(world, target_type), x, z)
+    """Geodesic distance (m) from world points to the target's success region (float for scalars).
+
+    Reads the compact field directly (no grid-sized array per call), with :func:`field_at`'s rule.
+    """
+    values, index, w = compact_field(world, target_type), cell_index(world), world.grid.shape[1]
+
+    def read(r: np.ndarray, c: np.ndarray) -> np.ndarray:
+        e = index.entry(np.asarray(r, dtype=np.int64) * w + c)
+        return np.where(e >= 0, values[np.maximum(e, 0)], np.float32(np.inf)) if values.size else \
+            np.full(e.shape, np.inf, dtype=np.float32)
+
+    out = _read_at(world, read, x, z)
     return float(out) if out.ndim == 0 else out
 
 

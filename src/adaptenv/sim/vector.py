@@ -19,6 +19,7 @@ import numpy as np
 
 from adaptenv.errors import AdaptenvError
 from adaptenv.sim import geodesic, metrics, physics, scan, task
+from adaptenv.sim.geodesic import CHUNK_BITS, NOT_NAVIGABLE
 from adaptenv.sim.physics import _MOVE_DELTA, _YAW_DELTA, PackedGrids, _move_one
 from adaptenv.sim.scan import RAY_COS, RAY_SIN, _scan_one, pack_semantic, pack_squares
 from adaptenv.sim.spec import (
@@ -43,13 +44,24 @@ PARALLEL_MIN_BATCH = 64
 
 
 @numba.njit(cache=True)
-def _field_at(dist, off, h, w, x0, z0, res, x, z):
-    """A distance field at a point: its cell, or (when that is inf) the best 3x3 neighbour plus the
-    distance to its centre, as ``geodesic.field_at`` reads it."""
+def _cell_value(vals, rank, start, off, coff, i):
+    """Compact field ``vals`` at flat cell i of the house whose ``geodesic.CellIndex`` is packed at
+    ``off`` (rank) and ``coff`` (start); inf on cells that are not navigable."""
+    r = rank[off + i]
+    if r == NOT_NAVIGABLE:
+        return math.inf
+    return vals[start[coff + (i >> CHUNK_BITS)] + np.int64(r)]
+
+
+@numba.njit(cache=True, inline="always")
+def _field_at(vals, rank, start, off, coff, h, w, x0, z0, res, x, z):
+    """A compact distance field at a point: its cell, or (when that is inf) the best 3x3 neighbour
+    plus the distance to its centre, as ``geodesic.field_at`` reads it. Inlined: as a called
+    function (three array arguments) the step was 4-7% slower (docs/BENCHMARKS.md)."""
     col = int(math.floor((x - x0) / res))
     row = int(math.floor((z - z0) / res))
     if 0 <= row < h and 0 <= col < w:
-        v = dist[off + row * w + col]
+        v = _cell_value(vals, rank, start, off, coff, row * w + col)
         if v < math.inf:
             return v
     best = math.inf
@@ -57,20 +69,21 @@ def _field_at(dist, off, h, w, x0, z0, res, x, z):
         for dc in range(-1, 2):
             rr, cc = row + dr, col + dc
             if 0 <= rr < h and 0 <= cc < w:
-                v = dist[off + rr * w + cc]
+                v = _cell_value(vals, rank, start, off, coff, rr * w + cc)
                 if v < math.inf:
                     best = min(best, v + math.hypot(x0 + (cc + 0.5) * res - x, z0 + (rr + 0.5) * res - z))
     return best
 
 
 def _dependency_stamp() -> str:
-    """SHA-256 of the sources the batch kernels inline from other files (physics.py, scan.py).
+    """SHA-256 of the sources the batch kernels inline or take constants from (physics.py, scan.py,
+    geodesic.py).
 
     numba's on-disk cache only checks the kernel's own file; the stamp is a closure variable of the
     kernels, and numba keys cached code on closure contents, so editing a dependency recompiles.
     """
     h = hashlib.sha256()
-    for mod in (physics, scan):
+    for mod in (physics, scan, geodesic):
         h.update(Path(mod.__file__).read_bytes())
     return h.hexdigest()
 
@@ -79,12 +92,12 @@ def _make_agent_step(stamp: str):
     """The per-agent step kernel, keyed in numba's cache by ``stamp`` (its only closure variable)."""
 
     @numba.njit(cache=True)
-    def _agent_step(i, stepping, clear, sem, sq, dist, offs, hs, ws, x0s, z0s, ress,
+    def _agent_step(i, stepping, clear, sem, sq, dist, rank, start, coffs, offs, hs, ws, x0s, z0s, ress,
                     env, doff, x, z, yaw, steps, collisions, prev_action, path, geo, best, moved, done,
                     actions, radius, yaw_delta, move_delta, ray_cos, ray_sin, max_range, max_steps,
                     reward, terminated, truncated, depth, classes):
         """Agent i: act (when ``stepping`` and not done), book-keep the reward, then look and measure."""
-        _ = stamp  # a closure variable, so that numba's cache key covers physics.py and scan.py
+        _ = stamp  # a closure variable, so that numba's cache key covers physics.py, scan.py, geodesic.py
         e = env[i]
         off, h, w, x0, z0, res = offs[e], hs[e], ws[e], x0s[e], z0s[e], ress[e]
         act = stepping and not done[i]
@@ -99,7 +112,7 @@ def _make_agent_step(stamp: str):
                 collisions[i] += 1
             steps[i] += 1
             prev_action[i] = a
-        d = _field_at(dist[doff[i]], 0, h, w, x0, z0, res, x[i], z[i])
+        d = _field_at(dist[doff[i]], rank, start, off, coffs[e], h, w, x0, z0, res, x[i], z[i])
         geo[i] = d
         if act:
             gain = 0.0
@@ -130,25 +143,25 @@ def _make_loops(stamp: str):
     only ``stamp``: numba's cache key must not include a dispatcher object)."""
 
     @numba.njit(cache=True)
-    def _run_serial(idx, stepping, clear, sem, sq, dist, offs, hs, ws, x0s, z0s, ress,
+    def _run_serial(idx, stepping, clear, sem, sq, dist, rank, start, coffs, offs, hs, ws, x0s, z0s, ress,
                     env, doff, x, z, yaw, steps, collisions, prev_action, path, geo, best, moved, done,
                     actions, radius, yaw_delta, move_delta, ray_cos, ray_sin, max_range, max_steps,
                     reward, terminated, truncated, depth, classes):
         _ = stamp
         for k in range(idx.shape[0]):
-            _agent_step(idx[k], stepping, clear, sem, sq, dist, offs, hs, ws, x0s, z0s, ress,
+            _agent_step(idx[k], stepping, clear, sem, sq, dist, rank, start, coffs, offs, hs, ws, x0s, z0s, ress,
                         env, doff, x, z, yaw, steps, collisions, prev_action, path, geo, best, moved, done,
                         actions, radius, yaw_delta, move_delta, ray_cos, ray_sin, max_range, max_steps,
                         reward, terminated, truncated, depth, classes)
 
     @numba.njit(cache=True, parallel=True)
-    def _run_parallel(idx, stepping, clear, sem, sq, dist, offs, hs, ws, x0s, z0s, ress,
+    def _run_parallel(idx, stepping, clear, sem, sq, dist, rank, start, coffs, offs, hs, ws, x0s, z0s, ress,
                       env, doff, x, z, yaw, steps, collisions, prev_action, path, geo, best, moved, done,
                       actions, radius, yaw_delta, move_delta, ray_cos, ray_sin, max_range, max_steps,
                       reward, terminated, truncated, depth, classes):
         _ = stamp
         for k in numba.prange(idx.shape[0]):
-            _agent_step(idx[k], stepping, clear, sem, sq, dist, offs, hs, ws, x0s, z0s, ress,
+            _agent_step(idx[k], stepping, clear, sem, sq, dist, rank, start, coffs, offs, hs, ws, x0s, z0s, ress,
                         env, doff, x, z, yaw, steps, collisions, prev_action, path, geo, best, moved, done,
                         actions, radius, yaw_delta, move_delta, ray_cos, ray_sin, max_range, max_steps,
                         reward, terminated, truncated, depth, classes)
@@ -157,6 +170,17 @@ def _make_loops(stamp: str):
 
 
 _run_serial, _run_parallel = _make_loops(_STAMP)
+
+
+def _pack_cells(worlds: list) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The worlds' cell indices in flat arrays: ranks aligned with ``PackedGrids`` offsets, chunk
+    starts with house e's at ``chunk_offset[e]`` (one world's arrays are used in place)."""
+    index = [geodesic.cell_index(w) for w in worlds]
+    sizes = np.array([ix.start.size for ix in index], dtype=np.int64)
+    chunk_offset = np.concatenate([[0], np.cumsum(sizes)[:-1]]).astype(np.int64)
+    if len(index) == 1:
+        return index[0].rank, index[0].start, chunk_offset
+    return (np.concatenate([ix.rank for ix in index]), np.concatenate([ix.start for ix in index]), chunk_offset)
 
 
 @numba.njit(cache=True)
@@ -227,6 +251,8 @@ class BatchSim:
         """Threads of the kernel: 1 (serial), n >= 2 (multi-threaded), or None (auto, see :meth:`threads_for`)."""
         self.parallel = parallel
         """Older spelling of ``threads`` (used only when ``threads`` is None): True, False or None."""
+        self._rank, self._start, self._chunk_offset = _pack_cells(self.worlds)
+        """The worlds' ``geodesic.CellIndex`` packed like ``grids`` (one world's used in place)."""
         self._fields = numba.typed.List.empty_list(numba.types.float32[::1])
         self._field_offset: dict[tuple[int, str], int] = {}
         self._targets: dict[tuple[int, str], np.ndarray] = {}
@@ -264,18 +290,19 @@ class BatchSim:
     def _distance_offset(self, e: int, target_type: str) -> int:
         """Index of the (house, target) distance field in ``self._fields``; fetched on first use.
 
-        The fields are flat views of ``geodesic.distance_field``'s cached arrays, not copies.
+        The fields are ``geodesic.compact_field``'s cached arrays themselves (values on navigable
+        cells only, read through the packed cell index), not copies.
         """
         key = (e, target_type)
         off = self._field_offset.get(key)
         if off is None:
             world = self.worlds[e]
-            field = np.asarray(geodesic.distance_field(world, target_type), dtype=np.float32)
-            if field.shape != world.grid.shape:
-                raise ValueError(f"distance field of {target_type!r} has shape {field.shape}, "
-                                 f"expected the grid's {world.grid.shape}")
+            field = geodesic.compact_field(world, target_type)
+            if field.dtype != np.float32 or field.shape != (geodesic.cell_index(world).cells,):
+                raise ValueError(f"compact distance field of {target_type!r} has {field.dtype} shape "
+                                 f"{field.shape}, expected float32 over the world's navigable cells")
             off = self._field_offset[key] = len(self._fields)
-            self._fields.append(np.ascontiguousarray(field).reshape(-1))
+            self._fields.append(np.ascontiguousarray(field))
             self._targets[key] = np.asarray(task.target_points(world, target_type).points, dtype=np.float64)
         return off
 
@@ -359,7 +386,8 @@ class BatchSim:
     def _kernel(self, kernel, idx: np.ndarray, actions: np.ndarray, stepping: bool) -> None:
         """Call ``kernel`` (``_run_serial`` or ``_run_parallel``) on the packed state."""
         g = self.grids
-        kernel(idx, stepping, g.clearance, self.semantic, self.squares, self._fields, g.offset, g.height, g.width,
+        kernel(idx, stepping, g.clearance, self.semantic, self.squares, self._fields, self._rank, self._start,
+               self._chunk_offset, g.offset, g.height, g.width,
                g.x0, g.z0, g.resolution, self.env, self._doff, self.x, self.z, self.yaw, self.steps, self.collisions,
                self.prev_action, self.path_length, self.geodesic, self.best, self.moved, self.done,
                actions, self.radius, _YAW_DELTA, _MOVE_DELTA, RAY_COS, RAY_SIN, self.max_range, self.max_steps,
@@ -431,12 +459,12 @@ class BatchSim:
 
     @property
     def nbytes(self) -> int:
-        """Memory of the arrays BatchSim holds that no world holds too: packed rasters of several
-        worlds (one world's are used in place) and distance fields no longer in their world's cache."""
-        own = sum(a.nbytes for a in (self.grids.clearance, self.semantic, self.squares) if a.base is None)
-        held = {id(a) for w in self.worlds for a in w.cache.values() if isinstance(a, np.ndarray)}
-        own += sum(f.nbytes for f in self._fields if id(f.base) not in held)
-        return int(own)
+        """Memory of the arrays BatchSim holds that no world holds too: packed rasters and cell
+        indices of several worlds (one world's are used in place) and distance fields no longer in
+        their world's cache."""
+        held = {id(a) for w in self.worlds for a in (w.grid.clearance, w.semantic, *w.cached_arrays())}
+        arrays = [self.grids.clearance, self.semantic, self.squares, self._rank, self._start, *self._fields]
+        return int(sum(a.nbytes for a in arrays if id(a) not in held and id(a.base) not in held))
 
 
 class EpisodeSampler:

@@ -66,25 +66,29 @@ class NavWorld:
 
     @property
     def nbytes(self) -> int:
-        """Memory held by the world's arrays (grid, semantic, occluder and cached fields)."""
-        seen: set[int] = set()
-        cached = sum(_array_bytes(v, seen) for v in self.cache.values())
+        """Memory held by the world's arrays (grid, semantic, occluder and cached fields), each array once."""
+        cached = sum({id(a): a.nbytes for a in self.cached_arrays()}.values())
         return self.grid.nbytes + self.semantic.nbytes + self.occluder.nbytes + cached
 
+    def cached_arrays(self) -> list[np.ndarray]:
+        """The NumPy arrays in ``cache``, including those inside cached dataclasses, lists and tuples
+        (e.g. target points, the expert's guidance fields); weak references hold none."""
+        out: list[np.ndarray] = []
+        for value in self.cache.values():
+            _collect_arrays(value, out)
+        return out
 
-def _array_bytes(value, seen: set[int]) -> int:
-    """Bytes of the NumPy arrays in a cache entry (an array, a dataclass or a sequence of them),
-    each array counted once (``seen`` holds ids), so fields shared between entries are not double-counted."""
+
+def _collect_arrays(value, out: list[np.ndarray]) -> None:
+    """Append the NumPy arrays of a cache entry (an array, a dataclass or a sequence of them) to ``out``."""
     if isinstance(value, np.ndarray):
-        if id(value) in seen:
-            return 0
-        seen.add(id(value))
-        return value.nbytes
-    if is_dataclass(value) and not isinstance(value, type):
-        return sum(_array_bytes(getattr(value, f.name), seen) for f in fields(value))
-    if isinstance(value, (list, tuple)):
-        return sum(_array_bytes(v, seen) for v in value)
-    return 0
+        out.append(value)
+    elif is_dataclass(value) and not isinstance(value, type):
+        for f in fields(value):
+            _collect_arrays(getattr(value, f.name), out)
+    elif isinstance(value, (list, tuple)):
+        for v in value:
+            _collect_arrays(v, out)
 
 
 def compile_world(house: House, name: str = "house", resolution: float = DEFAULT_RESOLUTION,
