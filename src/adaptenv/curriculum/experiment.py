@@ -215,6 +215,7 @@ def _plots(out: Path, cfg: ExperimentConfig) -> None:
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
+    from matplotlib.ticker import MaxNLocator
 
     sets = sorted({k for m in cfg.methods for s in cfg.seeds for r in read_iterations(run_dir(out, m, s))[:1]
                    for k in r.heldout})
@@ -226,6 +227,8 @@ def _plots(out: Path, cfg: ExperimentConfig) -> None:
                 ax.plot(xs, mean, marker="o", label=m, linewidth=2.2 if m == cfg.reference else 1.2)
                 ax.fill_between(xs, mean - se, mean + se, alpha=0.15)
             ax.set_xlabel(label)
+            if x == "iteration":
+                ax.xaxis.set_major_locator(MaxNLocator(integer=True))
             ax.set_ylabel(f"held-out success ({set_name})")
             ax.grid(alpha=0.3)
             ax.legend(fontsize=8)
