@@ -75,8 +75,8 @@ class LoopConfig:
     finetune_envs: int = 64
     """Parallel agents while fine-tuning."""
     finetune_lr: float = 1e-4
-    """Adam learning rate of fine-tuning, annealed to zero over each iteration's frames (3e-4 lowered
-    held-out success of the ``none`` baseline in a 3-iteration probe; 1e-4 kept it level)."""
+    """Adam learning rate of fine-tuning, annealed to zero over each iteration's frames (the gentler of
+    the two rates compared in docs/RESULTS.md)."""
     replay_fraction: float = 0.5
     """Share of the fine-tuning scenes drawn from earlier scenes so the policy does not forget."""
     heldout_episodes: int = 100
