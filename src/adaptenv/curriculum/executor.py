@@ -139,12 +139,17 @@ def check_picklable(fn: Callable[..., Any], kind: str) -> None:
 
 
 class _Progress:
-    """A rich progress bar on stderr when ``desc`` is set, otherwise nothing."""
+    """A transient rich progress bar when ``desc`` is set and stderr is a terminal, otherwise nothing
+    (so logs and pipes get no bar remnants)."""
 
     def __init__(self, desc: str | None, total: int):
         self._bar = None
-        if desc is not None and total > 0:
-            from rich.console import Console
+        if desc is None or total <= 0:
+            return
+        from rich.console import Console
+
+        console = Console(stderr=True)
+        if console.is_terminal:
             from rich.progress import (
                 BarColumn,
                 MofNCompleteColumn,
@@ -154,7 +159,7 @@ class _Progress:
             )
 
             self._bar = Progress(TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(),
-                                 TimeElapsedColumn(), console=Console(stderr=True), transient=True)
+                                 TimeElapsedColumn(), console=console, transient=True)
             self._task = self._bar.add_task(desc, total=total)
 
     def __enter__(self) -> _Progress:
