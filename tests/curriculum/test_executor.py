@@ -156,6 +156,17 @@ def test_expert_episodes_in_worker_processes_equal_the_in_process_loop(process_e
     assert process_executor.map(expert_level, work) == [expert_level(x) for x in work]
 
 
+@pytest.mark.slow
+def test_the_loops_evaluation_jobs_in_worker_processes_equal_the_in_process_loop(process_executor):
+    from adaptenv.bench.executor import heldout_chunk, heldout_items
+
+    work = heldout_items(episodes=60)
+    assert [(j.start, j.stop) for j in work] == [(0, 50), (50, 60)]
+    local = [heldout_chunk(j) for j in work]
+    assert process_executor.map(heldout_chunk, work) == local
+    assert sum(len(c) for c in local) == 60 and any(success for c in local for success, *_ in c)
+
+
 # --------------------------------------------------------------------------- Ray (local instance)
 
 

@@ -1,10 +1,15 @@
-"""Speedup of the executors from 1 to 2 workers on expert episodes in procedural houses (target >= 1.6x).
+"""Speedup of the executors from 1 to 2 workers on the closed loop's work (target >= 1.6x).
 
-One item is one level of the closed loop: generate a 4-room house from its seed, compile it, and
-run the shortest-path expert on a few sampled episodes with full recording (as evaluation does).
+Two workloads (``--workload``):
+
+- ``levels``: one item is one level: generate a 4-room house from its seed, compile it, and run the
+  shortest-path expert on a few sampled episodes with full recording.
+- ``heldout``: the loop's own held-out evaluation jobs (:func:`adaptenv.curriculum.jobs.run_eval`):
+  the shipped policy on ``preset:pretrain-rearranged``, chunks of 50 episodes.
+
 Items carry their seeds, so every executor must return exactly the in-process results; the
-benchmark checks that before printing. Registered as ``adaptenv bench executor [--json] [--kind]``
-by :mod:`adaptenv.cli.executor`.
+benchmark checks that before printing. Registered as ``adaptenv bench executor [--json] [--kind]
+[--workload]`` by :mod:`adaptenv.cli.executor`.
 """
 
 from __future__ import annotations
@@ -44,6 +49,34 @@ def expert_level(item: tuple[int, int]) -> tuple[int, int, int, float]:
     return seed, successes, steps, spl
 
 
+#: Held-out episodes of the ``heldout`` workload (chunks of ``jobs.EVAL_CHUNK``) and their set.
+HELDOUT_EPISODES = 400
+HELDOUT_SET = "preset:pretrain-rearranged"
+
+
+def heldout_items(episodes: int = HELDOUT_EPISODES) -> list[Any]:
+    """The loop's evaluation jobs for the shipped policy on the rearranged held-out set."""
+    from adaptenv.agents.registry import resolve_policy
+    from adaptenv.curriculum.jobs import PolicyWeights, eval_jobs
+
+    weights = PolicyWeights.of(resolve_policy("pretrained").net)
+    return [job for _, job in eval_jobs(weights, {"heldout": HELDOUT_SET}, episodes, seed=0)]
+
+
+def heldout_chunk(job: Any) -> list[tuple[bool, float, int, int]]:
+    """Run one evaluation job; (success, SPL, steps, collisions) per episode, comparable across executors."""
+    from adaptenv.curriculum.jobs import run_eval
+
+    return [(bool(r.success), float(r.spl), int(r.steps), int(r.collisions)) for r in run_eval(job)]
+
+
+#: workload name -> (item function, items builder taking the item count or None for its default).
+WORKLOADS = {
+    "levels": (expert_level, lambda n: items(n or N_ITEMS)),
+    "heldout": (heldout_chunk, lambda n: heldout_items(50 * n if n else HELDOUT_EPISODES)),
+}
+
+
 def identity(x: Any) -> Any:
     """The cheapest possible item (to measure what the executor costs per item)."""
     return x
@@ -66,7 +99,7 @@ def _children_cpu() -> float:
     return ru.ru_utime + ru.ru_stime
 
 
-def measure(kind: str, reference: list, work: list, repeats: int) -> dict[str, float]:
+def measure(kind: str, fn: Any, reference: list, work: list, repeats: int) -> dict[str, float]:
     """Median wall times (s) of one map with 1 and 2 workers of ``kind``, speedup and overheads."""
     from adaptenv.bench import median_time
     from adaptenv.curriculum.executor import make_executor
@@ -76,10 +109,10 @@ def measure(kind: str, reference: list, work: list, repeats: int) -> dict[str, f
     for workers in (1, 2):
         cpu0, wall0 = _children_cpu(), time.perf_counter()
         with make_executor(kind, workers=workers) as ex:
-            if ex.map(expert_level, work) != reference:
+            if ex.map(fn, work) != reference:
                 raise AdaptenvError(f"executor {kind} with {workers} workers returned results different from "
                                     "the in-process loop; this is a bug in the executor")
-            out[f"{kind} {workers} worker(s) (s)"] = median_time(lambda ex=ex: ex.map(expert_level, work),
+            out[f"{kind} {workers} worker(s) (s)"] = median_time(lambda ex=ex: ex.map(fn, work),
                                                                  repeats=repeats, warmup=0)
             if workers == 1:
                 tiny = list(range(N_TINY))
@@ -90,8 +123,10 @@ def measure(kind: str, reference: list, work: list, repeats: int) -> dict[str, f
     return out
 
 
-def run(kinds: tuple[str, ...] = ("process", "ray"), n_items: int = N_ITEMS, repeats: int = 3) -> dict[str, Any]:
-    """All figures: in-process time, then per kind 1- and 2-worker times, speedup, per-item overhead.
+def run(kinds: tuple[str, ...] = ("process", "ray"), n_items: int | None = None, repeats: int = 3,
+        workload: str = "levels") -> dict[str, Any]:
+    """All figures of one workload: in-process time, then per kind 1- and 2-worker times, speedup,
+    per-item overhead. ``n_items``: levels, or evaluation chunks of 50 episodes (None: the default).
 
     Each executor is warmed up (and checked against the in-process results) by one untimed map.
     ``load average`` is the machine's 1-minute load before the run, and ``cores used`` the mean
@@ -103,19 +138,21 @@ def run(kinds: tuple[str, ...] = ("process", "ray"), n_items: int = N_ITEMS, rep
 
     load = os.getloadavg()[0] if hasattr(os, "getloadavg") else float("nan")
     limit_threads()  # the in-process reference runs single-threaded too, like one worker
-    work = items(n_items)
-    reference = [expert_level(x) for x in work]  # also warms numba's cache
-    base = median_time(lambda: [expert_level(x) for x in work], repeats=repeats, warmup=0)
-    figures: dict[str, Any] = {"load average (1 min) before": load, "items": n_items,
-                               "episodes per item": EPISODES_PER_ITEM, "repeats": repeats,
-                               "in-process (s)": base, "in-process per item (ms)": 1e3 * base / n_items}
+    fn, build = WORKLOADS[workload]
+    work = build(n_items)
+    reference = [fn(x) for x in work]  # also warms numba's cache (and loads the held-out set)
+    base = median_time(lambda: [fn(x) for x in work], repeats=repeats, warmup=0)
+    per_item = EPISODES_PER_ITEM if workload == "levels" else work[0].stop - work[0].start
+    figures: dict[str, Any] = {"load average (1 min) before": load, "workload": workload, "items": len(work),
+                               "episodes per item": per_item, "repeats": repeats,
+                               "in-process (s)": base, "in-process per item (ms)": 1e3 * base / len(work)}
     for kind in kinds:
-        m = measure(kind, reference, work, repeats)
+        m = measure(kind, fn, reference, work, repeats)
         one, two = m[f"{kind} 1 worker(s) (s)"], m[f"{kind} 2 worker(s) (s)"]
         figures[f"{kind} 1 worker (s)"] = one
         figures[f"{kind} 2 workers (s)"] = two
         figures[f"{kind} speedup 1->2"] = one / two
-        figures[f"{kind} overhead per item (ms)"] = 1e3 * (one - base) / n_items
+        figures[f"{kind} overhead per item (ms)"] = 1e3 * (one - base) / len(work)
         figures[f"{kind} tiny-item round trip (ms/item)"] = m[f"{kind} tiny-item round trip (ms/item)"]
         if kind == "process":
             figures["process 2 workers: cores used"] = m["process 2 worker(s) cores used"]

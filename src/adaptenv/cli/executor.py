@@ -9,13 +9,17 @@ import typer
 from adaptenv.cli._common import JSON_OPTION
 
 KIND_OPTION = typer.Option(None, "--kind", help="Only this executor (default: process, and ray when installed).")
-ITEMS_OPTION = typer.Option(16, "--items", min=2, help="Levels per timed map.")
+ITEMS_OPTION = typer.Option(None, "--items", min=2, help="Items per timed map: levels (default 16) or "
+                            "evaluation chunks of 50 episodes (default 8).")
+WORKLOAD_OPTION = typer.Option("levels", "--workload", help="levels: expert episodes in generated houses; "
+                               "heldout: the loop's held-out evaluation jobs (shipped policy).")
 REPEATS_OPTION = typer.Option(3, "--repeats", min=1, help="Timed maps per configuration (the median is printed).")
 
 
-def bench_executor(kind: Literal["process", "ray"] | None = KIND_OPTION, n_items: int = ITEMS_OPTION,
-                   repeats: int = REPEATS_OPTION, as_json: bool = JSON_OPTION) -> None:
-    """Speedup from 1 to 2 workers (process pool and Ray) on expert episodes in generated houses."""
+def bench_executor(kind: Literal["process", "ray"] | None = KIND_OPTION, n_items: int | None = ITEMS_OPTION,
+                   repeats: int = REPEATS_OPTION, workload: Literal["levels", "heldout"] = WORKLOAD_OPTION,
+                   as_json: bool = JSON_OPTION) -> None:
+    """Speedup from 1 to 2 workers (process pool and Ray) on the closed loop's work."""
     import importlib.util
 
     from adaptenv.bench import emit
@@ -30,8 +34,9 @@ def bench_executor(kind: Literal["process", "ray"] | None = KIND_OPTION, n_items
     else:
         kinds = ("process",)
         notes.append("ray is not installed, so it was skipped (pip install 'adaptenv[ray]')")
-    figures = run(kinds, n_items=n_items, repeats=repeats)
-    emit("executor: expert episodes in generated houses (median wall time)", figures, as_json, notes=notes)
+    figures = run(kinds, n_items=n_items, repeats=repeats, workload=workload)
+    title = {"levels": "expert episodes in generated houses", "heldout": "the loop's held-out evaluation jobs"}
+    emit(f"executor: {title[workload]} (median wall time)", figures, as_json, notes=notes)
 
 
 def register(app: typer.Typer, bench: typer.Typer) -> None:
