@@ -68,13 +68,14 @@ def loop(
                            command=" ".join(["adaptenv"] + sys.argv[1:]))
     from rich.table import Table
 
-    table = Table(title=f"{method} seed {seed}: held-out success per iteration")
+    table = Table(title=f"{method} seed {seed}: held-out success per iteration (Delta R against pi_0)")
     sets = sorted(records[0].heldout)
     for col in ["iteration", "env steps", "updates", "edits", *sets]:
         table.add_column(col, justify="right")
     for r in records:
         table.add_row(str(r.iteration), f"{r.env_steps:,}", f"{r.grad_updates:,}", str(r.edits),
-                      *[f"{r.heldout[s].success:.3f}" for s in sets])
+                      *[f"{r.heldout[s].success:.3f} ({r.heldout[s].success - records[0].heldout[s].success:+.3f})"
+                        for s in sets])
     console.print(table)
     console.print(f"run folder: [bold]{out}[/]  (report: adaptenv report {out})")
 
