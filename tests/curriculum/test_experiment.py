@@ -9,6 +9,7 @@ import pytest
 
 from adaptenv.curriculum.experiment import (
     ExperimentConfig,
+    final_evaluation,
     paired_test,
     run_experiment,
     summary_markdown,
@@ -74,3 +75,14 @@ def test_small_experiment_writes_every_artifact(tiny_policy, tmp_path):
     assert (tmp_path / "ours" / "seed_0" / "iterations.jsonl").read_text() == before
     assert again["methods"] == summary["methods"]
     assert summary_markdown(again) == md
+
+    # a final evaluation on more episodes: same tables, cached per run
+    final = final_evaluation(tmp_path, cfg, 8)
+    assert set(final["methods"]) == set(cfg.methods) and "success_gain:tiny" in final["tests"]["none"]
+    doc = json.loads((tmp_path / "ours" / "seed_0" / "final_eval.json").read_text())
+    assert doc["episodes"] == 8 and doc["final"]["tiny"]["episodes"] == 8
+    assert doc["initial"] == json.loads((tmp_path / "none" / "seed_0" / "final_eval.json").read_text())["initial"]
+    assert (tmp_path / "summary_final.md").is_file() and (tmp_path / "ours" / "per_seed_final.csv").is_file()
+    stamp = (tmp_path / "ours" / "seed_0" / "final_eval.json").stat().st_mtime_ns
+    assert final_evaluation(tmp_path, cfg, 8) == final
+    assert (tmp_path / "ours" / "seed_0" / "final_eval.json").stat().st_mtime_ns == stamp

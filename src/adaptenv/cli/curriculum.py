@@ -86,6 +86,8 @@ def experiment(
     executor: str = EXECUTOR_OPTION,
     workers: int = WORKERS_OPTION,
     address: str = ADDRESS_OPTION,
+    final_episodes: int = typer.Option(0, "--final-episodes", min=0, help="Then evaluate pi_0 and each run's "
+                                       "last policy on this many held-out episodes per set (summary_final.md)."),
 ) -> None:
     """Run methods x seeds (resuming finished runs), then write CSVs, the summary table and plots.
 
@@ -100,13 +102,21 @@ def experiment(
     cfg = ExperimentConfig.load(config)
     out = out or Path("runs") / config.stem
     ex = None if executor == "inprocess" else make_executor(executor, workers, address)
+    def say(text: str) -> None:
+        console.print(f"[dim]{text}[/]")
+
     try:
-        run_experiment(cfg, out, executor=ex, command=" ".join(["adaptenv"] + sys.argv[1:]),
-                       progress=lambda text: console.print(f"[dim]{text}[/]"))
+        run_experiment(cfg, out, executor=ex, command=" ".join(["adaptenv"] + sys.argv[1:]), progress=say)
+        console.print((out / "summary.md").read_text(encoding="utf-8"))
+        if final_episodes:
+            from adaptenv.curriculum.experiment import final_evaluation
+
+            final_evaluation(out, cfg, final_episodes, executor=ex, progress=say)
+            console.print(f"[bold]final evaluation on {final_episodes} episodes per set[/]")
+            console.print((out / "summary_final.md").read_text(encoding="utf-8"))
     finally:
         if ex is not None:
             ex.close()
-    console.print((out / "summary.md").read_text(encoding="utf-8"))
     console.print(f"experiment folder: [bold]{out}[/]  (report: adaptenv report {out})")
 
 

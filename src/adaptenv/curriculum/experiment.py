@@ -8,6 +8,10 @@
   paired t-test (over seeds: the same seed gives every method the same pi_0 and the same held-out
   episodes) of ours against each baseline;
 - ``OUT/plots/heldout_<set>_vs_iterations.png`` and ``..._vs_env_steps.png``.
+
+:func:`final_evaluation` (``adaptenv experiment --final-episodes N``) evaluates pi_0 and each run's
+last policy again on more held-out episodes, to shrink the evaluation noise in the comparison, and
+writes the same tables as ``per_seed_final.csv`` and ``summary_final.{json,md}``.
 """
 
 from __future__ import annotations
@@ -21,7 +25,7 @@ from typing import Any
 import numpy as np
 
 from adaptenv.curriculum.loop import METHODS, LoopConfig, run_loop
-from adaptenv.curriculum.records import atomic_write_text, read_iterations
+from adaptenv.curriculum.records import atomic_write_text, iteration_dir, read_iterations
 from adaptenv.errors import ConfigError
 
 METRICS = ("success", "spl", "collisions")
@@ -145,14 +149,21 @@ def summarize(out: str | Path, cfg: ExperimentConfig | None = None) -> dict[str,
     """Write per-seed CSVs, summary.json, summary.md and plots for an experiment folder."""
     out = Path(out)
     cfg = cfg or ExperimentConfig(**json.loads((out / "experiment.json").read_text(encoding="utf-8")))
-    table = final_figures(out, cfg)
+    summary = write_summary(out, cfg, final_figures(out, cfg))
+    _plots(out, cfg)
+    return summary
+
+
+def write_summary(out: Path, cfg: ExperimentConfig, table: dict[str, dict[int, dict[str, float]]],
+                  suffix: str = "") -> dict[str, Any]:
+    """From method -> seed -> figures: ``<method>/per_seed{suffix}.csv`` and ``summary{suffix}.json/md``."""
     metrics = sorted({k for seeds in table.values() for row in seeds.values() for k in row})
     for m, seeds in table.items():
         cols = sorted(seeds)
         lines = ["metric:set," + ",".join(f"seed_{s}" for s in cols)]
         for key in metrics:
             lines.append(key + "," + ",".join(f"{seeds[s].get(key, float('nan')):.6g}" for s in cols))
-        atomic_write_text(out / m / "per_seed.csv", "\n".join(lines) + "\n")
+        atomic_write_text(out / m / f"per_seed{suffix}.csv", "\n".join(lines) + "\n")
 
     summary: dict[str, Any] = {"methods": {}, "tests": {}, "reference": cfg.reference, "seeds": cfg.seeds}
     for m, seeds in table.items():
@@ -166,10 +177,55 @@ def summarize(out: str | Path, cfg: ExperimentConfig | None = None) -> dict[str,
         common = sorted(set(ref) & set(seeds))
         summary["tests"][m] = {key: paired_test([ref[s][key] for s in common], [seeds[s][key] for s in common])
                                for key in metrics if key.split(":")[0] in TESTED}
-    atomic_write_text(out / "summary.json", json.dumps(summary, indent=1, default=float))
-    atomic_write_text(out / "summary.md", summary_markdown(summary))
-    _plots(out, cfg)
+    atomic_write_text(out / f"summary{suffix}.json", json.dumps(summary, indent=1, default=float))
+    atomic_write_text(out / f"summary{suffix}.md", summary_markdown(summary))
     return summary
+
+
+FINAL_EVAL = "final_eval.json"
+"""Per run: held-out figures of pi_0 and of the last policy on ``episodes`` episodes per set."""
+
+
+def final_evaluation(out: str | Path, cfg: ExperimentConfig, episodes: int, *, executor: Any = None,
+                     progress: Any = None) -> dict[str, Any]:
+    """Evaluate pi_0 and every finished run's last policy on ``episodes`` held-out episodes per set
+    (the seed's episodes, so comparisons stay paired), then write ``summary_final``; cached per run."""
+    from adaptenv.agents.checkpoint import load_checkpoint
+    from adaptenv.curriculum.executor import InProcessExecutor
+    from adaptenv.curriculum.jobs import PolicyWeights
+    from adaptenv.curriculum.loop import evaluate_sets
+
+    out, ex = Path(out), executor if executor is not None else InProcessExecutor()
+    specs = cfg.loop_config(cfg.reference, cfg.seeds[0]).heldout
+    say = progress or (lambda text: None)
+
+    def evaluate(policy_path: Path, seed: int) -> dict[str, Any]:
+        weights = PolicyWeights.of(load_checkpoint(policy_path).net)
+        return {k: v.model_dump() for k, v in evaluate_sets(weights, specs, episodes, seed, ex).items()}
+
+    initial: dict[int, dict[str, Any]] = {}  # pi_0 is the same policy in every run of a seed
+    table: dict[str, dict[int, dict[str, float]]] = {}
+    for m in cfg.methods:
+        for s in cfg.seeds:
+            folder = run_dir(out, m, s)
+            recs = read_iterations(folder)
+            if not recs:
+                continue
+            path = folder / FINAL_EVAL
+            doc = json.loads(path.read_text(encoding="utf-8")) if path.is_file() else {}
+            if doc.get("episodes") != episodes or doc.get("iteration") != recs[-1].iteration:
+                say(f"final evaluation: {m} seed {s} ({episodes} episodes per set)")
+                if s not in initial:
+                    initial[s] = evaluate(iteration_dir(folder, 0) / "policy.pt", s)
+                doc = {"episodes": episodes, "iteration": recs[-1].iteration, "initial": initial[s],
+                       "final": evaluate(iteration_dir(folder, recs[-1].iteration) / "policy.pt", s)}
+                atomic_write_text(path, json.dumps(doc, indent=1))
+            initial.setdefault(s, doc["initial"])
+            row = {f"{k}:{name}": float(v[k]) for name, v in doc["final"].items() for k in METRICS}
+            row.update({f"success_gain:{name}": v["success"] - doc["initial"][name]["success"]
+                        for name, v in doc["final"].items()})
+            table.setdefault(m, {})[s] = row
+    return write_summary(out, cfg, table, suffix="_final")
 
 
 def summary_markdown(summary: dict[str, Any]) -> str:

@@ -265,8 +265,11 @@ def run_loop(cfg: LoopConfig, run_dir: str | Path, *, resume: bool = False, exec
                               "choose a new folder")
         run_dir.mkdir(parents=True, exist_ok=True)
         state, records = LoopState(), []
-    atomic_write_text(run_dir / "run.json", RunInfo(method=cfg.method, seed=cfg.seed, config=asdict(cfg),
-                                                    command=command).model_dump_json(indent=1))
+    info = run_dir / "run.json"
+    if resume and info.is_file():  # keep the command that started the run
+        command = RunInfo.model_validate_json(info.read_text(encoding="utf-8")).command or command
+    atomic_write_text(info, RunInfo(method=cfg.method, seed=cfg.seed, config=asdict(cfg),
+                                    command=command).model_dump_json(indent=1))
     store = SceneStore(run_dir / "scenes")
     ex = executor if executor is not None else InProcessExecutor()
     bcfg = lb.LevelBufferConfig(capacity=cfg.buffer_capacity, min_fill=0.0, replay_prob=1.0).check()
