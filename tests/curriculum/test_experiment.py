@@ -83,6 +83,8 @@ def test_small_experiment_writes_every_artifact(tiny_policy, tmp_path):
     assert doc["episodes"] == 8 and doc["final"]["tiny"]["episodes"] == 8
     assert doc["initial"] == json.loads((tmp_path / "none" / "seed_0" / "final_eval.json").read_text())["initial"]
     assert (tmp_path / "summary_final.md").is_file() and (tmp_path / "ours" / "per_seed_final.csv").is_file()
+    assert final["methods"]["ours"]["grad_updates:all"] == summary["methods"]["ours"]["grad_updates:all"]
+    assert "nan" not in (tmp_path / "summary_final.md").read_text()
     stamp = (tmp_path / "ours" / "seed_0" / "final_eval.json").stat().st_mtime_ns
     assert final_evaluation(tmp_path, cfg, 8) == final
     assert (tmp_path / "ours" / "seed_0" / "final_eval.json").stat().st_mtime_ns == stamp

@@ -127,10 +127,15 @@ def final_figures(out: Path, cfg: ExperimentConfig) -> dict[str, dict[int, dict[
             row = {f"{k}:{name}": getattr(v, k) for name, v in last.heldout.items() for k in METRICS}
             row.update({f"success_gain:{name}": v.success - recs[0].heldout[name].success
                         for name, v in last.heldout.items() if name in recs[0].heldout})
-            row.update({"env_steps:all": float(last.env_steps), "grad_updates:all": float(last.grad_updates),
-                        "edits:all": float(last.edits), "iterations:all": float(last.iteration)})
+            row.update(_budget(last))
             table.setdefault(m, {})[s] = row
     return table
+
+
+def _budget(last: Any) -> dict[str, float]:
+    """The budget a run spent up to its last record (rows ``<counter>:all``)."""
+    return {"env_steps:all": float(last.env_steps), "grad_updates:all": float(last.grad_updates),
+            "edits:all": float(last.edits), "iterations:all": float(last.iteration)}
 
 
 def paired_test(a: list[float], b: list[float]) -> float | None:
@@ -224,6 +229,7 @@ def final_evaluation(out: str | Path, cfg: ExperimentConfig, episodes: int, *, e
             row = {f"{k}:{name}": float(v[k]) for name, v in doc["final"].items() for k in METRICS}
             row.update({f"success_gain:{name}": v["success"] - doc["initial"][name]["success"]
                         for name, v in doc["final"].items()})
+            row.update(_budget(recs[-1]))
             table.setdefault(m, {})[s] = row
     return write_summary(out, cfg, table, suffix="_final")
 
