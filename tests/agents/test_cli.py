@@ -40,6 +40,18 @@ def test_cli_evaluate_writes_the_report(tmp_path):
     summary = json.loads((out / "summary.json").read_text())
     assert summary["episodes"] == 4 and "success_ci95" in summary and summary["command"].startswith("adaptenv evaluate")
     assert (out / "houses.csv").is_file() and (out / "episodes.csv").is_file()
+    failed = sum(1 for line in (out / "episodes.csv").read_text().splitlines()[1:] if ",False," in line)
+    assert sum(summary["failure_modes"].values()) == failed  # every failure classified by the built-in F
+
+
+def test_cli_evaluate_names_how_a_random_walker_fails(tmp_path):
+    res = CliRunner().invoke(app, ["evaluate", "--policy", "random", "--houses", "preset:tiny", "--episodes", "6",
+                                   "-o", str(tmp_path)])
+    assert res.exit_code == 0, res.output
+    modes = json.loads((tmp_path / "summary.json").read_text())["failure_modes"]
+    assert modes and set(modes) <= {"timeout", "ended_too_far", "ended_without_sight", "stuck", "looping",
+                                    "never_saw_target"}
+    assert "failures on preset:tiny (built-in analysis F)" in " ".join(res.output.split())
 
 
 def test_cli_evaluate_compares_sets_and_rejects_unknown_policies(tmp_path):

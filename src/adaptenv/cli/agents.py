@@ -93,6 +93,10 @@ def evaluate(
         report.policy = policy
         sub = out / _slug(spec) if len(houses) > 1 else out
         paths = write_report(report, house_set, sub, command=command)
+        report.summary["failure_modes"] = failure_modes(report, house_set)
+        doc = json.loads(paths["summary"].read_text(encoding="utf-8"))
+        paths["summary"].write_text(json.dumps({**doc, "failure_modes": report.summary["failure_modes"]}, indent=1,
+                                               default=float) + "\n", encoding="utf-8")
         summaries.append((spec, report.summary, paths))
     table = Table(title=f"{policy}: {episodes} episodes per set, seed {seed}")
     for col in ("houses", "success [95% CI]", "SPL [95% CI]", "SEL", "collisions", "length"):
@@ -103,6 +107,10 @@ def evaluate(
                       f"{s['sel']:.3f} +- {s['sel_se']:.3f}", f"{s['collisions']:.1f} +- {s['collisions_se']:.1f}",
                       f"{s['steps']:.0f} +- {s['steps_se']:.0f}")
     console.print(table)
+    for spec, s, _ in summaries:
+        if s["failure_modes"]:
+            console.print(f"failures on {spec} (built-in analysis F): "
+                          + ", ".join(f"{mode} {n}" for mode, n in s["failure_modes"].items()))
     if len(summaries) > 1:
         base_spec, base, _ = summaries[0]
         drops = {}
@@ -118,6 +126,24 @@ def evaluate(
              "sets": {spec: s for spec, s, _ in summaries}, "drop_from": base_spec, "drops": drops},
             indent=1, default=float) + "\n", encoding="utf-8")
     console.print(f"wrote results to [bold]{out}[/]")
+
+
+def failure_modes(report, house_set) -> dict[str, int]:
+    """How the failed episodes failed, as the built-in analysis F classifies them, most common first."""
+    from collections import Counter
+
+    from adaptenv.adapt.analysis import BuiltinAnalyzer
+    from adaptenv.agents.evaluate import trajectory_of
+    from adaptenv.sim.metrics import episode_metrics
+
+    analyzer, modes = BuiltinAnalyzer(), Counter()
+    for r in report.results:
+        if not r.success and r.index in report.recordings:
+            world = house_set.worlds[r.env]
+            traj = trajectory_of(world, r, report.recordings[r.index], report.policy)
+            traj.metrics = episode_metrics(world, traj)
+            modes[str(analyzer.analyze(traj, world).outcome.failure_mode)] += 1
+    return dict(modes.most_common())
 
 
 def train_command_line(cfg) -> str:
