@@ -40,6 +40,11 @@ def key(report):
             for r in report.results]
 
 
+def test_a_slice_of_the_episodes_is_sampled_on_its_own(tiny_set):
+    whole = sample_episodes(tiny_set.worlds, 12, seed=3)
+    assert sample_episodes(tiny_set.worlds, 9, seed=3, start=4) == whole[4:9]
+
+
 def test_evaluation_is_deterministic_and_batch_independent(tiny_set):
     torch.manual_seed(0)
     net = NavNet(NetConfig(hidden=32, feature_dim=32, conv_channels=8))

@@ -64,13 +64,14 @@ class Recorded:
     moved: list[bool] = field(default_factory=list)
 
 
-def sample_episodes(worlds: Sequence[Any], n: int, seed: int, *, use_house_start: bool = False
+def sample_episodes(worlds: Sequence[Any], n: int, seed: int, *, use_house_start: bool = False, start: int = 0
                     ) -> list[tuple[int, Any]]:
-    """``n`` (house index, Episode) pairs: house ``k % len(worlds)``, episode seed derived from ``(seed, k)``."""
+    """Episodes ``start..n-1`` as (house index, Episode) pairs: house ``k % len(worlds)``, episode seed
+    derived from ``(seed, k)``, so any slice equals the same slice of the whole list."""
     from adaptenv.sim import task
 
     out = []
-    for k in range(n):
+    for k in range(start, n):
         e = k % len(worlds)
         ep_seed = int(np.random.SeedSequence([seed, k]).generate_state(1)[0])
         ep = task.sample_episode(worlds[e], ep_seed, use_house_start=use_house_start)

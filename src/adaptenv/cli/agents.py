@@ -92,11 +92,8 @@ def evaluate(
                               progress=lambda k, task=task: bar.update(task, completed=k))
         report.policy = policy
         sub = out / _slug(spec) if len(houses) > 1 else out
-        paths = write_report(report, house_set, sub, command=command)
         report.summary["failure_modes"] = failure_modes(report, house_set)
-        doc = json.loads(paths["summary"].read_text(encoding="utf-8"))
-        paths["summary"].write_text(json.dumps({**doc, "failure_modes": report.summary["failure_modes"]}, indent=1,
-                                               default=float) + "\n", encoding="utf-8")
+        paths = write_report(report, house_set, sub, command=command)
         summaries.append((spec, report.summary, paths))
     table = Table(title=f"{policy}: {episodes} episodes per set, seed {seed}")
     for col in ("houses", "success [95% CI]", "SPL [95% CI]", "SEL", "collisions", "length"):

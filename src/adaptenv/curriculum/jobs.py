@@ -51,11 +51,10 @@ def heldout_set(spec: str) -> Any:
 
 @dataclass(frozen=True)
 class EvalJob:
-    """Episodes ``start:stop`` of the ``episodes`` fixed held-out episodes of one set."""
+    """Episodes ``start:stop`` of a set's fixed held-out episodes (episode k depends on (seed, k) only)."""
 
     weights: PolicyWeights
     spec: str
-    episodes: int
     seed: int
     start: int
     stop: int
@@ -63,7 +62,7 @@ class EvalJob:
 
 def eval_jobs(weights: PolicyWeights, specs: dict[str, str], episodes: int, seed: int) -> list[tuple[str, EvalJob]]:
     """Every set's episodes cut into :data:`EVAL_CHUNK` pieces, tagged with the set's name."""
-    return [(name, EvalJob(weights, spec, episodes, seed, a, min(a + EVAL_CHUNK, episodes)))
+    return [(name, EvalJob(weights, spec, seed, a, min(a + EVAL_CHUNK, episodes)))
             for name, spec in specs.items() for a in range(0, episodes, EVAL_CHUNK)]
 
 
@@ -72,7 +71,7 @@ def run_eval(job: EvalJob) -> list[Any]:
     from adaptenv.agents.evaluate import run_episodes, sample_episodes
 
     hs = heldout_set(job.spec)
-    eps = sample_episodes(hs.worlds, job.episodes, job.seed)[job.start:job.stop]
+    eps = sample_episodes(hs.worlds, job.stop, job.seed, start=job.start)
     results, _ = run_episodes(hs.worlds, eps, job.weights.policy(), batch=len(eps))
     return results
 
