@@ -10,9 +10,9 @@ import pytest
 from adaptenv.sim.physics import PackedGrids
 from adaptenv.sim.scan import (
     RAY_OFFSETS_DEG,
-    free_squares,
+    free_runs,
+    pack_runs,
     pack_semantic,
-    pack_squares,
     scan,
     scan_world,
 )
@@ -152,7 +152,7 @@ def _agreement_with_reference(world, n: int, seed: int) -> tuple[np.ndarray, np.
     xs, zs = xs + rng.uniform(-0.02, 0.02, n), zs + rng.uniform(-0.02, 0.02, n)
     yaws = rng.uniform(0.0, 360.0, n)
     grids, sem = PackedGrids.from_worlds([world]), pack_semantic([world])
-    depth, classes = scan(grids, sem, np.zeros(n, np.int64), xs, zs, yaws, squares=pack_squares([world]))
+    depth, classes = scan(grids, sem, np.zeros(n, np.int64), xs, zs, yaws, runs=pack_runs([world]))
     close, same = [], []
     for i in range(n):
         ref_d, ref_c = reference_scan(world, xs[i], zs[i], yaws[i])
@@ -178,27 +178,72 @@ def test_numba_scan_agrees_with_a_slow_reference_in_a_cluttered_house():
     assert same.mean() >= 0.99, f"only {same.mean():.4f} of rays agree on the class"
 
 
-def _square_is_free(blocked: np.ndarray, r: int, c: int, su: int, sv: int, side: int) -> bool:
-    """Whether the side x side square of cells cornered at (r, c), extending by (su, sv), is on the raster and free."""
-    rs = [r + sv * k for k in range(side)]
-    cs = [c + su * k for k in range(side)]
-    if min(rs + cs) < 0 or max(rs) >= blocked.shape[0] or max(cs) >= blocked.shape[1]:
-        return False  # cells off the raster count as obstacles
-    return not blocked[np.ix_(rs, cs)].any()
+def _free(blocked: np.ndarray, c0: int, r0: int, c1: int, r1: int) -> bool:
+    """Whether the cells [r0, r1) x [c0, c1) are on the raster and free (off the raster counts as blocked)."""
+    h, w = blocked.shape
+    return 0 <= r0 < r1 <= h and 0 <= c0 < c1 <= w and not blocked[r0:r1, c0:c1].any()
 
 
-def test_free_squares_are_the_largest_free_squares_in_each_quadrant():
+def test_free_runs_are_maximal_free_rectangles_through_each_cell():
     rng = np.random.default_rng(3)
     blocked = rng.random((13, 17)) < 0.15
-    sq = free_squares(blocked)
-    assert sq.shape == (4, 13, 17) and sq.dtype == np.uint8
-    for q in range(4):
-        su, sv = (-1 if q & 1 else 1), (-1 if q & 2 else 1)
-        for r in range(13):
-            for c in range(17):
-                s = int(sq[q, r, c])
-                if blocked[r, c]:
-                    assert s == 0
+    semantic = rng.integers(1, 60, size=(13, 17)).astype(np.int16)
+    runs = free_runs(blocked, semantic)
+    ids = runs.ids.reshape(13, 17, 2)
+    table = runs.table.reshape(-1, 4).astype(int)
+    assert runs.ids.dtype == np.uint16 and np.all(table[0] == 0)
+    for r in range(13):
+        for c in range(17):
+            if blocked[r, c]:
+                assert ids[r, c, 0] == 0 and ids[r, c, 1] == semantic[r, c]  # obstacle cells hold their class
+                continue
+            for along in (0, 1):  # 0: the row rectangle, 1: the column rectangle
+                c0, r0, c1, r1 = table[ids[r, c, along]]
+                assert c0 <= c < c1 and r0 <= r < r1 and _free(blocked, c0, r0, c1, r1), (r, c, along)
+                if along == 0:  # the whole free run of the row, then as many rows as stay free
+                    assert not _free(blocked, c0 - 1, r, c1, r + 1) and not _free(blocked, c0, r, c1 + 1, r + 1)
                 else:
-                    assert _square_is_free(blocked, r, c, su, sv, s), (q, r, c, s)
-                    assert not _square_is_free(blocked, r, c, su, sv, s + 1), (q, r, c, s)
+                    assert not _free(blocked, c, r0 - 1, c + 1, r1) and not _free(blocked, c, r0, c + 1, r1 + 1)
+                assert not _free(blocked, c0, r0, c1, r1 + 1) and not _free(blocked, c0, r0, c1 + 1, r1)
+                assert not _free(blocked, c0, r0 - 1, c1, r1) and not _free(blocked, c0 - 1, r0, c1, r1)
+
+
+def _exact_first_hit(blocked: np.ndarray, u: float, v: float, du: float, dv: float) -> tuple[float, int, int]:
+    """Distance (cells) at which a ray enters its first blocked or off-raster cell, by an exact
+    cell-by-cell walk (Amanatides and Woo), and that cell's (row, col)."""
+    h, w = blocked.shape
+    col, row = math.floor(u), math.floor(v)
+    step_c, step_r = (1 if du > 0 else -1), (1 if dv > 0 else -1)
+    next_c = ((col + (du > 0)) - u) / du if du != 0 else math.inf
+    next_r = ((row + (dv > 0)) - v) / dv if dv != 0 else math.inf
+    t = 0.0
+    while 0 <= row < h and 0 <= col < w and not blocked[row, col]:
+        if next_c < next_r:
+            t, col, next_c = next_c, col + step_c, next_c + abs(1 / du)
+        else:
+            t, row, next_r = next_r, row + step_r, next_r + abs(1 / dv)
+    return t, row, col
+
+
+def test_scan_stops_exactly_where_a_cell_walk_enters_the_first_obstacle():
+    """The jumps change speed, not results: depth and class equal an exact cell-by-cell walk's."""
+    from adaptenv.bench.sim import clutter_house
+
+    world = compile_world(clutter_house(200, seed=0))
+    g = world.grid
+    rng = np.random.default_rng(4)
+    rows, cols = np.nonzero(g.clearance >= AGENT_RADIUS)
+    pick = rng.integers(len(rows), size=40)
+    for row, col in zip(rows[pick], cols[pick], strict=True):
+        u, v = col + rng.random(), row + rng.random()
+        yaw = float(rng.uniform(0.0, 360.0))
+        depth, classes = scan_world(world, g.x0 + u * g.resolution, g.z0 + v * g.resolution, yaw)
+        for k in range(N_RAYS):
+            a = math.radians(yaw + RAY_OFFSETS_DEG[k])
+            t, hr, hc = _exact_first_hit(g.blocked, u, v, math.sin(a), math.cos(a))
+            if t * g.resolution > MAX_RANGE:
+                assert depth[k] == 1.0 and classes[k] == CLASS_NONE
+                continue
+            assert abs(depth[k] * MAX_RANGE - t * g.resolution) < 1e-4 * g.resolution, (k, depth[k], t)
+            inside = 0 <= hr < g.shape[0] and 0 <= hc < g.shape[1]
+            assert classes[k] == (world.semantic[hr, hc] if inside else CLASS_WALL)

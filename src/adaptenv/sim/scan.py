@@ -5,18 +5,19 @@ yaw - FOV/2; left is the direction of decreasing yaw) each return the distance t
 obstacle divided by ``MAX_RANGE`` (1.0 when nothing is hit within range) and the semantic class of
 what they hit (``CLASS_NONE`` when nothing).
 
-Rays are cast through *free squares*: for every free cell and each of the four quadrants of
-direction, :func:`free_squares` stores the side ``s`` of the largest obstacle-free square of cells
-that has this cell as its corner and extends into that quadrant (``s = 0`` on obstacle cells;
-cells outside the raster count as obstacles). A ray whose direction lies in a quadrant cannot
-leave that square before crossing its far sides, so it jumps straight to the nearer of those
-two sides, then reads the square of the cell it lands in, and stops in the first obstacle cell.
-Depth is the exact distance at which the ray enters that cell (to within float rounding), and
-a step always crosses at least one cell boundary, so no obstacle, however thin, is skipped.
+Rays are cast through *free runs*: every free cell belongs to two obstacle-free rectangles of
+cells, its **row rectangle** (the cell's run of free cells along its row, extended up and down for
+as long as the whole run stays free) and its **column rectangle** (the same with rows and columns
+swapped); :func:`free_runs` numbers them once per house. A ray inside a free rectangle cannot meet
+an obstacle before leaving it through one of the two sides it is heading for, so from its current
+point it jumps to the farther of its exits from the cell's two rectangles, reads the rectangles of
+the cell it lands in, and stops in the first obstacle cell. Depth is the exact distance at which
+the ray enters that cell (to within float rounding), and a jump always crosses at least one cell
+boundary, so no obstacle, however thin, is skipped.
 
-Unlike sphere tracing on the clearance field (which the scan used before), the step does not
-shrink for obstacles beside or behind the ray, only for those in its quadrant ahead: clutter costs
-fewer extra steps, and open rooms take fewer steps too (see docs/simulator.md for measurements).
+Each rectangle reaches across the whole free stretch of its row or column, so a ray does not
+slow down for obstacles beside it or behind it: in open rooms most rays need one or two jumps, and
+in clutter the jumps still follow the aisles between objects (measurements in docs/simulator.md).
 The scan sees every obstacle cell, floor furniture included (beds, tables, toilets): it is a
 sensor at knee height, not a camera. Closed doors read as ``CLASS_DOOR``, and so do the frames of
 open doorways (the 10 cm of wall on each side of the hole).
@@ -26,6 +27,7 @@ from __future__ import annotations
 
 import math
 import weakref
+from dataclasses import dataclass
 
 import numba
 import numpy as np
@@ -37,67 +39,121 @@ from adaptenv.sim.spec import CLASS_NONE, CLASS_WALL, FOV_DEG, MAX_RANGE, N_RAYS
 RAY_OFFSETS_DEG = FOV_DEG * (np.arange(N_RAYS) / (N_RAYS - 1) - 0.5)
 RAY_COS = np.cos(np.radians(RAY_OFFSETS_DEG))
 RAY_SIN = np.sin(np.radians(RAY_OFFSETS_DEG))
-N_QUADRANTS = 4
-"""Quadrant q of a direction (du, dv): bit 0 set when du < 0, bit 1 set when dv < 0."""
 _NUDGE = 1e-6
 """Cells added to each jump so the ray lands strictly inside the next cell despite rounding."""
-_SQUARES_KEY = ("scan", "free_squares")
+_RUNS_KEY = ("scan", "free_runs")
+
+
+@dataclass(frozen=True)
+class FreeRuns:
+    """The free rectangles the scan jumps through, for one house or several packed together.
+
+    ``ids`` holds two entries per cell, aligned with PackedGrids (cell ``k`` of the packed rasters
+    at ``2 * k``): the row rectangle and the column rectangle of a free cell; on an obstacle cell 0
+    and the cell's semantic class (so a ray that lands there reads its class from the same place).
+    Rectangle ``j`` of house ``e`` is entries ``4 * (offset[e] + j)`` to ``+ 4`` of ``table``:
+    ``(col0, row0, col1, row1)`` in cells, ends exclusive; rectangle 0 of each house is unused (the
+    obstacle marker).
+    """
+
+    ids: np.ndarray
+    """uint16 (uint32 for a house with more than 65,534 rectangles), two per cell, flat."""
+    table: np.ndarray
+    """uint16 (4 n,): the rectangles' bounds in cells, four values each."""
+    offset: np.ndarray
+    """int64 (E,): each house's first rectangle in ``table``."""
 
 
 @numba.njit(cache=True)
-def _free_squares(blocked, out):
-    """Fill ``out`` (4, H, W) uint8 with the free-square sides of each quadrant (capped at 255).
-
-    The classic largest-square recurrence, swept from the far corner of each quadrant:
-    ``s = 1 + min(s of the three neighbours ahead)`` on free cells, 0 on obstacles and off the raster.
-    """
+def _row_rectangles(blocked, rid, rects):
+    """Number the row rectangles of ``blocked``: fill ``rid`` (H, W) with 1 + index and ``rects`` with
+    (col0, row0, col1, row1); returns their count. A run is extended a row at a time while the
+    row's blocked-cell count over the run (a prefix sum) is zero."""
     h, w = blocked.shape
-    for q in range(N_QUADRANTS):
-        su = -1 if q & 1 else 1
-        sv = -1 if q & 2 else 1
-        r_first, r_stop = (h - 1, -1) if sv > 0 else (0, h)
-        c_first, c_stop = (w - 1, -1) if su > 0 else (0, w)
-        for r in range(r_first, r_stop, -sv):
-            for c in range(c_first, c_stop, -su):
-                if blocked[r, c]:
-                    out[q, r, c] = 0
-                    continue
-                rn, cn = r + sv, c + su
-                m = 0
-                if 0 <= rn < h and 0 <= cn < w:
-                    m = min(out[q, rn, c], out[q, r, cn], out[q, rn, cn])
-                out[q, r, c] = min(m + 1, 255)
+    before = np.zeros((h, w + 1), dtype=np.int32)  # blocked cells left of each column, per row
+    for r in range(h):
+        for c in range(w):
+            before[r, c + 1] = before[r, c] + (1 if blocked[r, c] else 0)
+    n = 0
+    for r in range(h):
+        c = 0
+        while c < w:
+            if blocked[r, c]:
+                rid[r, c] = 0
+                c += 1
+                continue
+            c1 = c
+            while c1 < w and not blocked[r, c1]:
+                c1 += 1
+            r0 = r
+            while r0 > 0 and before[r0 - 1, c1] == before[r0 - 1, c]:
+                r0 -= 1
+            r1 = r + 1
+            while r1 < h and before[r1, c1] == before[r1, c]:
+                r1 += 1
+            rects[n, 0], rects[n, 1], rects[n, 2], rects[n, 3] = c, r0, c1, r1
+            n += 1
+            rid[r, c:c1] = n
+            c = c1
+    return n
 
 
-def free_squares(blocked: np.ndarray) -> np.ndarray:
-    """uint8 (4, H, W): per quadrant, the side in cells of the largest free square cornered at each cell."""
+def _rectangles(blocked: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Row rectangles of a raster: ids int64 (H, W) (1-based, 0 on obstacles) and bounds int64 (n, 4)."""
+    rid = np.empty(blocked.shape, dtype=np.int64)
+    rects = np.empty((blocked.size // 2 + blocked.shape[0] + 1, 4), dtype=np.int64)
+    n = _row_rectangles(blocked, rid, rects)
+    return rid, rects[:n]
+
+
+def free_runs(blocked: np.ndarray, semantic: np.ndarray) -> FreeRuns:
+    """The row and column rectangles of a raster (cells outside it count as obstacles), with the
+    ``semantic`` class of each obstacle cell."""
     blocked = np.ascontiguousarray(blocked, dtype=np.bool_)
-    out = np.empty((N_QUADRANTS, *blocked.shape), dtype=np.uint8)
-    _free_squares(blocked, out)
-    return out
+    row_ids, row_rects = _rectangles(blocked)
+    col_ids, col_rects = _rectangles(np.ascontiguousarray(blocked.T))
+    col_ids, col_rects = col_ids.T, col_rects[:, [1, 0, 3, 2]]  # back to (col0, row0, col1, row1)
+    n_rows = len(row_rects)
+    count = 1 + n_rows + len(col_rects)
+    dtype = np.uint16 if count <= np.iinfo(np.uint16).max else np.uint32
+    ids = np.empty((*blocked.shape, 2), dtype=dtype)
+    ids[..., 0] = row_ids
+    ids[..., 1] = np.where(blocked, semantic, col_ids + n_rows)
+    if max(blocked.shape) > np.iinfo(np.uint16).max:
+        raise ValueError(f"a raster of {blocked.shape} cells is too large for the scan (at most 65,535 a side)")
+    table = np.zeros((count, 4), dtype=np.uint16)
+    table[1:1 + n_rows] = row_rects
+    table[1 + n_rows:] = col_rects
+    return FreeRuns(ids.reshape(-1), table.reshape(-1), np.zeros(1, dtype=np.int64))
 
 
-def world_squares(world) -> np.ndarray:
-    """A NavWorld's free squares, computed once and kept in ``world.cache`` (so ``world.nbytes`` counts them)."""
-    sq = world.cache.get(_SQUARES_KEY)
-    if sq is None:
-        sq = world.cache[_SQUARES_KEY] = free_squares(world.grid.blocked)
-    return sq
+def world_runs(world) -> FreeRuns:
+    """A NavWorld's free rectangles, computed once and kept in ``world.cache`` (so ``world.nbytes`` counts them)."""
+    runs = world.cache.get(_RUNS_KEY)
+    if runs is None:
+        runs = world.cache[_RUNS_KEY] = free_runs(world.grid.blocked, world.semantic)
+    return runs
 
 
-def pack_squares(worlds) -> np.ndarray:
-    """The free squares of several NavWorlds in one flat uint8 array, aligned with PackedGrids: house
-    e's quadrant q starts at ``4 * offset[e] + q * H_e * W_e`` (one world's array is used in place)."""
-    if len(worlds) == 1:
-        return world_squares(worlds[0]).reshape(-1)
-    return np.concatenate([world_squares(w).ravel() for w in worlds])
+def _concat(parts: list[FreeRuns]) -> FreeRuns:
+    """Several houses' FreeRuns packed in order (one house's arrays are used in place)."""
+    if len(parts) == 1:
+        return parts[0]
+    sizes = np.array([len(p.table) // 4 for p in parts], dtype=np.int64)
+    return FreeRuns(np.concatenate([p.ids for p in parts]), np.concatenate([p.table for p in parts]),
+                    np.concatenate([[0], np.cumsum(sizes)[:-1]]).astype(np.int64))
 
 
-_packed_memo: dict[int, tuple[weakref.ref, np.ndarray]] = {}
+def pack_runs(worlds) -> FreeRuns:
+    """The free rectangles of several NavWorlds, aligned with ``PackedGrids.from_worlds(worlds)``."""
+    return _concat([world_runs(w) for w in worlds])
 
 
-def _squares_of_grids(grids: PackedGrids) -> np.ndarray:
-    """Free squares derived from PackedGrids' clearance (obstacle cells have clearance 0), memoized
+_packed_memo: dict[int, tuple[weakref.ref, FreeRuns]] = {}
+
+
+def _runs_of_grids(grids: PackedGrids, semantic: np.ndarray) -> FreeRuns:
+    """Free rectangles derived from PackedGrids' clearance (obstacle cells have clearance 0), memoized
     per clearance array (by identity, dropped with it) so repeated :func:`scan` calls pay once."""
     key = id(grids.clearance)
     hit = _packed_memo.get(key)
@@ -106,36 +162,37 @@ def _squares_of_grids(grids: PackedGrids) -> np.ndarray:
     parts = []
     for e in range(grids.offset.shape[0]):
         h, w, off = int(grids.height[e]), int(grids.width[e]), int(grids.offset[e])
-        parts.append(free_squares(grids.clearance[off:off + h * w].reshape(h, w) <= 0.0).ravel())
-    sq = parts[0] if len(parts) == 1 else np.concatenate(parts)
-    _packed_memo[key] = (weakref.ref(grids.clearance, lambda _, k=key: _packed_memo.pop(k, None)), sq)
-    return sq
+        parts.append(free_runs(grids.clearance[off:off + h * w].reshape(h, w) <= 0.0,
+                               semantic[off:off + h * w].reshape(h, w)))
+    runs = _concat(parts)
+    _packed_memo[key] = (weakref.ref(grids.clearance, lambda _, k=key: _packed_memo.pop(k, None)), runs)
+    return runs
 
 
 @numba.njit(cache=True, inline="always")
-def _scan_one(sq, sem, off, h, w, x0, z0, res, x, z, yaw, ray_cos, ray_sin, max_range, depth, classes, i):
+def _scan_one(ids, table, toff, off, h, w, x0, z0, res, x, z, yaw, ray_cos, ray_sin, max_range, depth,
+              classes, i):
     """Fill row i of ``depth`` (normalized) and ``classes`` for one agent at (x, z, yaw).
 
-    ``sq`` is :func:`pack_squares` output and ``off`` the house's cell offset. All rays advance in
-    lockstep, one jump each per sweep, so the CPU overlaps the independent memory loads of different
-    rays. Distances are in cells inside the loop.
+    ``ids`` and ``table`` are a :class:`FreeRuns`' arrays, ``toff`` the house's first rectangle and
+    ``off`` its cell offset. All rays advance in lockstep, one jump each per sweep, so the CPU
+    overlaps the independent memory loads of different rays. Distances are in cells inside the loop.
     """
     n = ray_cos.shape[0]
     a = math.radians(yaw)
     sy, cy = math.sin(a), math.cos(a)
     inv = 1.0 / res
-    hw = h * w
     u0, v0 = (x - x0) * inv, (z - z0) * inv  # position in cell units
     ray = np.empty((5, n))  # two allocations per scan, not seven: they are the kernel's fixed cost
     du, dv, iu, iv, t = ray[0], ray[1], ray[2], ray[3], ray[4]
-    base = np.empty(n, dtype=np.int64)  # start of the ray's quadrant in ``sq``; -1 once the ray is done
+    sides = np.empty(n, dtype=np.int64)  # table columns of the sides the ray heads for; -1 once done
     for r in range(n):
         # heading (sin, cos) of yaw + offset r by the angle-sum identities
         du[r] = sy * ray_cos[r] + cy * ray_sin[r]
         dv[r] = cy * ray_cos[r] - sy * ray_sin[r]
         iu[r] = 1.0 / du[r] if du[r] != 0.0 else 1e30
         iv[r] = 1.0 / dv[r] if dv[r] != 0.0 else 1e30
-        base[r] = 4 * off + ((1 if du[r] < 0.0 else 0) + (2 if dv[r] < 0.0 else 0)) * hw
+        sides[r] = (2 if du[r] >= 0.0 else 0) + 4 * (3 if dv[r] >= 0.0 else 1)
         t[r] = 0.0
         depth[i, r] = 1.0
         classes[i, r] = CLASS_NONE
@@ -143,8 +200,8 @@ def _scan_one(sq, sem, off, h, w, x0, z0, res, x, z, yaw, ray_cos, ray_sin, max_
     remaining = n
     while remaining > 0:
         for r in range(n):
-            b = base[r]
-            if b < 0:  # this ray is done
+            sd = sides[r]
+            if sd < 0:  # this ray is done
                 continue
             tr = t[r]
             u, v = u0 + tr * du[r], v0 + tr * dv[r]
@@ -157,32 +214,36 @@ def _scan_one(sq, sem, off, h, w, x0, z0, res, x, z, yaw, ray_cos, ray_sin, max_
                 if row >= h or col >= w:
                     cls = CLASS_WALL
                 else:
-                    s = np.int64(sq[b + row * w + col])
-                    if s == 0:
-                        cls = sem[off + row * w + col]
-                    else:  # leave the free square through the nearer of its two far sides
-                        bu = col + s if du[r] >= 0.0 else col + 1 - s
-                        bv = row + s if dv[r] >= 0.0 else row + 1 - s
-                        jump = min((bu - u) * iu[r], (bv - v) * iv[r]) + _NUDGE
+                    cell = off + row * w + col
+                    k = np.int64(ids[2 * cell])
+                    if k == 0:
+                        cls = np.int64(ids[2 * cell + 1])
+                    else:  # leave the farther-reaching of the cell's two rectangles
+                        su, sv = sd & 3, sd >> 2
+                        b1 = 4 * (toff + k)
+                        b2 = 4 * (toff + np.int64(ids[2 * cell + 1]))
+                        j1 = min((table[b1 + su] - u) * iu[r], (table[b1 + sv] - v) * iv[r])
+                        j2 = min((table[b2 + su] - u) * iu[r], (table[b2 + sv] - v) * iv[r])
+                        jump = max(j1, j2) + _NUDGE
             if cls >= 0:  # hit an obstacle cell (or left the raster, which only outside cells border)
                 depth[i, r] = tr * res / max_range
                 classes[i, r] = cls
-                base[r] = -1
+                sides[r] = -1
                 remaining -= 1
                 continue
             tr += jump
             if tr > t_max:
-                base[r] = -1
+                sides[r] = -1
                 remaining -= 1
             t[r] = tr
 
 
 @numba.njit(cache=True, parallel=True)
-def _scan_batch(sq, sem, offs, hs, ws, x0s, z0s, ress, env, x, z, yaw, ray_cos, ray_sin, max_range, depth,
-                classes):
+def _scan_batch(ids, table, toffs, offs, hs, ws, x0s, z0s, ress, env, x, z, yaw, ray_cos, ray_sin, max_range,
+                depth, classes):
     for i in numba.prange(x.shape[0]):
         e = env[i]
-        _scan_one(sq, sem, offs[e], hs[e], ws[e], x0s[e], z0s[e], ress[e], x[i], z[i], yaw[i],
+        _scan_one(ids, table, toffs[e], offs[e], hs[e], ws[e], x0s[e], z0s[e], ress[e], x[i], z[i], yaw[i],
                   ray_cos, ray_sin, max_range, depth, classes, i)
 
 
@@ -195,21 +256,21 @@ def pack_semantic(worlds) -> np.ndarray:
 
 
 def scan(grids: PackedGrids, semantic: np.ndarray, env: np.ndarray, x: np.ndarray, z: np.ndarray,
-         yaw: np.ndarray, max_range: float = MAX_RANGE, squares: np.ndarray | None = None
+         yaw: np.ndarray, max_range: float = MAX_RANGE, runs: FreeRuns | None = None
          ) -> tuple[np.ndarray, np.ndarray]:
     """Scan from each pose: returns depth float32 (B, N_RAYS) in [0, 1] and classes int64 (B, N_RAYS).
 
     ``semantic`` is :func:`pack_semantic` of the same worlds as ``grids``; ``env[i]`` is agent i's
-    house index. ``squares`` is :func:`pack_squares` of those worlds; when omitted it is derived from
+    house index. ``runs`` is :func:`pack_runs` of those worlds; when omitted it is derived from
     ``grids`` once and remembered for as long as ``grids.clearance`` lives.
     """
-    if squares is None:
-        squares = _squares_of_grids(grids)
+    if runs is None:
+        runs = _runs_of_grids(grids, semantic)
     n = np.shape(x)[0]
     depth = np.empty((n, N_RAYS), dtype=np.float32)
     classes = np.empty((n, N_RAYS), dtype=np.int64)
-    _scan_batch(squares, semantic, grids.offset, grids.height, grids.width, grids.x0, grids.z0,
-                grids.resolution, np.asarray(env, dtype=np.int64), np.asarray(x, dtype=np.float64),
+    _scan_batch(runs.ids, runs.table, runs.offset, grids.offset, grids.height, grids.width,
+                grids.x0, grids.z0, grids.resolution, np.asarray(env, dtype=np.int64), np.asarray(x, dtype=np.float64),
                 np.asarray(z, dtype=np.float64), np.asarray(yaw, dtype=np.float64), RAY_COS, RAY_SIN,
                 float(max_range), depth, classes)
     return depth, classes
@@ -222,5 +283,5 @@ def scan_world(world, x: float, z: float, yaw: float, max_range: float = MAX_RAN
     """
     depth, classes = scan(PackedGrids.from_worlds([world]), np.asarray(world.semantic, dtype=np.int16).ravel(),
                           np.zeros(1, np.int64), np.array([x]), np.array([z]), np.array([yaw]), max_range,
-                          squares=pack_squares([world]))
+                          runs=pack_runs([world]))
     return depth[0], classes[0]

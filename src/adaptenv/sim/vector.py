@@ -21,7 +21,7 @@ from adaptenv.errors import AdaptenvError
 from adaptenv.sim import geodesic, metrics, physics, scan, task
 from adaptenv.sim.geodesic import CHUNK_BITS, NOT_NAVIGABLE
 from adaptenv.sim.physics import _MOVE_DELTA, _YAW_DELTA, PackedGrids, _move_one
-from adaptenv.sim.scan import RAY_COS, RAY_SIN, _scan_one, pack_semantic, pack_squares
+from adaptenv.sim.scan import RAY_COS, RAY_SIN, _scan_one, pack_runs
 from adaptenv.sim.spec import (
     AGENT_RADIUS,
     END,
@@ -92,7 +92,7 @@ def _make_agent_step(stamp: str):
     """The per-agent step kernel, keyed in numba's cache by ``stamp`` (its only closure variable)."""
 
     @numba.njit(cache=True)
-    def _agent_step(i, stepping, clear, sem, sq, dist, rank, start, coffs, offs, hs, ws, x0s, z0s, ress,
+    def _agent_step(i, stepping, clear, ids, rtab, rtoffs, dist, rank, start, coffs, offs, hs, ws, x0s, z0s, ress,
                     env, doff, x, z, yaw, steps, collisions, prev_action, path, geo, best, moved, done,
                     actions, radius, yaw_delta, move_delta, ray_cos, ray_sin, max_range, max_steps,
                     reward, terminated, truncated, depth, classes):
@@ -128,7 +128,7 @@ def _make_agent_step(stamp: str):
             truncated[i] = False
         if d < best[i]:
             best[i] = d
-        _scan_one(sq, sem, off, h, w, x0, z0, res, x[i], z[i], yaw[i], ray_cos, ray_sin, max_range, depth, classes,
+        _scan_one(ids, rtab, rtoffs[e], off, h, w, x0, z0, res, x[i], z[i], yaw[i], ray_cos, ray_sin, max_range, depth, classes,
                   i)
 
     return _agent_step
@@ -143,25 +143,25 @@ def _make_loops(stamp: str):
     only ``stamp``: numba's cache key must not include a dispatcher object)."""
 
     @numba.njit(cache=True)
-    def _run_serial(idx, stepping, clear, sem, sq, dist, rank, start, coffs, offs, hs, ws, x0s, z0s, ress,
+    def _run_serial(idx, stepping, clear, ids, rtab, rtoffs, dist, rank, start, coffs, offs, hs, ws, x0s, z0s, ress,
                     env, doff, x, z, yaw, steps, collisions, prev_action, path, geo, best, moved, done,
                     actions, radius, yaw_delta, move_delta, ray_cos, ray_sin, max_range, max_steps,
                     reward, terminated, truncated, depth, classes):
         _ = stamp
         for k in range(idx.shape[0]):
-            _agent_step(idx[k], stepping, clear, sem, sq, dist, rank, start, coffs, offs, hs, ws, x0s, z0s, ress,
+            _agent_step(idx[k], stepping, clear, ids, rtab, rtoffs, dist, rank, start, coffs, offs, hs, ws, x0s, z0s, ress,
                         env, doff, x, z, yaw, steps, collisions, prev_action, path, geo, best, moved, done,
                         actions, radius, yaw_delta, move_delta, ray_cos, ray_sin, max_range, max_steps,
                         reward, terminated, truncated, depth, classes)
 
     @numba.njit(cache=True, parallel=True)
-    def _run_parallel(idx, stepping, clear, sem, sq, dist, rank, start, coffs, offs, hs, ws, x0s, z0s, ress,
+    def _run_parallel(idx, stepping, clear, ids, rtab, rtoffs, dist, rank, start, coffs, offs, hs, ws, x0s, z0s, ress,
                       env, doff, x, z, yaw, steps, collisions, prev_action, path, geo, best, moved, done,
                       actions, radius, yaw_delta, move_delta, ray_cos, ray_sin, max_range, max_steps,
                       reward, terminated, truncated, depth, classes):
         _ = stamp
         for k in numba.prange(idx.shape[0]):
-            _agent_step(idx[k], stepping, clear, sem, sq, dist, rank, start, coffs, offs, hs, ws, x0s, z0s, ress,
+            _agent_step(idx[k], stepping, clear, ids, rtab, rtoffs, dist, rank, start, coffs, offs, hs, ws, x0s, z0s, ress,
                         env, doff, x, z, yaw, steps, collisions, prev_action, path, geo, best, moved, done,
                         actions, radius, yaw_delta, move_delta, ray_cos, ray_sin, max_range, max_steps,
                         reward, terminated, truncated, depth, classes)
@@ -241,9 +241,8 @@ class BatchSim:
                              f"NUMBA_NUM_THREADS), got {threads}")
         self.worlds = list(worlds)
         self.grids = PackedGrids.from_worlds(self.worlds)
-        self.semantic = pack_semantic(self.worlds)
-        self.squares = pack_squares(self.worlds)
-        """The scan's free squares (``scan.pack_squares``), aligned with ``grids``."""
+        self.runs = pack_runs(self.worlds)
+        """The scan's free rectangles (``scan.pack_runs``), aligned with ``grids``."""
         self.max_steps = int(max_steps)
         self.radius = float(radius)
         self.max_range = float(max_range)
@@ -386,7 +385,8 @@ class BatchSim:
     def _kernel(self, kernel, idx: np.ndarray, actions: np.ndarray, stepping: bool) -> None:
         """Call ``kernel`` (``_run_serial`` or ``_run_parallel``) on the packed state."""
         g = self.grids
-        kernel(idx, stepping, g.clearance, self.semantic, self.squares, self._fields, self._rank, self._start,
+        kernel(idx, stepping, g.clearance, self.runs.ids, self.runs.table, self.runs.offset,
+               self._fields, self._rank, self._start,
                self._chunk_offset, g.offset, g.height, g.width,
                g.x0, g.z0, g.resolution, self.env, self._doff, self.x, self.z, self.yaw, self.steps, self.collisions,
                self.prev_action, self.path_length, self.geodesic, self.best, self.moved, self.done,
@@ -462,8 +462,8 @@ class BatchSim:
         """Memory of the arrays BatchSim holds that no world holds too: packed rasters and cell
         indices of several worlds (one world's are used in place) and distance fields no longer in
         their world's cache."""
-        held = {id(a) for w in self.worlds for a in (w.grid.clearance, w.semantic, *w.cached_arrays())}
-        arrays = [self.grids.clearance, self.semantic, self.squares, self._rank, self._start, *self._fields]
+        held = {id(a) for w in self.worlds for a in (w.grid.clearance, *w.cached_arrays())}
+        arrays = [self.grids.clearance, self.runs.ids, self.runs.table, self._rank, self._start, *self._fields]
         return int(sum(a.nbytes for a in arrays if id(a) not in held and id(a.base) not in held))
 
 
