@@ -208,6 +208,16 @@ def test_free_runs_are_maximal_free_rectangles_through_each_cell():
                 assert not _free(blocked, c0, r0 - 1, c1, r1) and not _free(blocked, c0 - 1, r0, c1, r1)
 
 
+def test_free_runs_switch_to_uint32_ids_when_uint16_cannot_number_the_rectangles():
+    blocked = (np.add.outer(np.arange(260), np.arange(260)) % 2).astype(bool)  # a checkerboard: 1x1 runs
+    runs = free_runs(blocked, np.ones(blocked.shape, np.int16))
+    assert runs.ids.dtype == np.uint32 and len(runs.table) // 4 == 1 + 2 * int((~blocked).sum())
+    ids, table = runs.ids.reshape(260, 260, 2), runs.table.reshape(-1, 4)
+    for r, c in [(0, 0), (17, 41), (259, 1)]:
+        for along in (0, 1):
+            assert tuple(table[ids[r, c, along]]) == (c, r, c + 1, r + 1)
+
+
 def _exact_first_hit(blocked: np.ndarray, u: float, v: float, du: float, dv: float) -> tuple[float, int, int]:
     """Distance (cells) at which a ray enters its first blocked or off-raster cell, by an exact
     cell-by-cell walk (Amanatides and Woo), and that cell's (row, col)."""

@@ -5,7 +5,7 @@ yaw - FOV/2; left is the direction of decreasing yaw) each return the distance t
 obstacle divided by ``MAX_RANGE`` (1.0 when nothing is hit within range) and the semantic class of
 what they hit (``CLASS_NONE`` when nothing).
 
-Rays are cast through *free runs*: every free cell belongs to two obstacle-free rectangles of
+Rays are cast through *free rectangles*: every free cell belongs to two obstacle-free rectangles of
 cells, its **row rectangle** (the cell's run of free cells along its row, extended up and down for
 as long as the whole run stays free) and its **column rectangle** (the same with rows and columns
 swapped); :func:`free_runs` numbers them once per house. A ray inside a free rectangle cannot meet
@@ -110,6 +110,8 @@ def free_runs(blocked: np.ndarray, semantic: np.ndarray) -> FreeRuns:
     """The row and column rectangles of a raster (cells outside it count as obstacles), with the
     ``semantic`` class of each obstacle cell."""
     blocked = np.ascontiguousarray(blocked, dtype=np.bool_)
+    if max(blocked.shape) > np.iinfo(np.uint16).max:
+        raise ValueError(f"a raster of {blocked.shape} cells is too large for the scan (at most 65,535 a side)")
     row_ids, row_rects = _rectangles(blocked)
     col_ids, col_rects = _rectangles(np.ascontiguousarray(blocked.T))
     col_ids, col_rects = col_ids.T, col_rects[:, [1, 0, 3, 2]]  # back to (col0, row0, col1, row1)
@@ -119,8 +121,6 @@ def free_runs(blocked: np.ndarray, semantic: np.ndarray) -> FreeRuns:
     ids = np.empty((*blocked.shape, 2), dtype=dtype)
     ids[..., 0] = row_ids
     ids[..., 1] = np.where(blocked, semantic, col_ids + n_rows)
-    if max(blocked.shape) > np.iinfo(np.uint16).max:
-        raise ValueError(f"a raster of {blocked.shape} cells is too large for the scan (at most 65,535 a side)")
     table = np.zeros((count, 4), dtype=np.uint16)
     table[1:1 + n_rows] = row_rects
     table[1 + n_rows:] = col_rects
