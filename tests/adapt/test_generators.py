@@ -20,9 +20,10 @@ from adaptenv.adapt.objectives import (
     resample,
     shortest_route,
 )
-from adaptenv.adapt.pipeline import draw_episode, resolve_policy_spec, rollout
 from adaptenv.adapt.validation import validate_scene
 from adaptenv.adapt.verification import Check, check_objective, revise_until_verified
+from adaptenv.agents.policy import ExpertPolicy
+from adaptenv.agents.rollout import draw_episode, rollout
 from adaptenv.errors import ConfigError
 from adaptenv.scene.validate import validate_house
 from adaptenv.sim.geodesic import distance_field, field_at
@@ -39,7 +40,7 @@ def scene():
     house = generate_house(3, GenerationConfig(n_rooms=5))
     world = compile_world(house, "h")
     ep = draw_episode(world, np.random.default_rng([0, 1]))
-    policy = resolve_policy_spec("expert")
+    policy = ExpertPolicy()
     traj = rollout(world, ep, policy)
     return house, world, ep, policy, traj, analyze_trajectory(traj, world)
 

@@ -8,7 +8,15 @@ import numpy as np
 import pytest
 
 from adaptenv.agents.checkpoint import load_checkpoint
-from adaptenv.agents.train import SequenceBuffer, TrainConfig, beta_at, field_docs, finetune, train
+from adaptenv.agents.train import (
+    FinetuneConfig,
+    SequenceBuffer,
+    TrainConfig,
+    beta_at,
+    field_docs,
+    finetune,
+    train,
+)
 from adaptenv.errors import ConfigError
 
 
@@ -100,8 +108,7 @@ def test_resume_after_interruption_continues_from_the_checkpoint(tmp_path, monke
 def test_finetune_returns_a_new_policy(tiny_set, tmp_path):
     base = train(tiny_config(tmp_path, frames=1024, output="", run_dir=""))
     before = {k: v.clone() for k, v in base.net.state_dict().items()}
-    policy = finetune(base.policy(), tiny_set.houses, 1024, num_envs=16, rollout_steps=32, chunk_len=16,
-                      batch_chunks=16, updates_per_iter=4, final_eval_episodes=4, tensorboard=False, threads=1)
-    assert policy.net is not base.net
-    assert any(not (v == policy.net.state_dict()[k]).all() for k, v in before.items())
+    net, card = finetune(base.net, tiny_set.worlds, FinetuneConfig(frames=1024, num_envs=16, batch_chunks=16))
+    assert net is not base.net and card["frames"] >= 1024
+    assert any(not (v == net.state_dict()[k]).all() for k, v in before.items())
     assert all((v == base.net.state_dict()[k]).all() for k, v in before.items())  # the input is untouched

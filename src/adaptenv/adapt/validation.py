@@ -49,14 +49,12 @@ from adaptenv.scene.house import House, move_object
 from adaptenv.scene.occupancy import DEFAULT_RESOLUTION, LABEL_OBJECT0, OccupancyGrid, rasterize
 from adaptenv.sim.spec import AGENT_RADIUS, SUCCESS_DISTANCE, TARGET_TYPES
 from adaptenv.sim.world import compile_world
+from adaptenv.vocabulary import SEAT_TYPES, TABLE_TYPES
 
 #: Overlaps smaller than this (m^2) are touching, not overlapping.
 AREA_EPS = 1e-4
 #: How far (m) a footprint may stick out of its rooms or through a wall.
 CONTAIN_TOLERANCE = 0.01
-#: Seats that ProcTHOR tucks under tables (and packs against each other).
-SEAT_TYPES = frozenset({"Chair", "Stool", "ArmChair"})
-TABLE_TYPES = frozenset({"DiningTable", "Desk", "CoffeeTable", "SideTable"})
 #: Cells up to this many cell sizes outside an object's inflated footprint are where the agent stands next to it.
 APPROACH_CELLS = 2
 

@@ -17,7 +17,7 @@ target type, episode seed and pose of every agent). Learned policies must not us
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from typing import Any, Protocol, runtime_checkable
 
@@ -25,6 +25,8 @@ import numpy as np
 
 from adaptenv.errors import ConfigError
 from adaptenv.sim.spec import END, NO_ACTION
+from adaptenv.sim.task import Episode
+from adaptenv.sim.world import NavWorld
 
 State = Any
 """Whatever a policy carries between steps (None for memoryless policies, a tensor for a GRU)."""
@@ -67,7 +69,7 @@ class PolicyContext:
     every step and reset, so a policy may keep a reference to the context.
     """
 
-    worlds: Sequence[Any]
+    worlds: Sequence[NavWorld]
     """The compiled houses (:class:`~adaptenv.sim.world.NavWorld`) the batch runs in."""
     env_idx: np.ndarray
     """int64 (B,): index into ``worlds`` of each agent's house."""
@@ -81,7 +83,7 @@ class PolicyContext:
     extra: dict[str, Any] = field(default_factory=dict)
 
     @classmethod
-    def empty(cls, worlds: Sequence[Any], batch: int) -> PolicyContext:
+    def empty(cls, worlds: Sequence[NavWorld], batch: int) -> PolicyContext:
         """A context for ``batch`` agents with zeroed arrays (the runner fills them)."""
         return cls(worlds, np.zeros(batch, np.int64), [""] * batch, np.zeros(batch, np.int64),
                    np.zeros(batch), np.zeros(batch), np.zeros(batch))
@@ -181,7 +183,7 @@ class StepPolicy:
         self._prev = NO_ACTION
         self._context: PolicyContext | None = None
 
-    def __call__(self, world: Any, episode: Any, x: float, z: float, yaw: float, collided: bool, step: int) -> int:
+    def __call__(self, world: NavWorld, episode: Episode, x: float, z: float, yaw: float, collided: bool, step: int) -> int:
         from adaptenv.sim.physics import PackedGrids
         from adaptenv.sim.scan import pack_semantic, scan
         from adaptenv.sim.spec import class_id
@@ -208,8 +210,56 @@ class StepPolicy:
         return self._prev
 
 
-def as_step_policy(policy: Any) -> Any:
+class StepFunctionPolicy:
+    """A per-step callable of :mod:`adaptenv.sim.rollout` as a batched, privileged :class:`Policy`.
+
+    ``fn(world, episode, x, z, yaw, collided, step) -> action`` is called once per agent and step
+    with the agent's world, an :class:`~adaptenv.sim.task.Episode` (target type, start pose, seed)
+    and its pose; the adapter counts steps and reads ``collided`` from the observation.
+    """
+
+    def __init__(self, fn: Callable[..., int]):
+        self.fn = fn
+        self.name = str(getattr(fn, "name", type(fn).__name__))
+        self._context: PolicyContext | None = None
+        self._episodes: list[Any] = []
+        self._steps = np.zeros(0, dtype=np.int64)
+
+    def bind(self, context: PolicyContext) -> None:
+        self._context = context
+
+    def initial_state(self, batch: int) -> State:
+        return None
+
+    def act(self, obs: Observation, state: State, done: np.ndarray) -> tuple[np.ndarray, State]:
+        ctx = self._context
+        if ctx is None:
+            raise ConfigError("a per-step policy needs the runner's context; run it through adaptenv's runners "
+                              "(evaluate, rollout, adapt, train), which bind one")
+        batch = len(done)
+        if len(self._episodes) != batch:
+            self._episodes, self._steps = [None] * batch, np.zeros(batch, dtype=np.int64)
+        for i in np.flatnonzero(done):
+            start = (float(ctx.x[i]), float(ctx.z[i]), float(ctx.yaw[i]))
+            self._episodes[i] = Episode(ctx.target_types[i], start, int(ctx.seeds[i]))
+            self._steps[i] = 0
+        actions = np.array([self.fn(ctx.worlds[int(ctx.env_idx[i])], self._episodes[i], float(ctx.x[i]),
+                                    float(ctx.z[i]), float(ctx.yaw[i]), bool(obs["collided"][i]), int(self._steps[i]))
+                            for i in range(batch)], dtype=np.int64)
+        self._steps += 1
+        return actions, state
+
+
+def as_policy(policy: Policy | Callable[..., int]) -> Policy:
+    """The one place per-step callables become batched policies (batched policies pass through)."""
+    if isinstance(policy, Policy):
+        return policy
+    if callable(policy):
+        return StepFunctionPolicy(policy)
+    raise ConfigError(f"{type(policy).__name__} is not a policy; it needs initial_state(batch) and "
+                      "act(obs, state, done), or to be a per-step callable (see docs/agent.md)")
+
+
+def as_step_policy(policy: Policy | Callable[..., int]) -> Callable[..., int]:
     """Wrap a batched policy for :func:`adaptenv.sim.rollout.run_episode` (per-step callables pass through)."""
-    if hasattr(policy, "act") and hasattr(policy, "initial_state"):
-        return StepPolicy(policy)
-    return policy
+    return StepPolicy(policy) if isinstance(policy, Policy) else policy

@@ -39,7 +39,7 @@ import time
 from collections.abc import Sequence
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import torch
@@ -47,6 +47,10 @@ import torch.nn.functional as F
 
 from adaptenv.agents.config import TrainConfig, field_docs
 from adaptenv.errors import ConfigError
+
+if TYPE_CHECKING:
+    from adaptenv.agents.network import NavNet
+    from adaptenv.sim.world import NavWorld
 
 __all__ = ["TrainConfig", "field_docs", "train", "finetune"]
 
@@ -408,23 +412,41 @@ def train(cfg: TrainConfig, *, worlds: Sequence[Any] | None = None, init_net: An
     return TrainResult(net, card, logger.rows)
 
 
-def finetune(policy: Any, houses: Sequence[Any] | str, frames: int, *, seed: int = 0, **overrides: Any) -> Any:
-    """Continue training ``policy`` (a NeuralPolicy or checkpoint path) on ``houses``; returns a new policy.
+@dataclass(frozen=True)
+class FinetuneConfig:
+    """How a trained policy keeps learning on new scenes (the closed loop's recipe, the same for every method)."""
 
-    ``houses`` may be House objects, NavWorlds or a ``--houses`` spec. DAgger keeps the expert in
-    control 80% of the time (beta 0.8 throughout: with lower beta the student's success fell, see
-    docs/agent.md); nothing is written unless ``output``/``run_dir`` is given in ``overrides`` (any
-    TrainConfig field).
-    """
-    from adaptenv.agents.checkpoint import load_checkpoint
-    from adaptenv.agents.houses import compile_houses, load_house_set
+    frames: int = 16_384
+    """Labelled frames of DAgger per call."""
+    num_envs: int = 64
+    """Parallel agents collecting frames."""
+    learning_rate: float = 1e-4
+    """Adam learning rate, annealed to zero over the call's frames."""
+    beta: float = 0.8
+    """Probability the expert acts while collecting (with lower beta the student's success fell, docs/agent.md)."""
+    rollout_steps: int = 32
+    """Steps per collection round (and length of the training chunks)."""
+    batch_chunks: int = 64
+    """Chunks per gradient step."""
+    updates_per_iter: int = 4
+    """Gradient steps per collection round."""
 
-    net = load_checkpoint(policy).net if isinstance(policy, (str, Path)) else getattr(policy, "net", policy)
-    worlds = load_house_set(houses).worlds if isinstance(houses, str) else compile_houses(list(houses))
-    settings = {"frames": frames, "seed": seed, "output": "", "houses": "(in memory)", "beta_start": 0.8,
-                "progress": False, "eval_every": 0, "final_eval_episodes": 64, **overrides}
-    cfg = TrainConfig(**settings)
-    return train(cfg, worlds=worlds, init_net=net).policy()
+    def train_config(self, *, seed: int, episodes: int) -> TrainConfig:
+        """The full TrainConfig this recipe stands for (nothing written, no evaluation during the run)."""
+        steps = self.rollout_steps
+        return TrainConfig(houses="(in memory)", frames=self.frames, output="", seed=seed, num_envs=self.num_envs,
+                           rollout_steps=steps, chunk_len=steps, batch_chunks=self.batch_chunks,
+                           updates_per_iter=self.updates_per_iter,
+                           buffer_frames=max(self.frames, steps * self.num_envs), beta_start=self.beta,
+                           beta_end=self.beta, eval_every=0, final_eval_episodes=episodes, progress=False,
+                           tensorboard=False, learning_rate=self.learning_rate, save_every=10**9)
+
+
+def finetune(net: NavNet, worlds: Sequence[NavWorld], cfg: FinetuneConfig, *, seed: int = 0
+             ) -> tuple[NavNet, dict[str, Any]]:
+    """Continue training ``net`` (left untouched) on ``worlds`` with ``cfg``; returns the new network and its card."""
+    result = train(cfg.train_config(seed=seed, episodes=len(worlds)), worlds=worlds, init_net=net)
+    return result.net, result.card
 
 
 def _to_tensors(obs: dict[str, np.ndarray]) -> dict[str, torch.Tensor]:

@@ -6,6 +6,7 @@ import json
 import os
 from pathlib import Path
 
+import numpy as np
 import typer
 
 from adaptenv.cli._common import JSON_OPTION
@@ -78,10 +79,13 @@ def adapt(
 
     from adaptenv.adapt.analysis import BuiltinAnalyzer, LLMAnalyzer
     from adaptenv.adapt.generators import GENERATORS, make_generator
-    from adaptenv.adapt.pipeline import adapt_house, resolve_policy_spec
+    from adaptenv.adapt.step import adapt_scene, summarize, write_outputs
+    from adaptenv.agents.registry import resolve_policy
+    from adaptenv.agents.rollout import draw_episode
     from adaptenv.cli._common import existing_file
     from adaptenv.errors import ConfigError
     from adaptenv.scene.house import load_house
+    from adaptenv.sim.world import compile_world
 
     if generator not in GENERATORS:
         raise ConfigError(f"--generator {generator!r}: unknown generator; use one of {', '.join(GENERATORS)}")
@@ -93,9 +97,12 @@ def adapt(
         backend = llm_backend(model, base_url, llm_cache, f"--{'generator' if generator == 'llm' else 'analyzer'} llm")
     gen = make_generator(generator, backend=backend) if generator == "llm" else make_generator(generator)
     f = LLMAnalyzer(backend) if analyzer == "llm" else BuiltinAnalyzer()
-    result = adapt_house(h, policy=resolve_policy_spec(policy, seed=seed), analyzer=f, generator=gen, steps=steps,
-                         seed=seed, target_type=target, out_dir=out, name=house.stem)
-    s = result.summary
+    world = compile_world(h, house.stem)
+    episode = draw_episode(world, np.random.default_rng([seed, 1]), target)
+    result = adapt_scene(h, episode, policy=resolve_policy(policy, seed=seed), analyzer=f, generator=gen, steps=steps,
+                         rng=np.random.default_rng(seed), name=house.stem, render=True, render_dir=out / "steps")
+    s = summarize(result, analyzer=f.name, seed=seed)
+    write_outputs(result, s, out)
     if as_json:
         typer.echo(json.dumps(s, indent=1, default=str))
     else:

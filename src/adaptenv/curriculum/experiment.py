@@ -205,7 +205,7 @@ def final_evaluation(out: str | Path, cfg: ExperimentConfig, episodes: int, *, e
     say = progress or (lambda text: None)
 
     def evaluate(policy_path: Path, seed: int) -> dict[str, Any]:
-        weights = PolicyWeights.of(load_checkpoint(policy_path).net)
+        weights = PolicyWeights.of(load_checkpoint(policy_path).policy())
         return {k: v.model_dump() for k, v in evaluate_sets(weights, specs, episodes, seed, ex).items()}
 
     initial: dict[int, dict[str, Any]] = {}  # pi_0 is the same policy in every run of a seed

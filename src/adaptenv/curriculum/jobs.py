@@ -10,10 +10,26 @@ the same numbers.
 from __future__ import annotations
 
 import functools
-from dataclasses import dataclass, field
-from typing import Any
+from dataclasses import asdict, dataclass, field
+from typing import TYPE_CHECKING, Any, Literal
 
 import numpy as np
+
+from adaptenv.adapt.analysis import Analysis, Analyzer, BuiltinAnalyzer, LLMAnalyzer
+from adaptenv.adapt.generators import Generator, make_generator
+from adaptenv.adapt.generators.random_perturbation import random_single_edits
+from adaptenv.adapt.step import adapt_scene
+from adaptenv.agents.evaluate import EpisodeResult, run_episodes, sample_episodes
+from adaptenv.agents.houses import HouseSet, load_house_set
+from adaptenv.agents.policy import ExpertPolicy
+from adaptenv.agents.rollout import run_recorded
+from adaptenv.scene.house import House
+from adaptenv.sim.task import Episode, sample_episode
+from adaptenv.sim.trajectory import Trajectory
+from adaptenv.sim.world import compile_world
+
+if TYPE_CHECKING:
+    from adaptenv.agents.network import NeuralPolicy
 
 #: Episodes per evaluation job: fixed, so results never depend on the worker count.
 EVAL_CHUNK = 50
@@ -21,31 +37,34 @@ EVAL_CHUNK = 50
 
 @dataclass(frozen=True)
 class PolicyWeights:
-    """A network's architecture and weights as plain data, so a job can carry its policy to any worker."""
+    """A neural policy's architecture, weights and stop threshold as plain data, so a job can carry it to any worker."""
 
     config: dict[str, Any]
     state: dict[str, Any]
+    end_threshold: float
 
     @classmethod
-    def of(cls, net: Any) -> PolicyWeights:
-        from dataclasses import asdict
+    def of(cls, policy: NeuralPolicy) -> PolicyWeights:
+        net = policy.net
+        return cls(asdict(net.config), {k: v.detach().clone() for k, v in net.state_dict().items()},
+                   float(policy.end_threshold))
 
-        return cls(asdict(net.config), {k: v.detach().clone() for k, v in net.state_dict().items()})
-
-    def policy(self) -> Any:
+    def policy(self) -> NeuralPolicy:
         """The weights as a batched NeuralPolicy (the loop's evaluation and rollout policy)."""
-        from adaptenv.agents.network import NavNet, NetConfig, NeuralPolicy
+        from adaptenv.agents.network import (  # torch: loaded in workers only
+            NavNet,
+            NetConfig,
+            NeuralPolicy,
+        )
 
         net = NavNet(NetConfig(**self.config))
         net.load_state_dict(self.state)
-        return NeuralPolicy(net)
+        return NeuralPolicy(net, end_threshold=self.end_threshold)
 
 
 @functools.lru_cache(maxsize=8)
-def heldout_set(spec: str) -> Any:
+def heldout_set(spec: str) -> HouseSet:
     """The compiled house set of ``spec``, loaded once per process (held-out sets never change)."""
-    from adaptenv.agents.houses import load_house_set
-
     return load_house_set(spec)
 
 
@@ -66,10 +85,8 @@ def eval_jobs(weights: PolicyWeights, specs: dict[str, str], episodes: int, seed
             for name, spec in specs.items() for a in range(0, episodes, EVAL_CHUNK)]
 
 
-def run_eval(job: EvalJob) -> list[Any]:
+def run_eval(job: EvalJob) -> list[EpisodeResult]:
     """Run one chunk of held-out episodes; returns their EpisodeResults in order."""
-    from adaptenv.agents.evaluate import run_episodes, sample_episodes
-
     hs = heldout_set(job.spec)
     eps = sample_episodes(hs.worlds, job.stop, job.seed, start=job.start)
     results, _ = run_episodes(hs.worlds, eps, job.weights.policy(), batch=len(eps))
@@ -78,82 +95,98 @@ def run_eval(job: EvalJob) -> list[Any]:
 
 @dataclass(frozen=True)
 class RolloutJob:
-    """One episode of a policy in one scene (for analysis or regret scoring)."""
+    """One episode of a policy in one scene, and the expert's on the same episode (for analysis and regret)."""
 
     weights: PolicyWeights
-    house: Any
+    house: House
     name: str
     episode_seed: int
 
 
-def run_rollout(job: RolloutJob) -> tuple[Any, Any]:
-    """Roll the policy out once in the scene; returns the EpisodeResult and the trajectory with metrics."""
-    from adaptenv.agents.evaluate import run_episodes, trajectory_of
-    from adaptenv.sim import task
-    from adaptenv.sim.metrics import episode_metrics
-    from adaptenv.sim.world import compile_world
+@dataclass
+class Rollout:
+    """pi_t's episode in one scene: the task, its result, its trajectory (with metrics) and the expert's success."""
 
+    episode: Episode
+    result: EpisodeResult
+    trajectory: Trajectory
+    expert_success: bool
+
+
+def run_rollout(job: RolloutJob) -> Rollout:
+    """Roll the policy out once in the scene, then the shortest-path expert on the same episode."""
     world = compile_world(job.house, job.name)
-    episode = task.sample_episode(world, job.episode_seed)
-    results, recs = run_episodes([world], [(0, episode)], job.weights.policy(), batch=1, record=lambda r: True)
-    traj = trajectory_of(world, results[0], recs[results[0].index], "policy")
-    traj.metrics = episode_metrics(world, traj)
-    return results[0], traj
+    episode = sample_episode(world, job.episode_seed)
+    [(result, traj)] = run_recorded(world, [episode], job.weights.policy())
+    expert, _ = run_episodes([world], [(0, episode)], ExpertPolicy(), batch=1)
+    return Rollout(episode, result, traj, expert[0].success)
+
+
+GeneratorKind = Literal["random", "builtin", "llm"]
 
 
 @dataclass(frozen=True)
 class GenerateJob:
-    """Make one new scene from a parent: ``random`` single-object edits or the paper's F then G."""
+    """Make one new scene from a parent: ``random`` single-object edits, or the adaptation step with F and G."""
 
-    kind: str
-    """``random`` (random, accel) or ``ours`` / ``ours-llm`` (analysis F, then generator G)."""
-    house: Any
+    kind: GeneratorKind
+    """``random`` (random, accel) or the G of :func:`~adaptenv.adapt.step.adapt_scene` (``builtin``, ``llm``)."""
+    house: House
     name: str
     edit_steps: int
     seed: tuple[int, ...]
     """Seed words of the job's generator (``np.random.default_rng(seed)``)."""
-    trajectory: Any = None
+    weights: PolicyWeights | None = None
+    """pi_t: G checks its candidate edits against it and the child is rolled out with it."""
+    rollout: Rollout | None = None
+    """pi_t's episode in the parent (what F analyses); required for ``builtin`` and ``llm``."""
     llm: dict[str, Any] = field(default_factory=dict)
 
 
 @dataclass
 class Generated:
-    """What a generation job returns: the child scene, its edit log, the analysis (F) and the edit count."""
+    """What a generation job returns: the child scene and how it was made."""
 
-    house: Any
-    edit_log: Any
+    house: House
+    edit_log: dict[str, Any]
+    """The edits as written to edits.json (a generator's steps with verification, or an EditLog)."""
     edits: int
-    analysis: Any = None
+    """Edits that are in the child (applied and changing the scene)."""
+    analysis: Analysis | None = None
+    after: Trajectory | None = None
+    """pi_t's episode in the child (same start and target as the parent's rollout)."""
+    moved: list[str] = field(default_factory=list)
+    """Ids of the objects the child's edits moved or turned."""
+    valid: bool = True
+    """False when the final validation refused the edited house (the child is then the parent, unedited)."""
+    usage: dict[str, int] = field(default_factory=dict)
 
 
 def run_generate(job: GenerateJob) -> Generated:
     """Apply the job's generator to its parent scene."""
     rng = np.random.default_rng(list(job.seed))
     if job.kind == "random":
-        from adaptenv.adapt.generators.random_perturbation import random_single_edits
-
         child, log = random_single_edits(job.house, job.edit_steps, rng)
-        return Generated(child, log, sum(1 for e in log.edits if e.accepted and e.changed))
-    from adaptenv.adapt.generators import GenerationContext
-    from adaptenv.sim.task import Episode
-    from adaptenv.sim.world import compile_world
-
+        moved = [e.object_id for e in log.edits if e.accepted and e.changed]
+        return Generated(child, log.model_dump(mode="json"), len(moved), moved=moved)
+    if job.rollout is None or job.weights is None:
+        raise ValueError(f"GenerateJob {job.name}: kind {job.kind!r} needs the policy weights and its rollout")
     analyzer, generator = make_fg(job.kind, job.llm)
-    traj = job.trajectory
-    analysis = analyzer.analyze(traj, compile_world(job.house, job.name))
-    episode = Episode(traj.target_type, (traj.start.x, traj.start.z, traj.start.yaw), traj.seed)
-    ctx = GenerationContext(episode=episode, trajectory=traj, policy=None, render=False)
-    gen = generator.generate(job.house, analysis, steps=job.edit_steps, context=ctx, rng=rng)
-    return Generated(gen.house, gen.edit_log, len(gen.applied), analysis)
+    res = adapt_scene(job.house, job.rollout.episode, policy=job.weights.policy(), analyzer=analyzer,
+                      generator=generator, steps=job.edit_steps, rng=rng, before=job.rollout.trajectory,
+                      name=job.name)
+    log = res.generation.to_json_dict()
+    if not res.valid:  # the final check refused the whole edited house: the parent stands, nothing was applied
+        log["final_validation"] = res.problems
+        return Generated(job.house, log, 0, res.analysis, res.before, valid=False, usage=res.generation.usage)
+    return Generated(res.house, log, res.edits_applied, res.analysis, res.after,
+                     moved=[e.object_id for e in res.generation.applied], usage=res.generation.usage)
 
 
-def make_fg(kind: str, llm: dict[str, Any]) -> tuple[Any, Any]:
-    """Analyzer F and generator G of a method: built-in for ``ours``, LLM-backed for ``ours-llm``."""
-    from adaptenv.adapt.analysis import BuiltinAnalyzer, LLMAnalyzer
-    from adaptenv.adapt.generators import make_generator
-
-    if kind == "ours-llm":
-        from adaptenv.adapt.llm import LLMConfig, make_backend
+def make_fg(kind: GeneratorKind, llm: dict[str, Any]) -> tuple[Analyzer, Generator]:
+    """Analyzer F and generator G: built-in, or LLM-backed (one backend shared by F and G)."""
+    if kind == "llm":
+        from adaptenv.adapt.llm import LLMConfig, make_backend  # openai: imported only for LLM runs
 
         backend = make_backend(LLMConfig(**llm))
         return LLMAnalyzer(backend), make_generator("llm", backend=backend)

@@ -17,13 +17,15 @@ An experiment folder holds one run folder per (method, seed): ``EXP_DIR/<method>
 
 from __future__ import annotations
 
-import json
 import os
 import tempfile
 from pathlib import Path
 from typing import Any
 
 from pydantic import BaseModel, Field
+
+from adaptenv.scene.house import House, load_house, save_house
+from adaptenv.sim.world import NavWorld, compile_world
 
 RUN_INFO = "run.json"
 ITERATIONS = "iterations.jsonl"
@@ -134,5 +136,28 @@ def _csv(records: list[IterationRecord]) -> str:
     return "\n".join(lines) + "\n"
 
 
-def read_run_info(run_dir: Path) -> RunInfo:
-    return RunInfo.model_validate(json.loads((Path(run_dir) / RUN_INFO).read_text(encoding="utf-8")))
+class SceneStore:
+    """Scenes of a run by name, on disk (RUN_DIR/scenes/NAME.json) with an in-memory cache."""
+
+    def __init__(self, root: Path):
+        self.root = root
+        self.root.mkdir(parents=True, exist_ok=True)
+        self._houses: dict[str, House] = {}
+        self._worlds: dict[str, NavWorld] = {}
+
+    def put(self, name: str, house: House) -> str:
+        """Save ``house`` as scene ``name`` and return the name."""
+        save_house(house, self.root / f"{name}.json")
+        self._houses[name] = house
+        self._worlds.pop(name, None)
+        return name
+
+    def house(self, name: str) -> House:
+        if name not in self._houses:
+            self._houses[name] = load_house(self.root / f"{name}.json", validate=False)
+        return self._houses[name]
+
+    def world(self, name: str) -> NavWorld:
+        if name not in self._worlds:
+            self._worlds[name] = compile_world(self.house(name), name)
+        return self._worlds[name]

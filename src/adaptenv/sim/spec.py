@@ -18,10 +18,12 @@ from __future__ import annotations
 
 from functools import lru_cache
 
+from adaptenv.vocabulary import AGENT_RADIUS, TARGET_TYPES
+
+__all__ = ["AGENT_RADIUS", "TARGET_TYPES"]  # re-exported: the agent body and targets are part of the sim's interface
+
 OBSERVATION_VERSION = 1
 
-AGENT_RADIUS = 0.2
-"""Agent body: a disc of this radius (m)."""
 MOVE_STEP = 0.2
 ROTATE_LARGE = 30.0
 ROTATE_SMALL = 6.0
@@ -73,6 +75,3 @@ def n_classes() -> int:
     return _FIRST_OBJECT_CLASS + len(object_classes())
 
 
-#: ObjectNav target types adaptenv uses: ProcTHOR's standard floor-standing targets plus Fridge
-#: (the paper's example). Small objects are not targets because the scan sees floor furniture only.
-TARGET_TYPES = ("Bed", "Chair", "Fridge", "GarbageCan", "HousePlant", "Sofa", "Television", "Toilet")

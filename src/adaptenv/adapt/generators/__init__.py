@@ -37,6 +37,7 @@ if TYPE_CHECKING:
     from PIL import Image
 
     from adaptenv.adapt.analysis import Analysis
+    from adaptenv.agents.policy import Policy
     from adaptenv.scene.house import House
     from adaptenv.sim.task import Episode
     from adaptenv.sim.trajectory import Trajectory
@@ -84,8 +85,8 @@ class GenerationContext:
     episode: Episode
     trajectory: Trajectory | None = None
     """The rollout F analysed; its route feeds the objectives and is drawn on the renders."""
-    policy: Any = None
-    """Policy used to check candidate edits with rollouts (built-in); None skips the check."""
+    policy: Policy | None = None
+    """pi_t: the built-in G checks its best candidate edits with its rollouts; None skips the check."""
     rollout_episodes: int = 3
     """Episodes per rollout check (the same start and target, different initial headings)."""
     render: bool = True

@@ -52,6 +52,7 @@ from adaptenv.adapt.objectives import (
 from adaptenv.adapt.placement import PlacementResult
 from adaptenv.adapt.validation import EditValidator
 from adaptenv.adapt.verification import Check, check_objective, revise_until_verified
+from adaptenv.agents.rollout import checking_episodes, policy_score
 from adaptenv.scene.geometry import SceneGeometry
 from adaptenv.scene.house import House
 from adaptenv.sim.rollout import expert_policy, run_episode
@@ -279,8 +280,6 @@ class BuiltinGenerator:
     def _rollout_rank(self, scored: list[Candidate], world: NavWorld, context: GenerationContext,
                       record: StepRecord, cache: dict[int, float]) -> list[Candidate]:
         """Re-rank the best few candidates by the policy's mean SPL on them (lowest first); ``cache`` by id."""
-        from adaptenv.adapt.pipeline import checking_episodes, policy_score
-
         episodes = checking_episodes(context.episode, context.rollout_episodes)
         if record.policy_score_before is None:
             record.policy_score_before = policy_score(world, episodes, context.policy)

@@ -17,7 +17,7 @@ from adaptenv.scene.geometry import Footprint, SceneGeometry, yaw_axes
 from adaptenv.scene.house import House
 from adaptenv.scene.occupancy import OccupancyGrid, rasterize
 from adaptenv.scene.procedural.config import GenerationConfig, StageFailed
-from adaptenv.sim.spec import TARGET_TYPES
+from adaptenv.vocabulary import TARGET_TYPES
 
 #: Agent start positions lie on this lattice (m), as in ProcTHOR.
 POSE_GRID = 0.25

@@ -6,7 +6,7 @@ from dataclasses import dataclass, field, replace
 
 from adaptenv.errors import AdaptenvError, ConfigError
 from adaptenv.scene.assets import ROOM_TYPES
-from adaptenv.sim.spec import AGENT_RADIUS
+from adaptenv.vocabulary import AGENT_RADIUS
 
 MIN_ROOMS, MAX_ROOMS = 1, 10
 SPLITS = ("train", "val", "test")

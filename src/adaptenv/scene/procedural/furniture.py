@@ -25,6 +25,7 @@ from adaptenv.scene.geometry import footprint_corners, opening_segment, wall_flo
 from adaptenv.scene.house import House, HouseObject, Room, Vec3, move_object
 from adaptenv.scene.procedural.config import GenerationConfig, StageFailed
 from adaptenv.scene.procedural.doors import split_assets
+from adaptenv.vocabulary import CHAIR_TABLE_TYPES
 
 Anchor = str  # "corner" | "edge" | "middle"
 
@@ -45,7 +46,6 @@ EXCLUDED_FILLERS = frozenset({"Chair", "Cart", "BaseballBat", "BasketBall", "Boo
 #: Anchors of group members placed on their own when their group fits nowhere.
 SOLO_ANCHORS: dict[str, tuple[Anchor, ...]] = {"Chair": ("corner", "edge"), "Stool": ("corner", "edge")}
 #: Tables that chairs belong to when a house is rearranged.
-TABLE_TYPES = frozenset({"DiningTable", "Desk"})
 #: Types that need a minimum height to stand on the floor (basins and tiny plants go on counters).
 MIN_FLOOR_HEIGHT = {"Sink": 0.6, "HousePlant": 0.6}
 #: Types that ProcTHOR never marks kinematic (they may be pushed around).
@@ -606,7 +606,7 @@ def _footprint_box(obj: HouseObject, asset: AssetInfo) -> np.ndarray:
 def _existing_units(objs: list[HouseObject], catalog: AssetCatalog) -> list[Unit]:
     """Group chairs with the table or desk they stand at (within 0.4 m); other objects stand alone."""
     assets = {o.id: catalog.asset(o.assetId) for o in objs}
-    tables = [o for o in objs if assets[o.id].object_type in TABLE_TYPES]
+    tables = [o for o in objs if assets[o.id].object_type in CHAIR_TABLE_TYPES]
     groups: dict[str, list[HouseObject]] = {o.id: [o] for o in objs}
     for o in objs:
         if assets[o.id].object_type not in ("Chair", "Stool", "OfficeChair") or not tables:

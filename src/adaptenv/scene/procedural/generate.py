@@ -28,7 +28,7 @@ from adaptenv.scene.procedural.config import GenerationConfig, GenerationError, 
 from adaptenv.scene.procedural.doors import stage_doors, stage_windows
 from adaptenv.scene.procedural.furniture import replace_movables, stage_floor_objects
 from adaptenv.scene.procedural.structure import stage_lights, stage_structure, stage_walls
-from adaptenv.sim.spec import TARGET_TYPES
+from adaptenv.vocabulary import TARGET_TYPES
 
 
 class Stage(Protocol):

@@ -1,0 +1,166 @@
+"""One adaptation step, ``e_{t+1} = G(e_t, F(tau))`` with pi_t in G's context: the only copy of it.
+
+:func:`adapt_scene` is what ``adaptenv adapt``, the closed loop's generation job, ``adaptenv bench
+adapt`` and the demo all run::
+
+    result = adapt_scene(house, episode, policy=pi_t, analyzer=BuiltinAnalyzer(),
+                         generator=make_generator("builtin"), steps=5, rng=np.random.default_rng(0))
+
+It rolls pi_t out (unless the caller already has that trajectory), analyses the episode (F), lets
+G edit the house one object at a time while checking candidates against pi_t (the paper's
+``argmin_{e'} R(pi_t, e')``) and verifying each edit, validates the final house as a whole, and
+rolls pi_t out again in the edited house on the same episode. :func:`summarize` adds the figures a
+person reads (objectives, realism, expert check) and :func:`write_outputs` writes them.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from adaptenv.adapt.analysis import Analysis, Analyzer
+from adaptenv.adapt.generators import GenerationContext, GenerationResult, Generator
+from adaptenv.adapt.objectives import RouteSpec, measure, realism_score
+from adaptenv.adapt.validation import validate_scene
+from adaptenv.agents.policy import ExpertPolicy, Policy, as_policy
+from adaptenv.agents.rollout import rollout
+from adaptenv.render.topdown import render_house, save_render
+from adaptenv.scene.house import House, save_house
+from adaptenv.scene.validate import validate_house
+from adaptenv.sim.geodesic import is_solvable
+from adaptenv.sim.task import Episode
+from adaptenv.sim.trajectory import Trajectory
+from adaptenv.sim.world import NavWorld, compile_world
+
+
+@dataclass
+class AdaptResult:
+    """What one adaptation step produced: e_{t+1}, F's analysis, G's edit log and both rollouts of pi_t."""
+
+    house: House
+    """The edited house e_{t+1} (check :attr:`valid` before training on it)."""
+    original: House
+    episode: Episode
+    analysis: Analysis
+    generation: GenerationResult
+    """G's steps: each edit's intent (suggestion), status, verified flag and achieved move; token usage."""
+    before: Trajectory
+    """pi_t's episode in the original house (what F analysed)."""
+    after: Trajectory
+    """pi_t's episode in the edited house, same start and target."""
+    problems: list[str] = field(default_factory=list)
+    """Final validation of the whole edited house (empty when valid)."""
+    world: NavWorld | None = None
+    """The compiled edited house (reused by callers that roll out again)."""
+
+    @property
+    def valid(self) -> bool:
+        return not self.problems
+
+    @property
+    def edits_applied(self) -> int:
+        return len(self.generation.applied)
+
+    @property
+    def edits_verified(self) -> int:
+        return sum(1 for s in self.generation.steps if s.status == "applied" and s.verified)
+
+
+def adapt_scene(house: House, episode: Episode, *, policy: Policy, analyzer: Analyzer, generator: Generator,
+                steps: int, rng: np.random.Generator, before: Trajectory | None = None, name: str = "house",
+                rollout_episodes: int = 3, render: bool = False, render_dir: Path | None = None) -> AdaptResult:
+    """Adapt ``house`` to ``policy`` on ``episode``: rollout -> F -> G (with pi_t) -> final validation -> rollout.
+
+    Args:
+        house: the environment e_t (not modified).
+        episode: the task F and G work on (target type, start pose, seed).
+        policy: pi_t; a batched :class:`~adaptenv.agents.policy.Policy` or a per-step callable.
+        analyzer: F (``BuiltinAnalyzer`` or ``LLMAnalyzer``).
+        generator: G (``make_generator("builtin" | "llm" | "random")``).
+        steps: single-object edits to make.
+        rng: G's random stream (the built-in G is deterministic and ignores it).
+        before: pi_t's trajectory on ``episode`` in ``house`` when the caller already has it.
+        rollout_episodes: episodes (same start and target, spread headings) per check of a candidate edit.
+        render: re-render after every edit (the LLM generator always does); ``render_dir`` keeps them.
+    """
+    policy = as_policy(policy)
+    world = compile_world(house, name)
+    if before is None:
+        before = rollout(world, episode, policy)
+    analysis = analyzer.analyze(before, world)
+    context = GenerationContext(episode=episode, trajectory=before, policy=policy,
+                                rollout_episodes=rollout_episodes, render=render, out_dir=render_dir)
+    generation = generator.generate(house, analysis, steps=steps, context=context, rng=rng)
+    new = generation.house
+    problems = [str(p) for p in validate_scene(new, episode_targets=[episode.target_type], start=episode.start[:2],
+                                               original=house)]
+    problems += [p.message for p in validate_house(new)]
+    new_world = compile_world(new, name)
+    after = rollout(new_world, episode, policy)
+    return AdaptResult(new, house, episode, analysis, generation, before, after, problems, new_world)
+
+
+def summarize(result: AdaptResult, *, analyzer: str, seed: int | None = None) -> dict[str, Any]:
+    """The figures a person reads about one step: agent before/after, objectives, realism, expert check."""
+    ep = result.episode
+    world, new_world = compile_world(result.original, "before"), result.world or compile_world(result.house, "after")
+    expert = rollout(new_world, ep, ExpertPolicy())
+    route = RouteSpec.from_episode(ep.target_type, ep.start, result.before)
+    gen = result.generation
+    return {
+        "house": result.before.house, "policy": result.before.policy, "analyzer": analyzer, "generator": gen.generator, "seed": seed,
+        "episode": {"target_type": ep.target_type, "start": list(ep.start), "seed": ep.seed},
+        "steps_requested": len(gen.steps), "edits_applied": result.edits_applied,
+        "edits_verified": result.edits_verified,
+        "agent_before": _agent(result.before), "agent_after": _agent(result.after),
+        "objective_before": measure(world, route).as_dict(), "objective_after": measure(new_world, route).as_dict(),
+        "realism_before": realism_score(result.original, result.original),
+        "realism_after": realism_score(result.house, result.original),
+        "expert_solvable": bool(is_solvable(new_world, ep)), "expert_success_after": bool(expert.metrics.success),
+        "valid": result.valid, "problems": result.problems, "usage": gen.usage,
+    }
+
+
+def _agent(traj: Trajectory) -> dict[str, Any]:
+    m = traj.metrics
+    return {"success": m.success, "spl": m.spl, "steps": m.episode_length}
+
+
+def write_outputs(result: AdaptResult, summary: dict[str, Any], out: Path) -> dict[str, Path]:
+    """Write the adapted house, before/after renders, analysis, edit log, trajectories and summary into ``out``."""
+    out.mkdir(parents=True, exist_ok=True)
+    files = {"house": save_house(result.house, out / "house.json")}
+    moved = {e.object_id: "gold" for e in result.generation.applied}
+    files["before_png"] = save_render(render_house(result.original, trajectory=result.before, grid=True,
+                                                   title="before"), out / "before.png")
+    files["after_png"] = save_render(render_house(result.house, trajectory=result.after, grid=True,
+                                                  highlight=moved or None, title="after (moved objects in gold)"),
+                                     out / "after.png")
+    files["analysis"] = _write_json(out / "analysis.json", result.analysis.model_dump(mode="json"))
+    files["edits"] = _write_json(out / "edits.json", result.generation.to_json_dict())
+    files["trajectory_before"] = result.before.save(out / "trajectory_before.json")
+    files["trajectory_after"] = result.after.save(out / "trajectory_after.json")
+    files["summary"] = _write_json(out / "summary.json", summary)
+    return files
+
+
+def _write_json(path: Path, doc: Any) -> Path:
+    path.write_text(json.dumps(doc, indent=1, default=_json_default), encoding="utf-8")
+    return path
+
+
+def _json_default(x: Any) -> Any:
+    if isinstance(x, (np.floating, np.integer)):
+        return x.item()
+    if isinstance(x, float) and not math.isfinite(x):
+        return None
+    if isinstance(x, Path):
+        return str(x)
+    raise TypeError(f"not JSON serializable: {type(x).__name__}")
+
+

@@ -1,0 +1,264 @@
+"""Curriculum methods as strategies: which scenes pi_t is rolled out in, which scenes are made, what is trained on.
+
+:func:`~adaptenv.curriculum.loop.run_loop` calls the same hooks of every method, in this order,
+each iteration t (the split JaxUED's examples use between a resettable environment and the level
+sampler):
+
+1. :meth:`Method.scenes_to_roll_out`: the scenes pi_t plays once each (analysed or scored);
+2. the loop rolls pi_t out in them (and the expert, for regret);
+3. :meth:`Method.update_buffer`: what goes into the level buffer, scored by regret (PLR, ACCEL);
+4. :meth:`Method.make_scenes`: the new training scenes e_{t+1};
+5. :meth:`Method.train_on`: the scenes pi_t is fine-tuned on.
+
+A method is one class registered in :data:`METHODS`; adding one is a new class and one registry
+line (see docs/curriculum.md). Hooks read and change only the :class:`Iteration` they are given;
+every random choice comes from a named :class:`Stream` of ``(seed, t)``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from enum import IntEnum
+from pathlib import Path
+from typing import TYPE_CHECKING, ClassVar
+
+import numpy as np
+
+from adaptenv.curriculum import buffer as lb
+from adaptenv.curriculum.executor import Executor
+from adaptenv.curriculum.gallery import gallery_item
+from adaptenv.curriculum.jobs import (
+    GenerateJob,
+    GeneratorKind,
+    PolicyWeights,
+    Rollout,
+    run_generate,
+)
+from adaptenv.curriculum.records import GalleryItem, SceneStore
+from adaptenv.scene.procedural import generate_house
+
+if TYPE_CHECKING:
+    from adaptenv.curriculum.loop import LoopConfig, LoopState
+
+
+class Stream(IntEnum):
+    """The independent random streams of one iteration: ``np.random.default_rng([seed, t, stream])``."""
+
+    ACCEL_REPLAY = 1
+    """ACCEL: which buffer levels are replayed (and edited)."""
+    ACCEL_PARENTS = 2
+    """ACCEL: the seeds of the children's random edits."""
+    FRESH_HOUSES = 3
+    """DR and PLR: seeds of fresh procedural houses."""
+    ROLLOUT_EPISODES = 4
+    """The episodes pi_t plays in the rolled-out scenes."""
+    REPLAY = 5
+    """PLR (and ACCEL's first iteration): which buffer levels are trained on."""
+    ARCHIVE_MIX = 6
+    """Methods that make scenes: which earlier scenes are mixed into fine-tuning."""
+    FINETUNE = 7
+    """Fine-tuning (episode draws, minibatches)."""
+    GENERATE = 100
+    """Scene generation; job k of the iteration uses ``[seed, t, GENERATE + k]``."""
+
+
+@dataclass
+class Iteration:
+    """What a method's hooks see and change during iteration t; the loop owns it and saves what persists."""
+
+    t: int
+    cfg: LoopConfig
+    state: LoopState
+    store: SceneStore
+    buffer: lb.LevelBufferState
+    buffer_cfg: lb.LevelBufferConfig
+    weights: PolicyWeights
+    """pi_t as plain data (jobs carry it to workers)."""
+    executor: Executor
+    run_dir: Path
+    gallery: list[GalleryItem] = field(default_factory=list)
+    parents: dict[str, str] = field(default_factory=dict)
+    """Rolled-out scene -> the buffer level it was made from (ACCEL's children)."""
+    replayed: list[str] = field(default_factory=list)
+    """Buffer levels replayed this iteration (ACCEL trains on them)."""
+
+    def rng(self, stream: Stream) -> np.random.Generator:
+        """The generator of one named purpose of this iteration, independent of every other."""
+        return np.random.default_rng([self.cfg.seed, self.t, int(stream)])
+
+    def seed(self, stream: Stream, *words: int) -> int:
+        """A 32-bit seed of one named purpose (for procedural houses, episodes and fine-tuning)."""
+        return int(np.random.SeedSequence([self.cfg.seed, self.t, int(stream), *words]).generate_state(1)[0])
+
+
+class Method:
+    """The default hooks; each method overrides what it does differently."""
+
+    name: ClassVar[str]
+    replaces_parents: ClassVar[bool] = False
+    """Made scenes take their parents' places in the pool (scene-editing methods)."""
+
+    def scenes_to_roll_out(self, it: Iteration) -> list[str]:
+        """The next ``scenes_per_iteration`` scenes of the pool, round robin."""
+        pool, n = it.state.pool, it.cfg.scenes_per_iteration
+        first = (it.t - 1) * n % len(pool)
+        return [pool[(first + k) % len(pool)] for k in range(min(n, len(pool)))]
+
+    def update_buffer(self, it: Iteration, rolled: list[str], rollouts: list[Rollout]) -> None:
+        """Insert scored levels into the buffer (nothing by default)."""
+
+    def make_scenes(self, it: Iteration, rolled: list[str], rollouts: list[Rollout]) -> list[str]:
+        """The new training scenes e_{t+1} (none by default)."""
+        return []
+
+    def train_on(self, it: Iteration, rolled: list[str], new: list[str]) -> list[str]:
+        """The new scenes plus earlier ones (``replay_fraction`` of the mix) so the policy does not forget."""
+        state = it.state
+        if self.replaces_parents:
+            pool = list(state.pool)
+            for parent, child in zip(rolled, new, strict=True):
+                pool[pool.index(parent)] = child
+            state.pool = pool
+        n_replay = int(round(len(new) * it.cfg.replay_fraction / (1.0 - it.cfg.replay_fraction)))
+        earlier = state.archive
+        pick = it.rng(Stream.ARCHIVE_MIX).choice(len(earlier), size=min(n_replay, len(earlier)), replace=False)
+        state.archive = earlier + [x for x in new if x not in earlier]
+        return new + [earlier[i] for i in sorted(pick.tolist())]
+
+
+class NoNewScenes(Method):
+    """``none``: fine-tune on the original training scenes only (the control)."""
+
+    name = "none"
+
+    def train_on(self, it: Iteration, rolled: list[str], new: list[str]) -> list[str]:
+        return list(it.state.pool)
+
+
+class DomainRandomization(Method):
+    """``dr``: fresh procedural houses every iteration (open loop)."""
+
+    name = "dr"
+
+    def scenes_to_roll_out(self, it: Iteration) -> list[str]:
+        return fresh_houses(it, it.cfg.scenes_per_iteration)
+
+    def make_scenes(self, it: Iteration, rolled: list[str], rollouts: list[Rollout]) -> list[str]:
+        return rolled
+
+
+class EditingMethod(Method):
+    """Edit each rolled-out scene into a child with ``edit_steps`` single-object edits of one generator."""
+
+    generator: ClassVar[GeneratorKind]
+    tag: ClassVar[str]
+    """Letter in child names: ``house~t02a03`` is the child of iteration 2, job 3."""
+    replaces_parents = True
+
+    def make_scenes(self, it: Iteration, rolled: list[str], rollouts: list[Rollout]) -> list[str]:
+        jobs = [GenerateJob(self.generator, it.store.house(name), name, it.cfg.edit_steps,
+                            (it.cfg.seed, it.t, Stream.GENERATE + k), weights=it.weights, rollout=ro, llm=it.cfg.llm)
+                for k, (name, ro) in enumerate(zip(rolled, rollouts, strict=True))]
+        new = []
+        for k, (job, made) in enumerate(zip(jobs, it.executor.map(run_generate, jobs, desc="generation"), strict=True)):
+            it.state.edits += made.edits
+            new.append(it.store.put(f"{job.name.split('~')[0]}~t{it.t:02d}{self.tag}{k:02d}", made.house))
+            if len(it.gallery) < it.cfg.gallery:
+                it.gallery.append(gallery_item(it.run_dir, it.t, new[-1], job.house, made, rollouts[k].trajectory))
+        return new
+
+
+class RandomEdits(EditingMethod):
+    """``random``: random single-object edits of the rolled-out scenes (open loop, same edit budget)."""
+
+    name = "random"
+    generator = "random"
+    tag = "r"
+
+
+class Ours(EditingMethod):
+    """``ours``: the paper's adaptation step, built-in F and G with pi_t (:func:`~adaptenv.adapt.step.adapt_scene`)."""
+
+    name = "ours"
+    generator = "builtin"
+    tag = "a"
+
+
+class OursLLM(Ours):
+    """``ours-llm``: the same step with LLM-backed F and G (needs the config's ``llm`` section)."""
+
+    name = "ours-llm"
+    generator = "llm"
+
+
+class PLR(Method):
+    """``plr``: Robust PLR. Fresh houses are only scored by regret; training replays high-regret buffer levels."""
+
+    name = "plr"
+
+    def scenes_to_roll_out(self, it: Iteration) -> list[str]:
+        if it.buffer.size == 0:
+            return list(it.state.pool)  # seed the buffer with the original training scenes
+        return fresh_houses(it, it.cfg.scenes_per_iteration)
+
+    def update_buffer(self, it: Iteration, rolled: list[str], rollouts: list[Rollout]) -> None:
+        for name, ro in zip(rolled, rollouts, strict=True):
+            it.buffer = lb.insert(it.buffer, it.buffer_cfg, name, regret(ro), it.t, parent_id=it.parents.get(name))
+
+    def train_on(self, it: Iteration, rolled: list[str], new: list[str]) -> list[str]:
+        if it.replayed:
+            return list(it.replayed)
+        replay = lb.sample_replay(it.buffer, it.buffer_cfg, it.rng(Stream.REPLAY), it.t, k=it.cfg.scenes_per_iteration)
+        it.buffer = lb.update_scores(it.buffer, list(replay), [it.buffer.scores[i] for i in replay], it.t)
+        return [it.buffer.level_ids[i] for i in replay]
+
+
+class ACCEL(PLR):
+    """``accel``: replayed high-regret levels get random edits; the children are scored and inserted.
+
+    Gradient steps go to the replayed parents (the children were only scored); the first
+    iteration seeds the buffer with the training scenes and trains on a replay of them.
+    """
+
+    name = "accel"
+
+    def scenes_to_roll_out(self, it: Iteration) -> list[str]:
+        if it.buffer.size == 0:
+            return list(it.state.pool)
+        idx = lb.sample_replay(it.buffer, it.buffer_cfg, it.rng(Stream.ACCEL_REPLAY), it.t,
+                               k=it.cfg.scenes_per_iteration)
+        it.replayed = [it.buffer.level_ids[i] for i in idx]
+        it.buffer = lb.update_scores(it.buffer, list(idx), [it.buffer.scores[i] for i in idx], it.t)
+        plans = lb.select_parents(it.buffer, idx, it.rng(Stream.ACCEL_PARENTS))
+        jobs = [GenerateJob("random", it.store.house(p.parent_id), p.parent_id, it.cfg.edit_steps, (p.seed,))
+                for p in plans]
+        children = []
+        for k, (plan, made) in enumerate(zip(plans, it.executor.map(run_generate, jobs, desc="ACCEL edits"),
+                                             strict=True)):
+            name = it.store.put(f"{plan.parent_id.split('~')[0]}~t{it.t:02d}c{k:02d}", made.house)
+            it.state.edits += made.edits
+            it.parents[name] = plan.parent_id
+            children.append(name)
+            if len(it.gallery) < it.cfg.gallery:
+                it.gallery.append(gallery_item(it.run_dir, it.t, name, jobs[k].house, made, None))
+        return children
+
+
+def regret(ro: Rollout) -> float:
+    """A level's score: the expert's measured success on pi_t's episode minus pi_t's (0 where the expert fails too)."""
+    return lb.regret_score(float(ro.result.success), ro.result.spl, float(ro.expert_success))
+
+
+def fresh_houses(it: Iteration, k: int) -> list[str]:
+    """``k`` new procedural houses (domain randomization), named ``drNNNN`` and stored."""
+    out = []
+    for _ in range(k):
+        house_seed = it.seed(Stream.FRESH_HOUSES, it.state.generated) % 2**31
+        out.append(it.store.put(f"dr{it.state.generated:04d}", generate_house(house_seed)))
+        it.state.generated += 1
+    return out
+
+
+#: Every method by name; add a method with one class and one line here.
+METHODS: dict[str, type[Method]] = {m.name: m for m in (NoNewScenes, RandomEdits, DomainRandomization, PLR, ACCEL,
+                                                        Ours, OursLLM)}

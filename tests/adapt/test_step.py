@@ -1,0 +1,126 @@
+"""The adaptation step end to end (rollout, F, G with pi_t, validation, after-rollout) and its one copy."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+from typer.testing import CliRunner
+
+from adaptenv.adapt.analysis import BuiltinAnalyzer
+from adaptenv.adapt.generators import make_generator
+from adaptenv.adapt.step import adapt_scene, summarize, write_outputs
+from adaptenv.agents.policy import ExpertPolicy, StepFunctionPolicy, as_policy
+from adaptenv.agents.registry import load_pretrained
+from adaptenv.agents.rollout import (
+    checking_episodes,
+    draw_episode,
+    find_solved_episode,
+    rollout,
+    run_recorded,
+)
+from adaptenv.cli import app
+from adaptenv.curriculum.jobs import GenerateJob, PolicyWeights, Rollout, run_generate
+from adaptenv.scene.house import load_house, save_house
+from adaptenv.scene.validate import validate_house_file
+from adaptenv.sim.rollout import expert_policy
+from adaptenv.sim.task import Episode
+from adaptenv.sim.world import compile_world
+
+
+@pytest.fixture(scope="module")
+def house():
+    from adaptenv.scene.procedural import GenerationConfig, generate_house
+
+    return generate_house(5, GenerationConfig(n_rooms=4))
+
+
+def test_adapt_scene_writes_a_valid_house_and_reports(house, tmp_path):
+    world = compile_world(house, "h")
+    ep = draw_episode(world, np.random.default_rng([1, 1]))
+    res = adapt_scene(house, ep, policy=ExpertPolicy(), analyzer=BuiltinAnalyzer(),
+                      generator=make_generator("builtin", max_candidates=10), steps=2, rng=np.random.default_rng(1),
+                      name="h")
+    summary = summarize(res, analyzer="builtin", seed=1)
+    write_outputs(res, summary, tmp_path)
+    names = {"house.json", "before.png", "after.png", "analysis.json", "edits.json", "summary.json",
+             "trajectory_before.json", "trajectory_after.json"}
+    assert names <= {p.name for p in tmp_path.iterdir()}
+    assert validate_house_file(tmp_path / "house.json") == []
+    saved = json.loads((tmp_path / "summary.json").read_text())
+    assert saved["valid"] and saved["expert_solvable"] and saved["expert_success_after"]
+    assert saved["edits_applied"] == len(res.generation.applied) >= 1
+    assert set(saved["objective_before"]) == {"narrow_passage", "lengthen_route", "occlude_target", "add_clutter"}
+    edits = json.loads((tmp_path / "edits.json").read_text())
+    assert len(edits["steps"]) == 2 and edits["generator"] == "builtin"
+    assert json.loads((tmp_path / "analysis.json").read_text())["outcome"]["success"] is True
+    assert {o.id: o.position.x for o in load_house(tmp_path / "house.json").objects} == \
+        {o.id: o.position.x for o in res.house.objects}
+    assert res.original is house and res.before.metrics.success
+    # the after-rollout is pi_t's own episode in the edited house, from the same start
+    assert res.after.start == res.before.start and res.after.target_type == ep.target_type
+
+
+def test_g_sees_the_policy_and_verifies_its_edits(house):
+    world = compile_world(house, "h")
+    ep = draw_episode(world, np.random.default_rng([1, 1]))
+    res = adapt_scene(house, ep, policy=ExpertPolicy(), analyzer=BuiltinAnalyzer(),
+                      generator=make_generator("builtin", max_candidates=10), steps=2, rng=np.random.default_rng(1))
+    applied = [s for s in res.generation.steps if s.status == "applied"]
+    assert applied and all(s.policy_score_before is not None for s in applied)
+    assert res.edits_verified == sum(1 for s in applied if s.verified) >= 1
+
+
+def test_per_step_callables_become_one_policy_at_the_edge(house):
+    world = compile_world(house, "h")
+    found = find_solved_episode(world, ExpertPolicy(), np.random.default_rng(0))
+    assert found is not None
+    ep, batched = found
+    wrapped = as_policy(expert_policy())
+    assert isinstance(wrapped, StepFunctionPolicy) and as_policy(wrapped) is wrapped
+    per_step = rollout(world, ep, wrapped)
+    assert batched.metrics.success and per_step.metrics.success
+    assert [s.pose for s in batched.steps] == [s.pose for s in per_step.steps]
+
+
+def test_random_generator_through_the_step(house):
+    world = compile_world(house, "h")
+    ep = draw_episode(world, np.random.default_rng([2, 1]))
+    res = adapt_scene(house, ep, policy=expert_policy(), analyzer=BuiltinAnalyzer(),
+                      generator=make_generator("random"), steps=1, rng=np.random.default_rng(2))
+    assert res.valid and res.generation.generator == "random"
+
+
+def test_checking_episodes_keep_start_and_target():
+    eps = checking_episodes(Episode("Bed", (1.0, 2.0, 30.0), seed=4), 3)
+    assert [e.start for e in eps] == [(1.0, 2.0, 30.0), (1.0, 2.0, 150.0), (1.0, 2.0, 270.0)]
+    assert {e.target_type for e in eps} == {"Bed"}
+
+
+@pytest.mark.slow
+def test_loop_generate_job_and_adapt_cli_make_the_same_house_and_log(house, tmp_path):
+    """The closed loop's `ours` runs exactly `adaptenv adapt`: same pi_t, episode and seed give the same child."""
+    path = save_house(house, tmp_path / "h.json")
+    out = tmp_path / "adapt"
+    result = CliRunner().invoke(app, ["adapt", str(path), "--policy", "pretrained", "--steps", "3", "--seed", "0",
+                                      "-o", str(out), "--json"])
+    assert result.exit_code == 0, result.output
+    cli_edits = json.loads((out / "edits.json").read_text())
+
+    world = compile_world(house, "h")
+    episode = draw_episode(world, np.random.default_rng([0, 1]))  # the CLI's episode draw for --seed 0
+    weights = PolicyWeights.of(load_pretrained())
+    [(res, traj)] = run_recorded(world, [episode], weights.policy())
+    made = run_generate(GenerateJob("builtin", house, "h", 3, (0,), weights=weights,
+                                    rollout=Rollout(episode, res, traj, True)))
+    assert made.house.to_dict() == load_house(out / "house.json").to_dict()
+
+    def steps(log):
+        return [{k: v for k, v in s.items() if k != "render"} for s in log["steps"]]
+
+    assert steps(made.edit_log) == steps(cli_edits)
+    assert made.edit_log["edit_log"] == cli_edits["edit_log"]
+    verified = [s["verified"] for s in cli_edits["steps"] if s["status"] == "applied"]
+    assert verified and [s["verified"] for s in made.edit_log["steps"] if s["status"] == "applied"] == verified
+    assert made.edits == sum(1 for s in cli_edits["steps"] if s["status"] == "applied")
