@@ -61,8 +61,6 @@ CONTAIN_TOLERANCE = 0.01
 #: Seats that ProcTHOR tucks under tables (and packs against each other).
 SEAT_TYPES = frozenset({"Chair", "Stool", "ArmChair"})
 TABLE_TYPES = frozenset({"DiningTable", "Desk", "CoffeeTable", "SideTable"})
-#: Cells up to this many cell sizes outside an object's inflated footprint are where the agent stands next to it.
-APPROACH_CELLS = 2
 
 ProblemKind = Literal["invalid", "outside_room", "crosses_wall", "overlap", "overlap_grew", "start_blocked", "no_start",
                       "room_unreachable", "doorway_blocked", "target_unreachable"]
@@ -114,13 +112,11 @@ def _mask_window(corners: np.ndarray, x0: float, z0: float, res: float, pad: int
 
 @dataclass
 class _Inflated:
-    """An object's inflated footprint (cells where it makes the agent disc not fit) and its ring."""
+    """An object's inflated footprint: the cells where it makes the agent disc not fit."""
 
     r0: int
     c0: int
     mask: np.ndarray
-    ring: np.ndarray
-    """Flat indices of the cells just outside the inflated footprint (where the agent stands next to it)."""
 
 
 class NavRaster:
@@ -149,16 +145,12 @@ class NavRaster:
         self.room = occ.room
 
     def inflate(self, corners: np.ndarray) -> _Inflated:
-        """Inflated footprint of a footprint (corners (4, 2)) and its approach ring."""
-        pad = self.pad + APPROACH_CELLS
-        r0, c0, m = _mask_window(corners, self.x0, self.z0, self.res, pad, self.shape)
+        """Inflated footprint of a footprint (corners (4, 2))."""
+        r0, c0, m = _mask_window(corners, self.x0, self.z0, self.res, self.pad, self.shape)
         # Distance to the footprint's cells gives the disc dilation exactly (same rule as the raster).
         dist = ndimage.distance_transform_edt(~m) * self.res
         clear = np.maximum(dist - 0.5 * self.res, 0.0).astype(np.float32)
-        inflated = clear < self.radius
-        ring = ~inflated & (clear < self.radius + APPROACH_CELLS * self.res)
-        rr, cc = np.nonzero(ring)
-        return _Inflated(r0, c0, inflated, (rr + r0) * self.shape[1] + (cc + c0))
+        return _Inflated(r0, c0, clear < self.radius)
 
     def _add(self, inf: _Inflated, sign: int, count: np.ndarray | None = None) -> None:
         count = self.count if count is None else count
@@ -499,12 +491,16 @@ class EditValidator:
         return region[:, keep]
 
     # ---------------------------------------------------------------- checks
-    def _check(self, nav: np.ndarray, moved: int, inf: _Inflated, corners: np.ndarray) -> list[ValidationProblem]:
-        """Problems of the candidate navigable raster (rooms, doorways, targets, start)."""
+    def _check(self, nav: np.ndarray, moved: int, corners: np.ndarray
+               ) -> tuple[list[ValidationProblem], list[str], np.ndarray | None]:
+        """Problems of the candidate navigable raster (start, rooms, doorways), the target types the
+        cached success regions cannot prove reachable (the exact check decides those), and the start's
+        4-connected component (flat bool; None when the start is blocked)."""
         if self.start_cell is None:
-            return [ValidationProblem("no_start", "the house has no start pose; set one with House.set_agent_pose")]
+            return [ValidationProblem("no_start", "the house has no start pose; set one with House.set_agent_pose")], \
+                [], None
         if not nav[self.start_cell]:
-            return [ValidationProblem("start_blocked", "the agent would no longer fit at its start")]
+            return [ValidationProblem("start_blocked", "the agent would no longer fit at its start")], [], None
         labels, _ = ndimage.label(nav)
         flat = labels.ravel()
         comp = flat[self.start_cell[0] * nav.shape[1] + self.start_cell[1]]
@@ -516,18 +512,15 @@ class EditValidator:
         for d in sorted(self.need_doors):
             if not (flat[self.doors[d]] == comp).any():
                 problems.append(ValidationProblem("doorway_blocked", f"the doorway {d} would be blocked", (d,)))
+        unproven = []
         for t in sorted(self.need_targets):
             # A cached success region stays valid (as a subset) away from a moved occluder or t.
             region = self.regions.get(t)
             if region is not None and self._affects(moved, t):
                 region = self._still_valid(region, moved, t, corners)
-            if region is not None and (flat[region[0].astype(np.int64)] == comp).any():
-                continue
-            rings = [inf.ring if k == moved else self.raster.objects[k].ring for k in self.of_type.get(t, ())]
-            if not any((flat[ring] == comp).any() for ring in rings):
-                problems.append(ValidationProblem("target_unreachable", f"no {t} could be reached from the start",
-                                                  (t,)))
-        return problems
+            if region is None or not (flat[region[0].astype(np.int64)] == comp).any():
+                unproven.append(t)
+        return problems, unproven, flat == comp
 
     def _affects(self, i: int, target_type: str) -> bool:
         """Whether moving object i can change where ``target_type`` is visible from (tall, or a target itself)."""
@@ -570,15 +563,16 @@ class EditValidator:
         center = self.ctx.centers[i] + np.array(res.achieved)
         corners = self.ctx.corners(i, center, res.yaw_after)
         inf = self.raster.inflate(corners)
-        problems = self._check(self.raster.navigable_with(i, inf), i, inf, corners)
-        missing = frozenset(p.object_ids[0] for p in problems if p.kind == "target_unreachable")
+        problems, unproven, component = self._check(self.raster.navigable_with(i, inf), i, corners)
         world = None
-        if missing and len(missing) == len(problems):
-            # The cached regions and approach rings are conservative; the exact geodesic check decides.
+        if unproven:
+            # The cached regions prove most targets reachable; the exact success regions decide the rest
+            # (a finite geodesic distance is a success-region cell in the start's 4-connected component).
             world = self._trial_world(i, center, res.yaw_after)
-            problems = [p for p in problems if not _world_reaches(world, p.object_ids[0], self.start)]
+            problems += [ValidationProblem("target_unreachable", f"no {t} could be reached from the start", (t,))
+                         for t in unproven if not component[success_region(world, t).ravel()].any()]
         return Proposal(**request, problems=tuple(problems), center=center, corners=corners, inflated=inf,
-                        exact_world=world, exact_targets=missing if world is not None else frozenset())
+                        exact_world=world, exact_targets=frozenset(unproven))
 
     def commit(self, proposal: Proposal, *, source: str = "manual", intent: str = "") -> Edit:
         """Apply a proposal from :meth:`propose` when it has no problems, log it either way; returns the Edit.
