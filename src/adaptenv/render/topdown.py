@@ -15,6 +15,7 @@ Example:
 
 from __future__ import annotations
 
+import io
 import math
 from dataclasses import dataclass
 from pathlib import Path
@@ -721,6 +722,13 @@ def render_house(house: House | None = None, *, trajectory: Trajectory | None = 
     """
     return render_map(house, trajectory=trajectory, grid=grid, size=size, highlight=highlight, labels=labels,
                       title=title, geometry=geometry, legend=legend).image
+
+
+def png_bytes(image: Image.Image) -> bytes:
+    """PNG encoding of a render (what the LLM backends send)."""
+    buf = io.BytesIO()
+    image.save(buf, format="PNG")
+    return buf.getvalue()
 
 
 def save_render(image: Image.Image, path: str | Path) -> Path:
