@@ -150,7 +150,8 @@ def _found(problems) -> list[tuple[str, tuple[str, ...]]]:
     return sorted((p.kind, p.object_ids) for p in problems)
 
 
-proposal_st = st.tuples(st.integers(0, 10_000), st.booleans(), st.integers(0, 100), st.floats(-30, 30),
+# Three in four proposals move an object onto a doorway, so that rejections are common.
+proposal_st = st.tuples(st.integers(0, 10_000), st.integers(0, 3).map(bool), st.integers(0, 100), st.floats(-30, 30),
                         st.floats(-30, 30), st.floats(0.8, 1.1), st.one_of(st.none(), st.floats(0, 355)))
 
 
