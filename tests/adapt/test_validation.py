@@ -11,7 +11,14 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from adaptenv.adapt.edits import Edit, apply_edit
-from adaptenv.adapt.validation import EditValidator, NavRaster, check_edit, validate_scene
+from adaptenv.adapt.generators._trial import edited_copy
+from adaptenv.adapt.validation import (
+    EditValidator,
+    NavRaster,
+    StaleProposalError,
+    check_edit,
+    validate_scene,
+)
 from adaptenv.scene.geometry import SceneGeometry
 from adaptenv.scene.house import load_house
 from adaptenv.scene.occupancy import rasterize
@@ -115,3 +122,80 @@ def test_episode_targets_are_kept_reachable():
     assert v.need_targets == {"GarbageCan"}
     edit = v.try_edit("Bed|0", 18.125, 0.0)
     assert not edit.accepted and any("GarbageCan" in p or "room|1" in p for p in edit.problems)
+
+
+# --------------------------------------------------------------------------- propose / commit / try_edit
+
+@cache
+def _generated_houses():
+    from adaptenv.scene.procedural import GenerationConfig, generate_house
+
+    return tuple(generate_house(seed, GenerationConfig(n_rooms=4)) for seed in range(3))
+
+
+def _request(v: EditValidator, edit: tuple) -> tuple[str, float, float, float | None]:
+    """A random move, or a move of the object onto a doorway (the edits that get rejected)."""
+    k, onto_door, door, dx, dy, frac, yaw = edit
+    ids = [oid for oid, m in zip(v.ctx.ids, v.ctx.movable, strict=True) if m]
+    oid = ids[k % len(ids)]
+    if onto_door:
+        doors = [d for d in v.geometry.doors if d.passable]
+        d = doors[door % len(doors)]
+        to = (np.add(d.p0, d.p1) / 2 - v.ctx.centers[v.ctx.index[oid]]) * frac * v.ctx.grid.units_per_meter
+        dx, dy = float(to[0]), float(to[1])
+    return oid, dx, dy, yaw
+
+
+def _found(problems) -> list[tuple[str, tuple[str, ...]]]:
+    return sorted((p.kind, p.object_ids) for p in problems)
+
+
+# Three in four proposals move an object onto a doorway, so that rejections are common.
+proposal_st = st.tuples(st.integers(0, 10_000), st.integers(0, 3).map(bool), st.integers(0, 100), st.floats(-30, 30),
+                        st.floats(-30, 30), st.floats(0.8, 1.1), st.one_of(st.none(), st.floats(0, 355)))
+
+
+@settings(max_examples=8, deadline=None, derandomize=True, suppress_health_check=[HealthCheck.too_slow])
+@given(which=st.integers(0, 2), edits=st.lists(proposal_st, min_size=1, max_size=3))
+def test_propose_commit_equals_try_edit_equals_validate_scene(which, edits):
+    house = _generated_houses()[which]
+    staged, direct = EditValidator(house), EditValidator(house)
+    for edit in edits:
+        oid, dx, dy, yaw = _request(staged, edit)
+        before = staged.house.model_copy(deep=True)
+        proposal = staged.propose(oid, dx, dy, yaw)
+        assert staged.house == before and len(staged.log) == len(direct.log)  # a dry run keeps nothing
+        res = proposal.result
+        if res.stop_reason == "invalid":
+            assert _found(proposal.problems) == [("invalid", (oid,))]
+        else:
+            edited = edited_copy(before, res)
+            assert _found(proposal.problems) == _found(validate_scene(edited, original=house))
+        committed = staged.commit(proposal, source="test")
+        tried = direct.try_edit(oid, dx, dy, yaw, source="test")
+        assert committed == tried
+        assert committed.accepted == proposal.valid
+        assert staged.house == direct.house
+        assert staged.house == (edited if proposal.valid and res.changed else before)
+
+
+def test_a_proposal_is_refused_after_another_commit_or_by_another_validator():
+    house = door_house()
+    v = EditValidator(house)
+    first, second = v.propose("Chair|2", 5.0, 0.0), v.propose("Chair|2", 0.0, 5.0)
+    assert first.valid and second.valid
+    with pytest.raises(StaleProposalError, match="another EditValidator"):
+        EditValidator(house).commit(first)
+    assert v.commit(first).accepted
+    with pytest.raises(StaleProposalError, match="propose again"):
+        v.commit(second)
+    assert v.commit(v.propose("Chair|2", 0.0, 5.0)).accepted
+
+
+def test_a_rejected_proposal_commits_as_a_logged_rejection():
+    v = EditValidator(door_house())
+    proposal = v.propose("Bed|0", 18.125, 0.0)
+    assert not proposal.valid and proposal.result.stop_reason == "reached"
+    edit = v.commit(proposal)
+    assert not edit.accepted and list(v.log) == [edit]
+    assert v.house == door_house()

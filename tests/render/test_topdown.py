@@ -14,6 +14,7 @@ from typer.testing import CliRunner
 
 from adaptenv.cli import app
 from adaptenv.errors import AdaptenvError
+from adaptenv.render import labels
 from adaptenv.render import topdown as td
 from adaptenv.render.topdown import render_house, render_map, render_to_file
 from adaptenv.scene.geometry import SceneGeometry
@@ -86,7 +87,7 @@ def test_every_floor_object_is_labelled_once_with_its_full_id(house):
     outside = [lab.box for lab in r.labels if not lab.inside]
     assert outside, "at 1024 px small objects need outside labels"
     boxes = np.array([lab.box for lab in r.labels])
-    ov = td._overlap(boxes, boxes)
+    ov = labels._overlap(boxes, boxes)
     np.fill_diagonal(ov, 0)
     assert ov.max() == 0, "two id labels overlap"
     w, h = r.image.size

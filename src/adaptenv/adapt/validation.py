@@ -20,8 +20,10 @@ against each other) may overlap.
 
 :class:`EditValidator` is the fast path the generators use: placement plus an incremental raster
 (only the moved object's inflated footprint is re-drawn) and one connected-component labelling
-per candidate; accepted edits update the scene, rejected ones leave it untouched, and both are
-logged as :class:`~adaptenv.adapt.edits.Edit` records.
+per candidate. Its public interface is three methods: ``propose`` (a dry run returning a
+:class:`Proposal`: the placement result and every problem, the scene unchanged), ``commit`` (apply
+a proposal without problems; log it either way as an :class:`~adaptenv.adapt.edits.Edit`) and
+``try_edit`` (both in one call).
 """
 
 from __future__ import annotations
@@ -43,20 +45,20 @@ from adaptenv.adapt.placement import (
     allowed_overlap,
     place_units,
 )
+from adaptenv.errors import AdaptenvError
 from adaptenv.scene.assets import AssetCatalog, load_catalog
 from adaptenv.scene.geometry import SceneGeometry, footprint_corners
 from adaptenv.scene.house import House, move_object
 from adaptenv.scene.occupancy import DEFAULT_RESOLUTION, LABEL_OBJECT0, OccupancyGrid, rasterize
+from adaptenv.sim.geodesic import geodesic_distance, success_region
 from adaptenv.sim.spec import AGENT_RADIUS, SUCCESS_DISTANCE, TARGET_TYPES
-from adaptenv.sim.world import compile_world
+from adaptenv.sim.world import NavWorld, compile_world
 from adaptenv.vocabulary import SEAT_TYPES, TABLE_TYPES
 
 #: Overlaps smaller than this (m^2) are touching, not overlapping.
 AREA_EPS = 1e-4
 #: How far (m) a footprint may stick out of its rooms or through a wall.
 CONTAIN_TOLERANCE = 0.01
-#: Cells up to this many cell sizes outside an object's inflated footprint are where the agent stands next to it.
-APPROACH_CELLS = 2
 
 ProblemKind = Literal["invalid", "outside_room", "crosses_wall", "overlap", "overlap_grew", "start_blocked", "no_start",
                       "room_unreachable", "doorway_blocked", "target_unreachable"]
@@ -108,13 +110,11 @@ def _mask_window(corners: np.ndarray, x0: float, z0: float, res: float, pad: int
 
 @dataclass
 class _Inflated:
-    """An object's inflated footprint (cells where it makes the agent disc not fit) and its ring."""
+    """An object's inflated footprint: the cells where it makes the agent disc not fit."""
 
     r0: int
     c0: int
     mask: np.ndarray
-    ring: np.ndarray
-    """Flat indices of the cells just outside the inflated footprint (where the agent stands next to it)."""
 
 
 class NavRaster:
@@ -143,16 +143,12 @@ class NavRaster:
         self.room = occ.room
 
     def inflate(self, corners: np.ndarray) -> _Inflated:
-        """Inflated footprint of a footprint (corners (4, 2)) and its approach ring."""
-        pad = self.pad + APPROACH_CELLS
-        r0, c0, m = _mask_window(corners, self.x0, self.z0, self.res, pad, self.shape)
+        """Inflated footprint of a footprint (corners (4, 2))."""
+        r0, c0, m = _mask_window(corners, self.x0, self.z0, self.res, self.pad, self.shape)
         # Distance to the footprint's cells gives the disc dilation exactly (same rule as the raster).
         dist = ndimage.distance_transform_edt(~m) * self.res
         clear = np.maximum(dist - 0.5 * self.res, 0.0).astype(np.float32)
-        inflated = clear < self.radius
-        ring = ~inflated & (clear < self.radius + APPROACH_CELLS * self.res)
-        rr, cc = np.nonzero(ring)
-        return _Inflated(r0, c0, inflated, (rr + r0) * self.shape[1] + (cc + c0))
+        return _Inflated(r0, c0, clear < self.radius)
 
     def _add(self, inf: _Inflated, sign: int, count: np.ndarray | None = None) -> None:
         count = self.count if count is None else count
@@ -230,10 +226,8 @@ def _reachable(nav: np.ndarray, start_cell: tuple[int, int] | None, room: np.nda
     return Reachability(True, rooms, door_ok), comp
 
 
-def _world_reaches(world, target_type: str, start: tuple[float, float]) -> bool:
+def _world_reaches(world: NavWorld, target_type: str, start: tuple[float, float]) -> bool:
     """Whether the target type's success region is reachable from the start (finite geodesic distance)."""
-    from adaptenv.sim.geodesic import geodesic_distance
-
     return bool(world.instances_of(target_type)) and math.isfinite(geodesic_distance(world, target_type, *start))
 
 
@@ -384,6 +378,39 @@ def validate_scene(house: House, *, episode_targets: list[str] | None = None, st
 
 # --------------------------------------------------------------------------- the fast path for generators
 
+class StaleProposalError(AdaptenvError):
+    """A proposal was committed to a scene other than the one it was checked against."""
+
+
+@dataclass(frozen=True, eq=False)
+class Proposal:
+    """A dry-run edit from :meth:`EditValidator.propose`: the request, placement, problems, and what commit needs."""
+
+    object_id: str
+    dx_units: float
+    dy_units: float
+    rotation: float | None
+    result: PlacementResult
+    """Where placement put the object (``result.changed`` is False when it could not move at all)."""
+    problems: tuple[ValidationProblem, ...]
+    """Every reason the edited scene would be invalid; empty when the edit may be committed."""
+    owner: object
+    version: int
+    """The validator and its state (number of committed edits) the proposal was checked against."""
+    center: np.ndarray | None = None
+    corners: np.ndarray | None = None
+    inflated: _Inflated | None = None
+    """The moved object's new centre, footprint corners and inflated raster footprint (when it moved)."""
+    exact_world: NavWorld | None = None
+    exact_targets: frozenset[str] = frozenset()
+    """The world compiled for the exact geodesic check and the target types it decided, if it ran."""
+
+    @property
+    def valid(self) -> bool:
+        """Whether :meth:`EditValidator.commit` would apply it (no problems)."""
+        return not self.problems
+
+
 class EditValidator:
     """Try edits on a scene: place, validate incrementally, keep valid ones, log all.
 
@@ -391,6 +418,8 @@ class EditValidator:
         >>> v = EditValidator(house, episode_targets=["Bed"])  # doctest: +SKIP
         >>> edit = v.try_edit("Chair|3|0|1", 20, 5, source="random")  # doctest: +SKIP
         >>> edit.accepted, edit.stop_reason, v.house  # doctest: +SKIP
+        >>> p = v.propose("Chair|3|0|1", -10, 0)  # dry run: v.house is unchanged  # doctest: +SKIP
+        >>> if p.valid: v.commit(p, source="search")  # doctest: +SKIP
     """
 
     def __init__(self, house: House, *, episode_targets: list[str] | None = None, start: Start | None = None,
@@ -423,11 +452,11 @@ class EditValidator:
         self.objects = {obj.id: obj for obj in self.house.objects}
         self.log = EditLog()
         self._witness: dict[str, int] = {}
+        self._owner = object()  # proposals remember which validator, and which of its states, they were made on
+        self._version = 0
 
-    def _refresh_regions(self, world, types: set[str] | None = None) -> None:
+    def _refresh_regions(self, world: NavWorld, types: set[str] | None = None) -> None:
         """Cache each needed target type's success region (flat indices) from an exactly compiled world."""
-        from adaptenv.sim.geodesic import success_region
-
         w = self.raster.shape[1]
         for t in types if types is not None else self.need_targets:
             if not world.instances_of(t):
@@ -460,12 +489,16 @@ class EditValidator:
         return region[:, keep]
 
     # ---------------------------------------------------------------- checks
-    def _check(self, nav: np.ndarray, moved: int, inf, corners: np.ndarray) -> list[ValidationProblem]:
-        """Problems of the candidate navigable raster (rooms, doorways, targets, start)."""
+    def _check(self, nav: np.ndarray, moved: int, corners: np.ndarray
+               ) -> tuple[list[ValidationProblem], list[str], np.ndarray | None]:
+        """Problems of the candidate navigable raster (start, rooms, doorways), the target types the
+        cached success regions cannot prove reachable (the exact check decides those), and the start's
+        4-connected component (flat bool; None when the start is blocked)."""
         if self.start_cell is None:
-            return [ValidationProblem("no_start", "the house has no start pose; set one with House.set_agent_pose")]
+            return [ValidationProblem("no_start", "the house has no start pose; set one with House.set_agent_pose")], \
+                [], None
         if not nav[self.start_cell]:
-            return [ValidationProblem("start_blocked", "the agent would no longer fit at its start")]
+            return [ValidationProblem("start_blocked", "the agent would no longer fit at its start")], [], None
         labels, _ = ndimage.label(nav)
         flat = labels.ravel()
         comp = flat[self.start_cell[0] * nav.shape[1] + self.start_cell[1]]
@@ -477,18 +510,15 @@ class EditValidator:
         for d in sorted(self.need_doors):
             if not (flat[self.doors[d]] == comp).any():
                 problems.append(ValidationProblem("doorway_blocked", f"the doorway {d} would be blocked", (d,)))
+        unproven = []
         for t in sorted(self.need_targets):
             # A cached success region stays valid (as a subset) away from a moved occluder or t.
             region = self.regions.get(t)
             if region is not None and self._affects(moved, t):
                 region = self._still_valid(region, moved, t, corners)
-            if region is not None and (flat[region[0].astype(np.int64)] == comp).any():
-                continue
-            rings = [inf.ring if k == moved else self.raster.objects[k].ring for k in self.of_type.get(t, ())]
-            if not any((flat[ring] == comp).any() for ring in rings):
-                problems.append(ValidationProblem("target_unreachable", f"no {t} could be reached from the start",
-                                                  (t,)))
-        return problems
+            if region is None or not (flat[region[0].astype(np.int64)] == comp).any():
+                unproven.append(t)
+        return problems, unproven, flat == comp
 
     def _affects(self, i: int, target_type: str) -> bool:
         """Whether moving object i can change where ``target_type`` is visible from (tall, or a target itself)."""
@@ -506,45 +536,74 @@ class EditValidator:
             return True
         return False
 
-    def _trial_world(self, i: int, center: np.ndarray, yaw: float):
+    def _trial_world(self, i: int, center: np.ndarray, yaw: float) -> NavWorld:
         """The compiled world with object i at a candidate pose (slow; for the exact fallback)."""
-        floor_index = {f.object_id: k for k, f in enumerate(self.geometry.footprints)}
         fps = list(self.geometry.footprints)
-        k = floor_index[self.ctx.ids[i]]
+        k = next(k for k, f in enumerate(fps) if f.object_id == self.ctx.ids[i])
         fps[k] = replace(fps[k], center=(float(center[0]), float(center[1])), yaw=float(yaw) % 360.0)
-        geometry = replace(self.geometry, footprints=fps)
-        return compile_world(self.house, geometry=geometry), geometry
+        return compile_world(self.house, geometry=replace(self.geometry, footprints=fps))
 
     # ---------------------------------------------------------------- editing
+    def propose(self, object_id: str, dx_units: float, dy_units: float, rotation: float | None = None) -> Proposal:
+        """Dry run of one edit: place the object (grid units, absolute yaw) and validate; the scene is unchanged.
+
+        The returned :class:`Proposal` holds the placement result and every problem found; pass it
+        to :meth:`commit` to apply it (only valid while no other edit has been committed).
+        """
+        res = place_units(self.ctx, object_id, dx_units, dy_units, rotation, step=self.step)
+        request = dict(object_id=object_id, dx_units=float(dx_units), dy_units=float(dy_units), rotation=rotation,
+                       result=res, owner=self._owner, version=self._version)
+        if res.stop_reason == "invalid":
+            return Proposal(**request, problems=(ValidationProblem("invalid", res.message, (object_id,)),))
+        if not res.changed:
+            return Proposal(**request, problems=())
+        i = self.ctx.index[object_id]
+        center = self.ctx.centers[i] + np.array(res.achieved)
+        corners = self.ctx.corners(i, center, res.yaw_after)
+        inf = self.raster.inflate(corners)
+        problems, unproven, component = self._check(self.raster.navigable_with(i, inf), i, corners)
+        world = None
+        if unproven:
+            # The cached regions prove most targets reachable; the exact success regions decide the rest
+            # (a finite geodesic distance is a success-region cell in the start's 4-connected component).
+            world = self._trial_world(i, center, res.yaw_after)
+            problems += [ValidationProblem("target_unreachable", f"no {t} could be reached from the start", (t,))
+                         for t in unproven if not component[success_region(world, t).ravel()].any()]
+        return Proposal(**request, problems=tuple(problems), center=center, corners=corners, inflated=inf,
+                        exact_world=world, exact_targets=frozenset(unproven))
+
+    def commit(self, proposal: Proposal, *, source: str = "manual", intent: str = "") -> Edit:
+        """Apply a proposal from :meth:`propose` when it has no problems, log it either way; returns the Edit.
+
+        A rejected proposal (any problem) is logged as not accepted and changes nothing.
+
+        Raises:
+            StaleProposalError: the proposal was made by another validator, or before an edit
+                committed since (the scene it was checked against is gone).
+        """
+        if proposal.owner is not self._owner:
+            raise StaleProposalError(f"the proposal to move {proposal.object_id} was made by another EditValidator; "
+                                     "call propose on this one")
+        if proposal.version != self._version:
+            raise StaleProposalError(f"the proposal to move {proposal.object_id} was made before another edit was "
+                                     "committed; call propose again on the current scene")
+        res = proposal.result
+        if proposal.valid and res.changed:
+            self._apply(self.ctx.index[res.object_id], proposal)
+        return self._record(res, proposal.dx_units, proposal.dy_units, proposal.rotation, source, intent,
+                            list(proposal.problems), invalid=res.stop_reason == "invalid")
+
     def try_edit(self, object_id: str, dx_units: float, dy_units: float, rotation: float | None = None, *,
                  source: str = "manual", intent: str = "") -> Edit:
-        """Place the object (grid units, absolute yaw), validate, keep it if valid; returns the logged Edit."""
-        res = place_units(self.ctx, object_id, dx_units, dy_units, rotation, step=self.step)
-        problems: list[ValidationProblem] = []
-        if res.stop_reason == "invalid":
-            problems = [ValidationProblem("invalid", res.message, (object_id,))]
-            edit = self._record(res, dx_units, dy_units, rotation, source, intent, problems, invalid=True)
-            return edit
-        inf = None
-        if res.changed:
-            i = self.ctx.index[object_id]
-            center = self.ctx.centers[i] + np.array(res.achieved)
-            corners = self.ctx.corners(i, center, res.yaw_after)
-            inf = self.raster.inflate(corners)
-            problems = self._check(self.raster.navigable_with(i, inf), i, inf, corners)
-            missing = {p.object_ids[0] for p in problems if p.kind == "target_unreachable"}
-            world = None
-            if missing and len(missing) == len(problems):
-                # The cached regions and approach rings are conservative; the exact geodesic check decides.
-                world, _ = self._trial_world(i, center, res.yaw_after)
-                problems = [p for p in problems if not _world_reaches(world, p.object_ids[0], self.start)]
-            if not problems:
-                self._commit(i, center, res, inf, corners)
-                if world is not None:
-                    self._refresh_regions(world, missing)
-        return self._record(res, dx_units, dy_units, rotation, source, intent, problems)
+        """Place the object (grid units, absolute yaw), validate, keep it if valid; returns the logged Edit.
 
-    def _commit(self, i: int, center: np.ndarray, res: PlacementResult, inf, corners: np.ndarray) -> None:
+        The same as ``commit(propose(...))``.
+        """
+        return self.commit(self.propose(object_id, dx_units, dy_units, rotation), source=source, intent=intent)
+
+    def _apply(self, i: int, proposal: Proposal) -> None:
+        """Move object i to the proposal's pose in every cache (footprints, regions, context, raster, house)."""
+        res, center, corners = proposal.result, proposal.center, proposal.corners
         fps = self.geometry.footprints
         k = next(k for k, f in enumerate(fps) if f.object_id == res.object_id)
         fps[k] = replace(fps[k], center=(float(center[0]), float(center[1])), yaw=res.yaw_after % 360.0)
@@ -552,8 +611,11 @@ class EditValidator:
             if self.regions.get(t) is not None and self._affects(i, t):
                 self.regions[t] = self._still_valid(self.regions[t], i, t, corners)
         self.ctx.commit(i, center, res.yaw_after)
-        self.raster.commit(i, inf)
+        self.raster.commit(i, proposal.inflated)
         move_object(self.objects[res.object_id], res.achieved[0], res.achieved[1], res.yaw_after - res.yaw_before)
+        if proposal.exact_world is not None:
+            self._refresh_regions(proposal.exact_world, set(proposal.exact_targets))
+        self._version += 1
 
     def _record(self, res: PlacementResult, dx_units: float, dy_units: float, rotation: float | None, source: str,
                 intent: str, problems: list[ValidationProblem], invalid: bool = False) -> Edit:

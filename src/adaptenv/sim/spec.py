@@ -64,13 +64,6 @@ def class_id(object_type: str) -> int:
     return _FIRST_OBJECT_CLASS + object_classes().index(object_type)
 
 
-def class_name(cid: int) -> str:
-    """Inverse of :func:`class_id`; also names the structural classes."""
-    if cid < _FIRST_OBJECT_CLASS:
-        return ("none", "wall", "door", "window")[cid]
-    return object_classes()[cid - _FIRST_OBJECT_CLASS]
-
-
 def n_classes() -> int:
     return _FIRST_OBJECT_CLASS + len(object_classes())
 

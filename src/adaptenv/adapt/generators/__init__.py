@@ -22,7 +22,6 @@ absolute yaw in degrees (0 faces up on the map, 90 faces right).
 
 from __future__ import annotations
 
-import io
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Literal, Protocol, runtime_checkable
@@ -32,6 +31,7 @@ from pydantic import BaseModel, Field
 
 from adaptenv.adapt.edits import Edit, EditLog
 from adaptenv.errors import ConfigError
+from adaptenv.render.topdown import png_bytes
 
 if TYPE_CHECKING:
     from PIL import Image
@@ -131,13 +131,6 @@ class Generator(Protocol):
                  rng: np.random.Generator) -> GenerationResult:
         """Edit a copy of ``house``; never modifies the input."""
         ...
-
-
-def png_bytes(image: Image.Image) -> bytes:
-    """PNG encoding of a PIL image (what the LLM backends send)."""
-    buf = io.BytesIO()
-    image.save(buf, format="PNG")
-    return buf.getvalue()
 
 
 def render_scene(house: House, context: GenerationContext, *, highlight: dict[str, str] | None = None,

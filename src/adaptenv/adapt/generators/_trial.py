@@ -1,56 +1,19 @@
-"""Dry runs of an edit on an :class:`~adaptenv.adapt.validation.EditValidator`: place and check, keep nothing.
+"""Candidate scenes of a proposed edit, for scoring before it is committed.
 
-Generators that search over candidate moves need the placement result and the validation verdict
-of many proposals before committing one; :func:`trial_edit` runs the same placement and the same
-incremental checks as ``EditValidator.try_edit`` without changing the validator's scene, and
-:func:`edited_copy` builds the candidate house for scoring. Committing the chosen proposal with
-``try_edit`` afterwards gives the identical result (placement is deterministic).
-
-The incremental path mirrors ``try_edit``'s private checks; if the validator's internals change,
-it falls back to the exact :func:`~adaptenv.adapt.validation.validate_scene` on the edited copy.
+Generators that search over candidate moves dry-run each with
+:meth:`~adaptenv.adapt.validation.EditValidator.propose` (placement plus validation, the scene
+unchanged); :func:`edited_copy` and :func:`moved_geometry` build the candidate house and geometry
+from the proposal's placement result so objectives can be measured on it. The chosen proposal is
+then applied with :meth:`~adaptenv.adapt.validation.EditValidator.commit`.
 """
 
 from __future__ import annotations
 
 from dataclasses import replace
 
-import numpy as np
-
-from adaptenv.adapt.placement import PlacementResult, place_units
-from adaptenv.adapt.validation import EditValidator, ValidationProblem, validate_scene
+from adaptenv.adapt.placement import PlacementResult
 from adaptenv.scene.geometry import SceneGeometry
 from adaptenv.scene.house import House, move_object
-
-
-def trial_edit(v: EditValidator, object_id: str, dx_units: float, dy_units: float,
-               rotation: float | None = None) -> tuple[PlacementResult, list[ValidationProblem]]:
-    """Placement result and validation problems of one proposal; the validator is left unchanged."""
-    res = place_units(v.ctx, object_id, dx_units, dy_units, rotation, step=v.step)
-    if res.stop_reason == "invalid":
-        return res, [ValidationProblem("invalid", res.message, (object_id,))]
-    if not res.changed:
-        return res, []
-    try:
-        return res, _incremental_problems(v, res)
-    except (AttributeError, TypeError):  # the validator's internals changed: use the exact, slower check
-        return res, validate_scene(edited_copy(v.house, res), episode_targets=sorted(v.need_targets),
-                                   start=v.start, original=v.house)
-
-
-def _incremental_problems(v: EditValidator, res: PlacementResult) -> list[ValidationProblem]:
-    """The checks of ``EditValidator.try_edit`` (incremental raster, exact geodesic fallback), without commit."""
-    from adaptenv.adapt.validation import _world_reaches
-
-    i = v.ctx.index[res.object_id]
-    center = v.ctx.centers[i] + np.array(res.achieved)
-    corners = v.ctx.corners(i, center, res.yaw_after)
-    inf = v.raster.inflate(corners)
-    problems = v._check(v.raster.navigable_with(i, inf), i, inf, corners)
-    missing = {p.object_ids[0] for p in problems if p.kind == "target_unreachable"}
-    if missing and len(missing) == len(problems):
-        world, _ = v._trial_world(i, center, res.yaw_after)
-        problems = [p for p in problems if not _world_reaches(world, p.object_ids[0], v.start)]
-    return problems
 
 
 def edited_copy(house: House, res: PlacementResult, *, share: bool = False) -> House:

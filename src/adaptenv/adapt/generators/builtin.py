@@ -8,7 +8,7 @@ Per step (offline, deterministic for a given rng):
    the target, and turns by +-90 or 180 degrees, all on the normalized grid. The targets
    themselves are never moved, so the episode stays comparable.
 3. Dry-run each through collision-aware placement and incremental validation
-   (:func:`~adaptenv.adapt.generators._trial.trial_edit`); score valid ones by the targeted
+   (:meth:`~adaptenv.adapt.validation.EditValidator.propose`); score valid ones by the targeted
    objective's gain, plus a smaller weight on the other suggestions' gains, plus
    ``realism_weight`` times the change in realism (:mod:`adaptenv.adapt.realism`). Candidates on
    which the shortest-path expert no longer solves the episode are dropped (``require_expert``):
@@ -18,7 +18,7 @@ Per step (offline, deterministic for a given rng):
    over R subject to validity.
 5. Verification: the targeted objective must move in the intended direction; otherwise revise
    by taking the next candidate (at most ``max_revisions`` times).
-6. Commit through ``EditValidator.try_edit`` (same result as the dry run), re-render.
+6. Commit the chosen proposal with ``EditValidator.commit``, re-render.
 
 Cost: one ``compile_world`` plus one distance field and a few line-of-sight walks per candidate
 (about 7 ms on a 5-room house); ``max_candidates`` bounds it.
@@ -40,7 +40,7 @@ from adaptenv.adapt.generators import (
     keep_render,
     render_scene,
 )
-from adaptenv.adapt.generators._trial import edited_copy, moved_geometry, trial_edit
+from adaptenv.adapt.generators._trial import edited_copy, moved_geometry
 from adaptenv.adapt.objectives import (
     OBJECTIVE_KINDS,
     ObjectiveValues,
@@ -49,8 +49,7 @@ from adaptenv.adapt.objectives import (
     measure,
     route_points,
 )
-from adaptenv.adapt.placement import PlacementResult
-from adaptenv.adapt.validation import EditValidator
+from adaptenv.adapt.validation import EditValidator, Proposal
 from adaptenv.adapt.verification import Check, check_objective, revise_until_verified
 from adaptenv.agents.rollout import checking_episodes, policy_score
 from adaptenv.scene.geometry import SceneGeometry
@@ -73,14 +72,14 @@ MOVE_KINDS = ("toward", "across", "sideways", "toward_target", "turn")
 
 @dataclass
 class Candidate:
-    """One proposal and, once tried, its placement, the edited house and its scores."""
+    """One proposal and, once tried, its dry run, the edited world and its scores."""
 
     object_id: str
     dx_units: float
     dy_units: float
     rotation: float | None
     kind: str
-    result: PlacementResult | None = None
+    proposal: Proposal | None = None
     world: NavWorld | None = None
     values: ObjectiveValues | None = None
     realism: float | None = None
@@ -162,12 +161,8 @@ class BuiltinGenerator:
                 record.reason = "no valid candidate made any suggested objective harder"
                 result.steps.append(record)
                 continue
-            edit = v.try_edit(chosen.object_id, chosen.dx_units, chosen.dy_units, chosen.rotation,
-                              source=self.name, intent=f"{sug.id} {sug.kind}: {chosen.kind} move")
-            if not edit.accepted:  # cannot happen when the dry run agreed; kept as a guard
-                record.status, record.reason = "rejected", "; ".join(edit.problems)
-                result.steps.append(record)
-                continue
+            # The dry run was made on the current scene and found no problem: committing applies it.
+            edit = v.commit(chosen.proposal, source=self.name, intent=f"{sug.id} {sug.kind}: {chosen.kind} move")
             record.gain = gain(sug.kind, values, chosen.values)
             world = compile_world(v.house, "candidate")
             values, realism = chosen.values, chosen.realism
@@ -248,12 +243,13 @@ class BuiltinGenerator:
         (with ``require_expert``) the shortest-path expert no longer solves the episode."""
         from adaptenv.adapt.objectives import realism_score
 
-        res, problems = trial_edit(v, cand.object_id, cand.dx_units, cand.dy_units, cand.rotation)
-        if problems or not res.changed:
+        proposal = v.propose(cand.object_id, cand.dx_units, cand.dy_units, cand.rotation)
+        res = proposal.result
+        if not proposal.valid or not res.changed:
             return None
         if not res.rotation_applied and math.hypot(*res.achieved) < MIN_MOVE:
             return None
-        cand.result = res
+        cand.proposal = proposal
         moved = moved_geometry(geometry, res)
         cand.world = compile_world(v.house, "candidate", geometry=moved)
         cand.values = measure(cand.world, route)
