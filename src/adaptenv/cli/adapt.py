@@ -80,6 +80,7 @@ def adapt(
     from adaptenv.adapt.analysis import BuiltinAnalyzer, LLMAnalyzer
     from adaptenv.adapt.generators import GENERATORS, make_generator
     from adaptenv.adapt.step import adapt_scene, summarize, write_outputs
+    from adaptenv.agents.network import configure_torch
     from adaptenv.agents.registry import resolve_policy
     from adaptenv.agents.rollout import draw_episode
     from adaptenv.cli._common import existing_file
@@ -92,6 +93,7 @@ def adapt(
     if analyzer not in ("builtin", "llm"):
         raise ConfigError(f"--analyzer {analyzer!r}: unknown analyzer; use builtin or llm")
     h = load_house(existing_file(house, "house file"))
+    configure_torch()  # one torch thread: G's rollout checks are many tiny batches
     backend = None
     if "llm" in (generator, analyzer):
         backend = llm_backend(model, base_url, llm_cache, f"--{'generator' if generator == 'llm' else 'analyzer'} llm")
