@@ -23,6 +23,7 @@ import numpy as np
 
 from adaptenv.adapt.analysis import Analysis, Analyzer
 from adaptenv.adapt.generators import GenerationContext, GenerationResult, Generator
+from adaptenv.adapt.llm.accounting import scene_usage
 from adaptenv.errors import AdaptenvError
 from adaptenv.scene.house import House
 from adaptenv.sim.task import Episode
@@ -216,12 +217,26 @@ def adapt_house(house: House, *, policy: Any, analyzer: Analyzer, generator: Gen
         "realism_before": realism_score(house, house), "realism_after": realism_score(new, house),
         "expert_solvable": bool(is_solvable(new_world, episode)),
         "expert_success_after": bool(expert.metrics.success),
-        "valid": not problems, "problems": problems, "usage": generation.usage,
+        "valid": not problems, "problems": problems, "stopped": generation.stopped,
+        "usage": scene_usage(analysis, generation).to_dict(generation.prices or _prices(analyzer), calls=False),
+        "llm": generation.llm or _llm_info(analyzer),
     }
     result = AdaptResult(new, house, episode, analysis, generation, before, after, summary)
     if out is not None:
         result.files = write_outputs(result, out)
     return result
+
+
+def _llm_info(part: Any) -> dict[str, Any] | None:
+    """Provider, API, model, base URL, prompt set, temperature of an LLM-backed F or G (never the key)."""
+    describe = getattr(getattr(part, "backend", None), "describe", None)
+    return describe() if describe is not None else None
+
+
+def _prices(part: Any) -> Any:
+    """Token prices of an LLM-backed F or G (None otherwise)."""
+    cfg = getattr(getattr(part, "backend", None), "config", None)
+    return cfg.prices() if cfg is not None else None
 
 
 def write_outputs(result: AdaptResult, out: Path) -> dict[str, Path]:

@@ -167,6 +167,11 @@ class BuiltinGenerator:
                 record.status, record.reason = "rejected", "; ".join(edit.problems)
                 result.steps.append(record)
                 continue
+            if not edit.changed:  # guard: a move that changes nothing is never applied nor verified
+                record.status, record.edit, record.verified = "no-op", edit, None
+                record.reason = "the chosen move changed neither position nor heading"
+                result.steps.append(record)
+                continue
             record.gain = gain(sug.kind, values, chosen.values)
             world = compile_world(v.house, "candidate")
             values, realism = chosen.values, chosen.realism
