@@ -124,6 +124,8 @@ class Generated:
     edit_log: Any
     edits: int
     analysis: Any = None
+    usage: Any = None
+    """LLM usage of F and G for this scene (:class:`adaptenv.adapt.llm.Usage`; None for built-in methods)."""
 
 
 def run_generate(job: GenerateJob) -> Generated:
@@ -144,7 +146,9 @@ def run_generate(job: GenerateJob) -> Generated:
     episode = Episode(traj.target_type, (traj.start.x, traj.start.z, traj.start.yaw), traj.seed)
     ctx = GenerationContext(episode=episode, trajectory=traj, policy=None, render=False)
     gen = generator.generate(job.house, analysis, steps=job.edit_steps, context=ctx, rng=rng)
-    return Generated(gen.house, gen.edit_log, len(gen.applied), analysis)
+    from adaptenv.adapt.llm.accounting import scene_usage
+
+    return Generated(gen.house, gen.edit_log, len(gen.applied), analysis, scene_usage(analysis, gen))
 
 
 def make_fg(kind: str, llm: dict[str, Any]) -> tuple[Any, Any]:

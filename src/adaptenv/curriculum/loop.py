@@ -31,7 +31,9 @@ from typing import Any
 
 import numpy as np
 
+from adaptenv.adapt.llm.accounting import check_llm_section, same_run, scenes_usage
 from adaptenv.curriculum import buffer as lb
+from adaptenv.curriculum.llm_usage import budget_left, record_iteration, usage_line
 from adaptenv.curriculum.records import (
     STATE,
     GalleryItem,
@@ -84,7 +86,8 @@ class LoopConfig:
     gallery: int = 4
     """Adapted scenes per iteration kept with before/after renders for the report."""
     llm: dict[str, Any] = field(default_factory=dict)
-    """LLMConfig fields for ours-llm (provider, model, base_url, ...)."""
+    """LLMConfig fields for ours-llm (provider, model, base_url, api, cache_dir, prompts, price_in, price_out,
+    max_tokens, max_cost, ...; docs/llm.md). Never an API key: name its variable in api_key_env."""
     buffer_capacity: int = 64
     """Level buffer size (plr, accel)."""
 
@@ -100,6 +103,7 @@ class LoopConfig:
         if self.method == "ours-llm" and not self.llm:
             raise ConfigError("loop config: method ours-llm needs an llm section (provider, model, base_url); "
                               "see docs/llm.md")
+        check_llm_section(self.llm, "loop config: llm")
         return self
 
 
@@ -254,7 +258,7 @@ def run_loop(cfg: LoopConfig, run_dir: str | Path, *, resume: bool = False, exec
     state_path = run_dir / STATE
     if resume and state_path.is_file():
         saved = json.loads(state_path.read_text(encoding="utf-8"))
-        if saved.get("config") != asdict(cfg):
+        if not same_run(saved.get("config"), asdict(cfg)):
             raise ConfigError(f"{run_dir}: --resume with a different config than the interrupted run; "
                               "use the same config or a new output folder")
         state = LoopState(**saved["state"])
@@ -291,7 +295,11 @@ def run_loop(cfg: LoopConfig, run_dir: str | Path, *, resume: bool = False, exec
     n = cfg.scenes_per_iteration
 
     for t in range(state.iteration + 1, cfg.iterations + 1):
+        if why := budget_left(run_dir, cfg.llm):  # stop cleanly; raise the budget and --resume to go on
+            say(f"stopping before t={t}: {why}")
+            break
         start = time.perf_counter()
+        llm_usage = None
         net = load_checkpoint(iteration_dir(run_dir, t - 1) / "policy.pt").net
         weights = PolicyWeights.of(net)
         shutil.rmtree(iteration_dir(run_dir, t), ignore_errors=True)  # a killed attempt at t starts over
@@ -355,7 +363,11 @@ def run_loop(cfg: LoopConfig, run_dir: str | Path, *, resume: bool = False, exec
                 jobs = [GenerateJob(kind, store.house(name), name, cfg.edit_steps, (cfg.seed, t, 100 + k),
                                     trajectory=traj, llm=cfg.llm)
                         for k, (name, traj) in enumerate(zip(rolled, trajs, strict=True))]
-                for k, (name, g) in enumerate(zip(rolled, ex.map(run_generate, jobs, desc="generation"), strict=True)):
+                made = ex.map(run_generate, jobs, desc="generation")
+                if cfg.method == "ours-llm":
+                    llm_usage = record_iteration(run_dir, t, scenes_usage(made), cfg.llm).iterations[str(t)]
+                    say(f"t={t}: {usage_line(run_dir, cfg.llm)}")
+                for k, (name, g) in enumerate(zip(rolled, made, strict=True)):
                     state.edits += g.edits
                     new.append(store.put(f"{name.split('~')[0]}~t{t:02d}{tag}{k:02d}", g.house))
                     if len(gallery) < cfg.gallery:
@@ -388,7 +400,7 @@ def run_loop(cfg: LoopConfig, run_dir: str | Path, *, resume: bool = False, exec
         state.iteration = t
         records.append(IterationRecord(iteration=t, env_steps=state.env_steps, grad_updates=state.grad_updates,
                                        edits=state.edits, train=train_metrics, heldout=heldout, gallery=gallery,
-                                       wall_time_s=round(time.perf_counter() - start, 2)))
+                                       wall_time_s=round(time.perf_counter() - start, 2), llm_usage=llm_usage))
         (iteration_dir(run_dir, t) / "scenes.json").write_text(json.dumps(
             {"rolled_out": rolled, "trained_on": train_names, "edits_this_iteration": state.edits - edits_before}),
             encoding="utf-8")

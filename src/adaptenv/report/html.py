@@ -96,7 +96,8 @@ def set_cell(metric: str, m: SetMetrics | None) -> str:
     if m is None:
         return "<td>–</td>"
     se_val = getattr(m, f"{metric}_se")
-    se = f' <span class="se">± {metric_text(metric, se_val)}</span>' if se_val else ""
+    se = (' <span class="se">± n/a</span>' if se_val is None
+          else f' <span class="se">± {metric_text(metric, se_val)}</span>' if se_val else "")
     return f"<td>{metric_text(metric, getattr(m, metric))}{se}</td>"
 
 

@@ -40,10 +40,6 @@ import numpy as np
 
 from adaptenv.adapt.analysis import Analysis, Suggestion
 from adaptenv.adapt.edits import Edit, EditLog
-from adaptenv.adapt.llm.errors import BudgetExceeded, LLMUnavailableError, ModelAnswerError
-from adaptenv.adapt.llm.messages import Message
-from adaptenv.adapt.llm.prompts import PAPER_G_PROMPT
-from adaptenv.adapt.llm.tools import MoveInstruction, move_tool, parse_move_instruction
 from adaptenv.adapt.generators import (
     GenerationContext,
     GenerationResult,
@@ -52,6 +48,10 @@ from adaptenv.adapt.generators import (
     png_bytes,
     render_scene,
 )
+from adaptenv.adapt.llm.errors import BudgetExceeded, LLMUnavailableError, ModelAnswerError
+from adaptenv.adapt.llm.messages import Message
+from adaptenv.adapt.llm.prompts import PAPER_G_PROMPT
+from adaptenv.adapt.llm.tools import MoveInstruction, move_tool, parse_move_instruction
 from adaptenv.adapt.objectives import OBJECTIVE_KINDS, RouteSpec, gain, measure
 from adaptenv.adapt.validation import EditValidator
 from adaptenv.adapt.verification import Check, ask_llm, revise_until_verified

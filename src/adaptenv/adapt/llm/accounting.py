@@ -1,35 +1,25 @@
-"""LLM usage of runs: one scene's F + G tokens, and a run ledger the closed loop records and budgets with.
+"""LLM usage of runs: one scene's F + G tokens, a batch's, and the checks a run config's ``llm`` section gets.
 
 For one adapted scene, :func:`scene_usage` adds F's calls (``Analysis.usage``) to G's
-(``GenerationResult.usage``). A closed-loop run keeps ``RUN_DIR/llm_usage.json`` (:class:`UsageLedger`):
-the tokens of every finished iteration (per role, with cost when prices are known) and the run total.
-The loop calls :func:`record_iteration` after an iteration's scenes are made, and
-:func:`budget_left` before starting the next one, so a run stops cleanly at its token or cost
-budget and resumes later (after the budget is raised) from the last finished iteration.
-
-Example:
-    >>> ledger = record_iteration(run_dir, t, usage, llm_config)  # doctest: +SKIP
-    >>> why = budget_left(run_dir, llm_config)  # None while there is budget left  # doctest: +SKIP
+(``GenerationResult.usage``); :func:`scenes_usage` sums a batch. :func:`check_llm_section` refuses an
+API key in a run config (before anything is saved) and validates the fields; :func:`same_run` lets a
+resumed run raise its budget. The closed loop's per-iteration ledger is
+:mod:`adaptenv.curriculum.llm_usage`.
 """
 
 from __future__ import annotations
 
-import json
-from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from pydantic import BaseModel, Field
+from pydantic import ValidationError
 
-from adaptenv.adapt.llm.config import LLMConfig
+from adaptenv.adapt.llm.config import LLMConfig, refuse_secrets
 from adaptenv.adapt.llm.usage import Usage
+from adaptenv.errors import ConfigError
 
 if TYPE_CHECKING:
     from adaptenv.adapt.analysis import Analysis
     from adaptenv.adapt.generators import GenerationResult
-
-#: File of a run folder holding the LLM usage per iteration.
-LEDGER = "llm_usage.json"
-
 
 def scene_usage(analysis: Analysis | None, generation: GenerationResult | None) -> Usage:
     """F's and G's calls for one adapted scene, as one :class:`Usage` (empty for the built-ins)."""
@@ -46,64 +36,37 @@ def llm_config_of(llm: dict[str, Any] | LLMConfig | None) -> LLMConfig | None:
     return LLMConfig(**llm) if llm else None
 
 
-class UsageLedger(BaseModel):
-    """What ``llm_usage.json`` holds: the LLM used, and the usage of each finished iteration and in total."""
-
-    llm: dict[str, Any] = Field(default_factory=dict)
-    """Provider, API, model, base URL, prompt set, temperature, prices (never the key)."""
-    iterations: dict[str, dict[str, Any]] = Field(default_factory=dict)
-    """Iteration number (as text) -> ``Usage.to_dict`` (totals, per role, with cost when priced)."""
-    total: dict[str, Any] = Field(default_factory=dict)
-    """The run total (totals and per role)."""
-
-    @classmethod
-    def read(cls, run_dir: str | Path) -> UsageLedger:
-        """The ledger of a run folder (empty when there is none yet)."""
-        p = Path(run_dir) / LEDGER
-        return cls.model_validate_json(p.read_text(encoding="utf-8")) if p.is_file() else cls()
-
-    def usage(self) -> Usage:
-        """The run total as a :class:`Usage` (every stored call record)."""
-        out = Usage()
-        for t in sorted(self.iterations, key=int):
-            out.merge(Usage.from_dict(self.iterations[t]))
-        return out
+def check_llm_section(llm: dict[str, Any], where: str) -> None:
+    """Refuse an API key in a run config's ``llm`` section and check its fields (one ConfigError naming them)."""
+    refuse_secrets(llm, where)
+    if not llm:
+        return
+    try:
+        LLMConfig(**llm).budget()
+    except ValidationError as exc:
+        err = exc.errors(include_url=False, include_input=False)[0]
+        raise ConfigError(f"{where}.{'.'.join(map(str, err['loc']))}: {err['msg']}; fix that value") from None
 
 
-def record_iteration(run_dir: str | Path, t: int, usage: Usage, llm: dict[str, Any] | LLMConfig | None
-                     ) -> UsageLedger:
-    """Store iteration ``t``'s usage (replacing an earlier attempt at ``t``) and the new total; atomic write."""
-    from adaptenv.curriculum.records import atomic_write_text
-
-    cfg = llm_config_of(llm)
-    prices = cfg.prices() if cfg is not None else None
-    ledger = UsageLedger.read(run_dir)
-    ledger.iterations = {k: v for k, v in ledger.iterations.items() if int(k) < t}
-    ledger.iterations[str(t)] = usage.to_dict(prices)
-    ledger.total = ledger.usage().to_dict(prices, calls=False)
-    if cfg is not None:
-        ledger.llm = cfg.describe()
-    atomic_write_text(Path(run_dir) / LEDGER, ledger.model_dump_json(indent=1))
-    return ledger
+#: LLM fields a resumed run may change: budgets can be raised to continue a run that used them up.
+RESUMABLE_LLM_FIELDS = ("max_tokens", "max_cost")
 
 
-def budget_left(run_dir: str | Path, llm: dict[str, Any] | LLMConfig | None) -> str | None:
-    """Why the run's token/cost budget is used up (None while there is budget left, or without a budget)."""
-    cfg = llm_config_of(llm)
-    if cfg is None:
-        return None
-    budget = cfg.budget()
-    if not budget.active:
-        return None
-    return budget.exceeded(UsageLedger.read(run_dir).usage())
+def same_run(saved: dict[str, Any] | None, current: dict[str, Any]) -> bool:
+    """Whether a saved run config and the current one describe the same run (budgets may differ)."""
+    def strip(cfg: dict[str, Any] | None) -> dict[str, Any] | None:
+        if cfg is None:
+            return None
+        llm = {k: v for k, v in (cfg.get("llm") or {}).items() if k not in RESUMABLE_LLM_FIELDS}
+        return {**cfg, "llm": llm}
+
+    return strip(saved) == strip(current)
 
 
-def usage_line(run_dir: str | Path, llm: dict[str, Any] | LLMConfig | None) -> str:
-    """One progress line with the run's running LLM totals (tokens, calls, retries, cache hits, cost)."""
-    cfg = llm_config_of(llm)
-    return "LLM so far: " + UsageLedger.read(run_dir).usage().line(cfg.prices() if cfg is not None else None)
-
-
-def dumps(ledger: UsageLedger) -> str:
-    """The ledger as JSON text (for reports)."""
-    return json.dumps(ledger.model_dump(), indent=1)
+def scenes_usage(made: list[Any]) -> Usage:
+    """The LLM usage of a batch of generated scenes (objects with a ``usage`` attribute; None is skipped)."""
+    out = Usage()
+    for g in made:
+        if getattr(g, "usage", None) is not None:
+            out.merge(g.usage)
+    return out
