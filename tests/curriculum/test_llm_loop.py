@@ -12,6 +12,7 @@ from adaptenv.curriculum.llm_usage import LEDGER, UsageLedger
 from adaptenv.curriculum.loop import LoopConfig, run_loop
 from adaptenv.curriculum.records import read_iterations
 from adaptenv.errors import ConfigError
+from adaptenv.report.html import build_report
 from tests.adapt import llm_server as srv
 
 KEY = "sk-loop-SECRET-9876543210fedcba"
@@ -112,3 +113,5 @@ def test_loop_stops_at_its_token_budget_and_resumes_with_a_larger_one(tmp_path, 
     records = run_loop(bigger, tmp_path, resume=True)
     assert [r.iteration for r in records] == [0, 1, 2] and len(server.requests) > made
     assert json.loads((tmp_path / LEDGER).read_text())["iterations"].keys() == {"1", "2"}
+    html = build_report(tmp_path, tmp_path / "report").read_text()
+    assert "LLM usage per iteration" in html and "<td>F</td>" in html and "<td>G</td>" in html and "$0.00" in html
