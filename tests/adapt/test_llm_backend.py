@@ -5,6 +5,7 @@ from __future__ import annotations
 import base64
 import io
 import json
+import pickle
 import subprocess
 import sys
 
@@ -524,6 +525,9 @@ def test_token_counter_sums_calls_and_tracks_blocks(tmp_path):
     assert backend.usage.cost(Prices(0.40, 1.60, 0.10)) == pytest.approx((200 * 0.40 + 150 * 0.10 + 35 * 1.60) / 1e6)
     again = Usage.from_dict(env_usage.to_dict())
     assert again.snapshot() == env_usage.snapshot()
+    copied = pickle.loads(pickle.dumps(env_usage))  # usage travels back from process/Ray workers
+    assert copied.records == env_usage.records
+    copied.add(CallRecord("G", Tokens.of(1, 1)))
 
 
 def test_budget_stops_requests_before_they_are_sent():

@@ -110,6 +110,16 @@ class Usage:
     def __post_init__(self) -> None:
         self._lock = threading.Lock()
 
+    def __getstate__(self) -> dict[str, Any]:
+        """Pickle without the lock (usage travels back from executor workers)."""
+        state = dict(self.__dict__)
+        state.pop("_lock", None)
+        return state
+
+    def __setstate__(self, state: dict[str, Any]) -> None:
+        self.__dict__.update(state)
+        self._lock = threading.Lock()
+
     def add(self, record: CallRecord) -> None:
         """Count one answer: a server call adds its tokens; a cache hit only counts as a hit."""
         with self._lock:
