@@ -115,3 +115,21 @@ def test_loop_stops_at_its_token_budget_and_resumes_with_a_larger_one(tmp_path, 
     assert json.loads((tmp_path / LEDGER).read_text())["iterations"].keys() == {"1", "2"}
     html = build_report(tmp_path, tmp_path / "report").read_text()
     assert "LLM usage per iteration" in html and "<td>F</td>" in html and "<td>G</td>" in html and "$0.00" in html
+
+
+@pytest.mark.slow
+def test_a_second_identical_loop_replays_from_the_cache_without_requests(tmp_path, tiny_policy, server):
+    cache = str(tmp_path / "cache")
+    first = run_loop(LoopConfig(**llm_loop(tiny_policy, server, cache_dir=cache)), tmp_path / "a")
+    made = len(server.requests)
+    assert made > 0
+    server.stop()  # the replay must come from the cache alone
+    again = run_loop(LoopConfig(**llm_loop(tiny_policy, server, cache_dir=cache)), tmp_path / "b")
+    assert len(server.requests) == made
+    scenes = sorted(p.name for p in (tmp_path / "a" / "scenes").iterdir())
+    assert scenes == sorted(p.name for p in (tmp_path / "b" / "scenes").iterdir())
+    assert all((tmp_path / "a" / "scenes" / n).read_text() == (tmp_path / "b" / "scenes" / n).read_text()
+               for n in scenes)
+    replay = UsageLedger.read(tmp_path / "b").total
+    assert replay["calls"] == 0 and replay["cache_hits"] == made
+    assert [r.edits for r in again] == [r.edits for r in first]
