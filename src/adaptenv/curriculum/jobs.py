@@ -15,6 +15,8 @@ from typing import Any
 
 import numpy as np
 
+from adaptenv.adapt.llm.accounting import scene_usage
+
 #: Episodes per evaluation job: fixed, so results never depend on the worker count.
 EVAL_CHUNK = 50
 
@@ -146,8 +148,6 @@ def run_generate(job: GenerateJob) -> Generated:
     episode = Episode(traj.target_type, (traj.start.x, traj.start.z, traj.start.yaw), traj.seed)
     ctx = GenerationContext(episode=episode, trajectory=traj, policy=None, render=False)
     gen = generator.generate(job.house, analysis, steps=job.edit_steps, context=ctx, rng=rng)
-    from adaptenv.adapt.llm.accounting import scene_usage
-
     return Generated(gen.house, gen.edit_log, len(gen.applied), analysis, scene_usage(analysis, gen))
 
 
