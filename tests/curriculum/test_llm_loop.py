@@ -108,6 +108,7 @@ def test_loop_stops_at_its_token_budget_and_resumes_with_a_larger_one(tmp_path, 
     assert [r.iteration for r in records] == [0, 1], "stopped cleanly after the iteration that used the budget"
     assert any("stopping before t=2: the token budget of 1,000 is used up" in x for x in lines)
     assert any(x.startswith("t=1: LLM so far:") for x in lines)
+    assert any("G stopped early: budget used up: the token budget" in x for x in lines), "one line per scene says why"
     made = len(server.requests)
     bigger = LoopConfig(**llm_loop(tiny_policy, server, max_tokens=10**7))
     records = run_loop(bigger, tmp_path, resume=True)

@@ -128,6 +128,8 @@ class Generated:
     analysis: Any = None
     usage: Any = None
     """LLM usage of F and G for this scene (:class:`adaptenv.adapt.llm.Usage`; None for built-in methods)."""
+    stopped: str = ""
+    """Why G ended early (LLM unavailable, budget used up), else empty."""
 
 
 def run_generate(job: GenerateJob) -> Generated:
@@ -148,7 +150,7 @@ def run_generate(job: GenerateJob) -> Generated:
     episode = Episode(traj.target_type, (traj.start.x, traj.start.z, traj.start.yaw), traj.seed)
     ctx = GenerationContext(episode=episode, trajectory=traj, policy=None, render=False)
     gen = generator.generate(job.house, analysis, steps=job.edit_steps, context=ctx, rng=rng)
-    return Generated(gen.house, gen.edit_log, len(gen.applied), analysis, scene_usage(analysis, gen))
+    return Generated(gen.house, gen.edit_log, len(gen.applied), analysis, scene_usage(analysis, gen), gen.stopped)
 
 
 def make_fg(kind: str, llm: dict[str, Any]) -> tuple[Any, Any]:

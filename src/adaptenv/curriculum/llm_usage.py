@@ -83,3 +83,18 @@ def usage_line(run_dir: str | Path, llm: dict[str, Any] | LLMConfig | None) -> s
     cfg = llm_config_of(llm)
     return "LLM so far: " + UsageLedger.read(run_dir).usage().line(cfg.prices() if cfg is not None else None)
 
+
+
+def iteration_lines(t: int, names: list[str], made: list[Any], run_dir: str | Path,
+                    llm: dict[str, Any] | LLMConfig | None) -> list[str]:
+    """Progress lines after an iteration's generation: one per scene (edits, tokens, cost, why G stopped
+    early), then the run's running totals."""
+    cfg = llm_config_of(llm)
+    prices = cfg.prices() if cfg is not None else None
+    lines = []
+    for name, g in zip(names, made, strict=True):
+        usage = g.usage if g.usage is not None else Usage()
+        stop = f"; G stopped early: {g.stopped}" if getattr(g, "stopped", "") else ""
+        lines.append(f"t={t} {name}: {g.edits} edit(s) applied; {usage.line(prices)}{stop}")
+    lines.append(f"t={t}: {usage_line(run_dir, llm)}")
+    return lines

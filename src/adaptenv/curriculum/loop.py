@@ -33,7 +33,7 @@ import numpy as np
 
 from adaptenv.adapt.llm.accounting import check_llm_section, same_run, scenes_usage
 from adaptenv.curriculum import buffer as lb
-from adaptenv.curriculum.llm_usage import budget_left, record_iteration, usage_line
+from adaptenv.curriculum.llm_usage import budget_left, iteration_lines, record_iteration
 from adaptenv.curriculum.records import (
     STATE,
     GalleryItem,
@@ -366,7 +366,8 @@ def run_loop(cfg: LoopConfig, run_dir: str | Path, *, resume: bool = False, exec
                 made = ex.map(run_generate, jobs, desc="generation")
                 if cfg.method == "ours-llm":
                     llm_usage = record_iteration(run_dir, t, scenes_usage(made), cfg.llm).iterations[str(t)]
-                    say(f"t={t}: {usage_line(run_dir, cfg.llm)}")
+                    for line in iteration_lines(t, rolled, made, run_dir, cfg.llm):
+                        say(line)
                 for k, (name, g) in enumerate(zip(rolled, made, strict=True)):
                     state.edits += g.edits
                     new.append(store.put(f"{name.split('~')[0]}~t{t:02d}{tag}{k:02d}", g.house))
