@@ -91,3 +91,118 @@ def test_adapt_with_llm_generator_against_a_local_server(house_file, tmp_path, m
     assert edits["generator"] == "llm" and edits["steps"][0]["edit"]["object_id"] == oid
     assert edits["usage"]["calls"] == 2
     assert runner.invoke(app, ["validate", str(tmp_path / "house.json")]).exit_code == 0
+
+
+# ----------------------------------------------------------------------------- LLM F and G through the CLI
+
+KEY = "sk-cli-SECRET-0123456789abcdef"
+
+
+def _server_module():
+    import importlib.util
+    import sys
+    from pathlib import Path
+
+    name = "adaptenv_tests_llm_server"
+    if name not in sys.modules:
+        spec = importlib.util.spec_from_file_location(name, Path(__file__).with_name("llm_server.py"))
+        sys.modules[name] = importlib.util.module_from_spec(spec)
+        spec.loader.exec_module(sys.modules[name])
+    return sys.modules[name]
+
+
+F_ANSWER = {"outcome": {"success": True, "failure_mode": None, "summary": "reached it"}, "concerns": [],
+            "suggestions": [{"kind": "narrow_passage", "description": "tighter", "addresses": [], "priority": 0.9}]}
+
+
+def _responses_answer(srv):
+    """Answer any Responses API request of F or G (first allowed object moved; verification says yes)."""
+    def reply(body):
+        tools = body.get("tools") or []
+        if not tools:
+            return 200, srv.responses_text_reply(json.dumps(F_ANSWER), input_tokens=1200, output_tokens=150)
+        if tools[0]["name"] == "propose_move_instruction":
+            oid = tools[0]["parameters"]["properties"]["object_id"]["enum"][0]
+            return 200, srv.responses_tool_reply("propose_move_instruction", {
+                "object_id": oid, "x_direction": "left", "x_units": 2, "y_direction": "up", "y_units": 1,
+                "rotation": 90}, input_tokens=1000, output_tokens=40)
+        return 200, srv.responses_tool_reply("verify_move", {"matches_intent": True, "reason": "ok",
+                                                             "revised_move": None}, input_tokens=1100, output_tokens=30)
+    return reply
+
+
+@pytest.fixture
+def loopback(monkeypatch):
+    for name in ("HTTP_PROXY", "HTTPS_PROXY", "ALL_PROXY", "http_proxy", "https_proxy", "all_proxy",
+                 "OPENAI_BASE_URL", "OPENAI_API_KEY"):
+        monkeypatch.delenv(name, raising=False)
+    monkeypatch.setenv("NO_PROXY", "127.0.0.1,localhost")
+    return monkeypatch
+
+
+def _key_files(folder) -> list[str]:
+    return [str(p) for p in folder.rglob("*") if p.is_file() and KEY.encode() in p.read_bytes()]
+
+
+def test_adapt_llm_counts_every_call_records_the_model_and_never_writes_the_key(house_file, tmp_path, loopback):
+    """F and G on the Responses API of a custom server (--api responses --base-url): 7 calls made, 7 counted."""
+    srv = _server_module()
+    loopback.setenv("ADAPTENV_LLM_API_KEY", KEY)
+    with srv.ScriptedLLMServer({srv.RESPONSES_PATH: [_responses_answer(srv)] * 20}, max_requests=20,
+                               timeout_s=120) as server:
+        result = runner.invoke(app, ["adapt", str(house_file), "--generator", "llm", "--analyzer", "llm",
+                                     "--api", "responses", "--base-url", server.url, "--model", "m", "--steps", "3",
+                                     "--seed", "1", "--price-in", "0.4", "--price-out", "1.6", "-o", str(tmp_path)])
+        assert result.exit_code == 0, result.output
+        requests = list(server.requests)
+    assert {r.path for r in requests} == {srv.RESPONSES_PATH}
+    summary = json.loads((tmp_path / "summary.json").read_text())
+    usage = summary["usage"]
+    assert usage["calls"] == len(requests) == 7, "F, then G and verification for each of 3 steps"
+    assert {k: v["calls"] for k, v in usage["by_role"].items()} == {"F": 1, "G": 3, "verify": 3}
+    assert usage["input_tokens"] == 1200 + 3 * 1000 + 3 * 1100 and usage["output_tokens"] == 150 + 3 * 40 + 3 * 30
+    assert usage["cost_usd"] == pytest.approx((7500 * 0.4 + 360 * 1.6) / 1e6)
+    assert summary["llm"] | {"model": "m", "api": "responses", "base_url": server.url, "prompts": "adaptenv",
+                             "temperature": 0.0} == summary["llm"]
+    assert "tokens F " in result.output and "tokens total" in result.output and "G step 3/3: applied" in result.output
+    edits = json.loads((tmp_path / "edits.json").read_text())
+    applied = [s for s in edits["steps"] if s["status"] == "applied"]
+    assert summary["edits_applied"] == len(applied)
+    assert _key_files(tmp_path) == [] and all(r.authorization == f"Bearer {KEY}" for r in requests)
+
+
+def test_openai_base_url_is_honoured_and_the_cache_replays_offline(house_file, tmp_path, loopback):
+    """OPENAI_BASE_URL + OPENAI_API_KEY as the SDK reads them; a second run from --llm-cache makes no request."""
+    srv = _server_module()
+    cache = tmp_path / "cache"
+    with srv.ScriptedLLMServer({srv.RESPONSES_PATH: [_responses_answer(srv)] * 10}, max_requests=10,
+                               timeout_s=120) as server:
+        loopback.setenv("OPENAI_BASE_URL", server.url)
+        loopback.setenv("OPENAI_API_KEY", KEY)
+        first = runner.invoke(app, ["adapt", str(house_file), "--generator", "llm", "--steps", "2", "--seed", "1",
+                                    "--llm-cache", str(cache), "-o", str(tmp_path / "a")])
+        assert first.exit_code == 0, first.output
+        made = len(server.requests)
+        assert made == 4 and f"at {server.url} (responses API" in first.output
+    # the server is gone: the replay must come from the cache alone
+    second = runner.invoke(app, ["adapt", str(house_file), "--generator", "llm", "--steps", "2", "--seed", "1",
+                                 "--llm-cache", str(cache), "-o", str(tmp_path / "b")])
+    assert second.exit_code == 0, second.output
+    assert (tmp_path / "a" / "house.json").read_text() == (tmp_path / "b" / "house.json").read_text()
+    usage = json.loads((tmp_path / "b" / "summary.json").read_text())["usage"]
+    assert usage["calls"] == 0 and usage["cache_hits"] == made
+    assert _key_files(tmp_path) == []
+
+
+def test_unreachable_server_is_named_in_one_line(house_file, tmp_path, loopback):
+    loopback.setenv("OPENAI_API_KEY", KEY)
+    loopback.setenv("OPENAI_BASE_URL", "http://127.0.0.1:9/v1")
+    result = runner.invoke(app, ["adapt", str(house_file), "--analyzer", "llm", "--steps", "1",
+                                 "--llm-config", str(_llm_config(tmp_path)), "-o", str(tmp_path / "o")])
+    assert "http://127.0.0.1:9/v1" in str(result.exception) and KEY not in str(result.exception)
+
+
+def _llm_config(tmp_path):
+    path = tmp_path / "llm.json"
+    path.write_text(json.dumps({"max_retries": 0, "timeout_s": 2}))
+    return path

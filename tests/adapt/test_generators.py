@@ -115,6 +115,21 @@ def test_random_perturbation_touches_every_movable_object(scene):
     assert validate_scene(res.house, episode_targets=[ep.target_type], start=ep.start[:2], original=house) == []
 
 
+def test_random_moves_that_change_nothing_are_noops_not_applied(scene):
+    house, world, ep, *_ = scene
+    ctx = GenerationContext(episode=ep, render=False)
+    res = RandomPerturbation(max_units=0.0, rotate_p=0.0).generate(house, None, steps=5, context=ctx,
+                                                                     rng=np.random.default_rng(0))
+    assert res.steps and {s.status for s in res.steps} == {"no-op"}
+    assert res.applied == [] and all(s.verified is None for s in res.steps)
+    assert res.house.model_dump() == house.model_dump()
+
+
+def test_builtin_steps_are_applied_only_when_they_change_the_scene(builtin_run):
+    for s in builtin_run.steps:
+        assert (s.status == "applied") == (s.edit is not None and s.edit.changed and s.status != "no-op")
+
+
 def test_random_single_edits_makes_k_valid_changes(scene):
     house, world, ep, *_ = scene
     new, log = random_single_edits(house, 4, np.random.default_rng(2), episode_targets=[ep.target_type],

@@ -5,6 +5,7 @@ from __future__ import annotations
 import base64
 import io
 import json
+import pickle
 import subprocess
 import sys
 
@@ -14,6 +15,8 @@ from PIL import Image
 from pydantic import BaseModel
 
 from adaptenv.adapt.llm import (
+    BudgetExceeded,
+    CallRecord,
     ChatCompletionsBackend,
     LLMAuthError,
     LLMConfig,
@@ -22,8 +25,11 @@ from adaptenv.adapt.llm import (
     LLMUnavailableError,
     Message,
     OpenAIResponsesBackend,
+    Prices,
     StructuredOutputError,
+    Tokens,
     ToolCallError,
+    Usage,
     load_llm_config,
     make_backend,
     move_tool,
@@ -137,10 +143,14 @@ def test_load_llm_config_names_file_and_field(tmp_path):
     cfg = load_llm_config(good)
     assert cfg.model == "m" and cfg.cache_dir == tmp_path / "c"
     bad = tmp_path / "bad.json"
-    bad.write_text(json.dumps({"timeout_s": -1, "api_key": KEY}))
-    with pytest.raises(ConfigError, match="bad.json: LLM config field timeout_s") as info:
+    bad.write_text(json.dumps({"timeout_s": -1}))
+    with pytest.raises(ConfigError, match="bad.json: LLM config field timeout_s"):
         load_llm_config(bad)
-    assert KEY not in str(info.value)
+    secret = tmp_path / "secret.json"
+    secret.write_text(json.dumps({"model": "m", "api_key": KEY}))
+    with pytest.raises(ConfigError, match="secret.json: field api_key holds an API key") as info:
+        load_llm_config(secret)
+    assert KEY not in str(info.value) and "api_key_env" in str(info.value)
     typo = tmp_path / "typo.json"
     typo.write_text(json.dumps({"modle": "x"}))
     with pytest.raises(ConfigError, match="field modle"):
@@ -491,22 +501,50 @@ def test_corrupt_cache_file_is_a_miss(tmp_path):
 
 
 def test_token_counter_sums_calls_and_tracks_blocks(tmp_path):
+    cached = srv.chat_tool_reply("propose_move_instruction", MOVE, prompt_tokens=200, completion_tokens=20)
+    cached["usage"]["prompt_tokens_details"] = {"cached_tokens": 150}
     mock = Mock((200, srv.chat_tool_reply("propose_move_instruction", MOVE, prompt_tokens=100, completion_tokens=10)),
-                (200, srv.chat_tool_reply("propose_move_instruction", MOVE, prompt_tokens=200, completion_tokens=20)),
+                (429, srv.error_body("slow down", "rate_limit_error")), (200, cached),
                 (200, srv.chat_text_reply('{"success": true, "concerns": []}', prompt_tokens=50,
                                           completion_tokens=5)))
-    backend = _chat(mock, cache_dir=tmp_path)
-    backend.call_tool("s", [Message.user("one")], None, move_tool(IDS))
+    backend = _chat(mock, [], cache_dir=tmp_path)
+    backend.call_tool("s", [Message.user("one")], None, move_tool(IDS), role="G")
     with backend.track() as env_usage:
-        backend.call_tool("s", [Message.user("two")], None, move_tool(IDS))
-        backend.parse("s", [Message.user("three")], None, Analysis)
-        backend.call_tool("s", [Message.user("one")], None, move_tool(IDS))  # cache hit
-    assert env_usage.snapshot() == {"input_tokens": 250, "output_tokens": 25, "total_tokens": 275, "calls": 2,
-                                    "cache_hits": 1}
-    assert backend.usage.snapshot() == {"input_tokens": 350, "output_tokens": 35, "total_tokens": 385,
-                                        "calls": 3, "cache_hits": 1}
-    assert backend.usage.reset()["total_tokens"] == 385
-    assert backend.usage.total_tokens == 0
+        backend.call_tool("s", [Message.user("two")], None, move_tool(IDS), role="verify")
+        backend.parse("s", [Message.user("three")], None, Analysis, role="F")
+        backend.call_tool("s", [Message.user("one")], None, move_tool(IDS), role="G")  # cache hit
+    assert env_usage.snapshot() == {"input_tokens": 250, "output_tokens": 25, "cached_tokens": 150,
+                                    "total_tokens": 275, "calls": 2, "retries": 1, "cache_hits": 1}
+    assert backend.usage.snapshot() == {"input_tokens": 350, "output_tokens": 35, "cached_tokens": 150,
+                                        "total_tokens": 385, "calls": 3, "retries": 1, "cache_hits": 1}
+    roles = env_usage.to_dict()["by_role"]
+    assert roles["verify"]["input_tokens"] == 200 and roles["verify"]["retries"] == 1
+    assert roles["F"]["calls"] == 1 and roles["G"] == {**roles["G"], "calls": 0, "cache_hits": 1}
+    assert [r.role for r in env_usage.records] == ["verify", "F", "G"]
+    # cost: 350 input of which 150 cached at 0.10, 200 at 0.40, 35 output at 1.60 (USD per million)
+    assert backend.usage.cost(Prices(0.40, 1.60, 0.10)) == pytest.approx((200 * 0.40 + 150 * 0.10 + 35 * 1.60) / 1e6)
+    again = Usage.from_dict(env_usage.to_dict())
+    assert again.snapshot() == env_usage.snapshot()
+    copied = pickle.loads(pickle.dumps(env_usage))  # usage travels back from process/Ray workers
+    assert copied.records == env_usage.records
+    copied.add(CallRecord("G", Tokens.of(1, 1)))
+
+
+def test_budget_stops_requests_before_they_are_sent():
+    mock = Mock((200, srv.chat_tool_reply("propose_move_instruction", MOVE, prompt_tokens=100, completion_tokens=10)))
+    backend = _chat(mock, max_tokens=100)
+    backend.call_tool("s", [Message.user("one")], None, move_tool(IDS), role="G")
+    with pytest.raises(BudgetExceeded, match="token budget of 100 is used up"):
+        backend.call_tool("s", [Message.user("two")], None, move_tool(IDS), role="G")
+    assert len(mock.bodies) == 1, "no request once the budget is used up"
+    with pytest.raises(ConfigError, match="needs prices"):
+        LLMConfig(max_cost=1.0).budget()
+    priced = LLMConfig(max_cost=0.0005, price_in=0.4, price_out=1.6).budget()
+    usage = Usage()
+    usage.add(CallRecord("G", Tokens.of(1000, 10)))
+    assert priced.exceeded(usage) is None
+    usage.add(CallRecord("G", Tokens.of(1000, 10)))
+    assert "cost budget" in priced.exceeded(usage)
 
 
 def test_missing_usage_counts_as_zero():

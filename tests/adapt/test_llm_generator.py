@@ -19,6 +19,8 @@ from tests.adapt import llm_server as srv
 from tests.sim import helpers as H
 
 IDS = ["GarbageCan|0", "Desk|1", "CoffeeTable|2"]
+#: What G may move: the episode's target (a GarbageCan) is excluded by default.
+MOVABLE = ["Desk|1", "CoffeeTable|2"]
 
 
 class Mock:
@@ -82,9 +84,10 @@ def test_step_request_body_and_verification(scene):
     assert analysis.to_text() in text and "rotation is the object's NEW absolute heading" in text
     assert "- CoffeeTable|2: CoffeeTable at x=" in text and "Desk|1" in text
     assert first["tools"] == [{"type": "function", "function": {
-        "name": "propose_move_instruction", "description": move_tool(IDS).description,
-        "parameters": move_tool(IDS).parameters, "strict": True}}]
-    assert first["tools"][0]["function"]["parameters"]["properties"]["object_id"]["enum"] == IDS
+        "name": "propose_move_instruction", "description": move_tool(MOVABLE).description,
+        "parameters": move_tool(MOVABLE).parameters, "strict": True}}]
+    assert first["tools"][0]["function"]["parameters"]["properties"]["object_id"]["enum"] == MOVABLE
+    assert "- GarbageCan|0:" not in text, "the episode's target is not offered to G"
     assert first["tool_choice"] == {"type": "function", "function": {"name": "propose_move_instruction"}}
     assert first["parallel_tool_calls"] is False
     assert second["tool_choice"] == {"type": "function", "function": {"name": "verify_move"}}
@@ -94,7 +97,8 @@ def test_step_request_body_and_verification(scene):
     (step,) = res.steps
     assert step.status == "applied" and step.verified is True and step.revisions == 0 and step.attempts == 1
     assert step.edit.object_id == "CoffeeTable|2" and step.edit.achieved_dx_units > 0
-    assert res.usage["calls"] == 2 and res.usage["total_tokens"] == 36
+    assert res.usage.calls == 2 and res.usage.total_tokens == 36
+    assert [r.role for r in res.usage.records] == ["G", "verify"]
     assert len(res.renders) == 1 and _positions(house) != _positions(res.house)
 
 
@@ -168,7 +172,7 @@ def test_server_down_ends_the_run_with_a_reason(scene):
 
 # ----------------------------------------------------------------------------- the LLM analyzer
 
-ANSWER = {"success": False, "failure_mode": "timeout", "summary": "kept circling the corridor",
+ANSWER = {"outcome": {"success": False, "failure_mode": "timeout", "summary": "kept circling the corridor"},
           "concerns": [{"kind": "collision", "severity": 0.7, "description": "bumped the desk", "grid_x": 20.0,
                         "grid_y": 30.0, "objects": ["Desk|1", "Ghost|7"]},
                        {"kind": "detour", "severity": 1.4, "description": "long loop", "grid_x": None,

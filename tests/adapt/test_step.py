@@ -42,7 +42,7 @@ def test_adapt_scene_writes_a_valid_house_and_reports(house, tmp_path):
     res = adapt_scene(house, ep, policy=ExpertPolicy(), analyzer=BuiltinAnalyzer(),
                       generator=make_generator("builtin", max_candidates=10), steps=2, rng=np.random.default_rng(1),
                       name="h")
-    summary = summarize(res, analyzer="builtin", seed=1)
+    summary = summarize(res, analyzer=BuiltinAnalyzer(), seed=1)
     write_outputs(res, summary, tmp_path)
     names = {"house.json", "before.png", "after.png", "analysis.json", "edits.json", "summary.json",
              "trajectory_before.json", "trajectory_after.json"}

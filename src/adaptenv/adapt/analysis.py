@@ -15,7 +15,7 @@ import io
 import logging
 import math
 from collections import Counter
-from typing import TYPE_CHECKING, Literal, Protocol, runtime_checkable
+from typing import TYPE_CHECKING, Any, Literal, Protocol, runtime_checkable
 
 import numpy as np
 from pydantic import BaseModel, Field
@@ -93,6 +93,8 @@ class Analysis(BaseModel):
     concerns: list[Concern] = Field(default_factory=list)
     suggestions: list[Suggestion] = Field(default_factory=list)
     source: str = "builtin"
+    usage: dict[str, Any] | None = None
+    """Token usage of the LLM calls behind this analysis (``Usage.to_dict``); None for the built-in F."""
 
     def to_text(self) -> str:
         """A compact plain-text rendering, used in the generator's prompt and in reports."""
@@ -322,12 +324,18 @@ class LLMSuggestion(BaseModel):
     priority: float
 
 
-class LLMAnalysisAnswer(BaseModel):
-    """The structured answer F's model must give (validated by the backend's ``parse``)."""
+class LLMOutcome(BaseModel):
+    """The paper's success assessment: did the robot succeed, how it failed, in one sentence."""
 
     success: bool
     failure_mode: FailureMode | None
     summary: str
+
+
+class LLMAnalysisAnswer(BaseModel):
+    """The structured answer F's model must give: the paper's three parts by name, each with adaptenv's fields."""
+
+    outcome: LLMOutcome
     concerns: list[LLMConcern]
     suggestions: list[LLMSuggestion]
 
@@ -390,8 +398,9 @@ def answer_to_analysis(answer: LLMAnalysisAnswer, task: str, trajectory: Traject
                                       priority=float(np.clip(np.nan_to_num(s.priority), 0, 1))))
     suggestions.sort(key=lambda s: -s.priority)
     m = trajectory.metrics
-    outcome = Outcome(success=answer.success, failure_mode=None if answer.success else answer.failure_mode,
-                      summary=answer.summary, steps=len(trajectory.steps), spl=m.spl if m else None)
+    said = answer.outcome
+    outcome = Outcome(success=said.success, failure_mode=None if said.success else said.failure_mode,
+                      summary=said.summary, steps=len(trajectory.steps), spl=m.spl if m else None)
     return Analysis(task=task, outcome=outcome, concerns=concerns, suggestions=suggestions, source="llm")
 
 
@@ -400,7 +409,10 @@ class LLMAnalyzer:
 
     Invalid answers are sent back with the validation error (``max_attempts`` in all); when every
     attempt fails, the built-in analysis is returned (``source="builtin-fallback"``) unless
-    ``fallback=False``, in which case the last error is raised.
+    ``fallback=False``, in which case the last error is raised. Transport failures and a used-up
+    budget are raised, never hidden behind the fallback. ``prompts="paper"`` (default: the
+    backend config's) sends the paper's appendix prompt verbatim, without a system message. The
+    tokens of every call are in ``Analysis.usage``.
 
     Example:
         >>> from adaptenv.adapt.llm import LLMConfig, make_backend
@@ -410,15 +422,21 @@ class LLMAnalyzer:
 
     name = "llm"
 
-    def __init__(self, backend: LLMBackend, *, max_attempts: int = 3, image_size: int = 768, fallback: bool = True):
+    def __init__(self, backend: LLMBackend, *, max_attempts: int = 3, image_size: int = 768, fallback: bool = True,
+                 prompts: str | None = None):
         self.backend = backend
         self.max_attempts = max_attempts
         self.image_size = image_size
         self.fallback = fallback
+        self.prompts = prompts or getattr(getattr(backend, "config", None), "prompts", "adaptenv")
         self.last_error: str | None = None
 
     def prompt(self, trajectory: Trajectory) -> str:
-        """The user prompt: the task description and what to report."""
+        """The user prompt: the paper's verbatim, or the task description and what to report."""
+        if self.prompts == "paper":
+            from adaptenv.adapt.llm.prompts import PAPER_F_PROMPT
+
+            return PAPER_F_PROMPT
         task = f"Task: the robot had to find a {trajectory.target_type} (object navigation) in this apartment."
         return ANALYZER_PROMPT.format(task=task)
 
@@ -429,16 +447,20 @@ class LLMAnalyzer:
         messages = [Message.user(self.prompt(trajectory), png)]
         task = f"Find a {trajectory.target_type} (ObjectNav) in house {trajectory.house}."
         known = {f.object_id for f in world.geometry.footprints}
+        system = "" if self.prompts == "paper" else ANALYZER_SYSTEM
         self.last_error = None
-        for attempt in range(self.max_attempts):
-            try:
-                answer = self.backend.parse(ANALYZER_SYSTEM, messages, None, LLMAnalysisAnswer)
-            except ModelAnswerError as exc:
-                self.last_error = str(exc)
-                log.info("analysis answer %d rejected: %s", attempt + 1, exc)
-                messages += [Message.assistant(exc.raw or "(no answer)"), Message.user(exc.feedback)]
-                continue
-            return answer_to_analysis(answer.value, task, trajectory, known)
+        with self.backend.track() as usage:
+            for attempt in range(self.max_attempts):
+                try:
+                    answer = self.backend.parse(system, messages, None, LLMAnalysisAnswer, role="F")
+                except ModelAnswerError as exc:
+                    self.last_error = str(exc)
+                    log.info("analysis answer %d rejected: %s", attempt + 1, exc)
+                    messages += [Message.assistant(exc.raw or "(no answer)"), Message.user(exc.feedback)]
+                    continue
+                out = answer_to_analysis(answer.value, task, trajectory, known)
+                out.usage = usage.to_dict()
+                return out
         if not self.fallback:
             from adaptenv.adapt.llm import LLMError
 
@@ -447,6 +469,7 @@ class LLMAnalyzer:
         log.warning("falling back to the built-in analysis: %s", self.last_error)
         out = analyze_trajectory(trajectory, world)
         out.source = "builtin-fallback"
+        out.usage = usage.to_dict()
         return out
 
 

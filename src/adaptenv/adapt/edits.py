@@ -63,11 +63,13 @@ class Edit(BaseModel):
     """Name of the generator that proposed the edit."""
     intent: str = ""
     """Free-text intent (e.g. the LLM's reason, the suggestion it implements)."""
+    undone: bool = False
+    """True when the generator took the edit back (replaced by a revision, or its step was aborted)."""
 
     @property
     def changed(self) -> bool:
         """Whether replaying this edit changes the scene."""
-        return self.accepted and (self.achieved_dx != 0.0 or self.achieved_dz != 0.0 or _yaw_delta(self) != 0.0)
+        return self.accepted and not self.undone and (self.achieved_dx != 0.0 or self.achieved_dz != 0.0 or _yaw_delta(self) != 0.0)
 
 
 def _yaw_delta(edit: Edit) -> float:
@@ -121,10 +123,10 @@ class EditLog(BaseModel):
 def apply_edit(house: House, edit: Edit, *, in_place: bool = False) -> House:
     """The house with an edit's achieved move replayed (children move rigidly); a copy unless ``in_place``.
 
-    Rejected edits change nothing. Raises AdaptenvError when the object is not a top-level object.
+    Rejected and undone edits change nothing. Raises AdaptenvError when the object is not a top-level object.
     """
     out = house if in_place else house.model_copy(deep=True)
-    if not edit.accepted:
+    if not edit.accepted or edit.undone:
         return out
     for obj in out.objects:
         if obj.id == edit.object_id:

@@ -25,6 +25,8 @@ import numpy as np
 
 from adaptenv.adapt.analysis import Analysis, Analyzer
 from adaptenv.adapt.generators import GenerationContext, GenerationResult, Generator
+from adaptenv.adapt.llm.accounting import scene_usage
+from adaptenv.adapt.llm.usage import Prices
 from adaptenv.adapt.objectives import RouteSpec, measure, realism_score
 from adaptenv.adapt.validation import validate_scene
 from adaptenv.agents.policy import ExpertPolicy, Policy, as_policy
@@ -105,15 +107,15 @@ def adapt_scene(house: House, episode: Episode, *, policy: Policy, analyzer: Ana
     return AdaptResult(new, house, episode, analysis, generation, before, after, problems, new_world)
 
 
-def summarize(result: AdaptResult, *, analyzer: str, seed: int | None = None) -> dict[str, Any]:
-    """The figures a person reads about one step: agent before/after, objectives, realism, expert check."""
+def summarize(result: AdaptResult, *, analyzer: Analyzer, seed: int | None = None) -> dict[str, Any]:
+    """The figures a person reads about one step: agent before/after, objectives, realism, expert check, LLM use."""
     ep = result.episode
     world, new_world = compile_world(result.original, "before"), result.world or compile_world(result.house, "after")
     expert = rollout(new_world, ep, ExpertPolicy())
     route = RouteSpec.from_episode(ep.target_type, ep.start, result.before)
     gen = result.generation
     return {
-        "house": result.before.house, "policy": result.before.policy, "analyzer": analyzer, "generator": gen.generator, "seed": seed,
+        "house": result.before.house, "policy": result.before.policy, "analyzer": analyzer.name, "generator": gen.generator, "seed": seed,
         "episode": {"target_type": ep.target_type, "start": list(ep.start), "seed": ep.seed},
         "steps_requested": len(gen.steps), "edits_applied": result.edits_applied,
         "edits_verified": result.edits_verified,
@@ -122,8 +124,22 @@ def summarize(result: AdaptResult, *, analyzer: str, seed: int | None = None) ->
         "realism_before": realism_score(result.original, result.original),
         "realism_after": realism_score(result.house, result.original),
         "expert_solvable": bool(is_solvable(new_world, ep)), "expert_success_after": bool(expert.metrics.success),
-        "valid": result.valid, "problems": result.problems, "usage": gen.usage,
+        "valid": result.valid, "problems": result.problems, "stopped": gen.stopped,
+        "usage": scene_usage(result.analysis, gen).to_dict(gen.prices or _backend_prices(analyzer), calls=False),
+        "llm": gen.llm or _backend_info(analyzer),
     }
+
+
+def _backend_info(part: Analyzer) -> dict[str, Any] | None:
+    """Provider, API, model, base URL, prompt set and temperature of an LLM-backed F (never the key)."""
+    backend = getattr(part, "backend", None)
+    return backend.describe() if backend is not None else None
+
+
+def _backend_prices(part: Analyzer) -> Prices | None:
+    """Token prices of an LLM-backed F (None for the built-in)."""
+    backend = getattr(part, "backend", None)
+    return backend.config.prices() if backend is not None else None
 
 
 def _agent(traj: Trajectory) -> dict[str, Any]:

@@ -108,7 +108,7 @@ def ask_llm(backend: LLMBackend, system: str, messages: list[Message], allowed_i
     last = ""
     for attempt in range(max_attempts):
         try:
-            call = backend.call_tool(system, messages, None, tool)
+            call = backend.call_tool(system, messages, None, tool, role="verify")
             return parse_verification(call.arguments, allowed_ids), ""
         except ModelAnswerError as exc:
             last = str(exc)

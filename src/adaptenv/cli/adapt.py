@@ -10,29 +10,76 @@ import numpy as np
 import typer
 
 from adaptenv.cli._common import JSON_OPTION
+from adaptenv.errors import ConfigError
 
 HOUSE_ARGUMENT = typer.Argument(..., metavar="HOUSE.json", help="House JSON file (ProcTHOR format).",
                                 show_default=False)
 TRAJ_ARGUMENT = typer.Argument(..., metavar="TRAJ.json", help="Trajectory JSON (from `adaptenv rollout -o`).",
                                show_default=False)
-MODEL_OPTION = typer.Option("gpt-4.1-mini", "--model", help="LLM model name (the paper used gpt-4.1-mini).")
+MODEL_OPTION = typer.Option(None, "--model", help="LLM model name (default gpt-4.1-mini, the paper's model).")
 BASE_URL_OPTION = typer.Option(None, "--base-url", metavar="URL",
-                               help="OpenAI-compatible server ending in /v1 (vLLM, Ollama, llama.cpp); "
-                                    "without it the OpenAI API is used and OPENAI_API_KEY must be set.")
+                               help="Server URL ending in /v1 (OpenAI, vLLM, Ollama, llama.cpp); default "
+                                    "$OPENAI_BASE_URL, else the OpenAI API (then OPENAI_API_KEY must be set).")
+API_OPTION = typer.Option(None, "--api", help="responses (the paper's) or chat (Chat Completions); default: "
+                          "responses for the OpenAI API, chat for any other --base-url.")
+KEY_ENV_OPTION = typer.Option(None, "--api-key-env", metavar="VAR", help="Environment variable holding the key "
+                              "(default OPENAI_API_KEY for OpenAI, ADAPTENV_LLM_API_KEY for other servers).")
 OUT_OPTION = typer.Option(..., "-o", "--out", help="Folder for the adapted house, renders and logs.")
-CACHE_OPTION = typer.Option(None, "--llm-cache", metavar="DIR", help="Cache LLM answers in this folder.")
+CACHE_OPTION = typer.Option(None, "--llm-cache", metavar="DIR", help="Cache LLM answers in this folder; a rerun "
+                            "with the same inputs makes no request.")
+PROMPTS_OPTION = typer.Option(None, "--prompts", help="adaptenv (default, richer prompts) or paper (the paper's "
+                              "appendix prompts verbatim).")
+PRICE_IN_OPTION = typer.Option(None, "--price-in", min=0.0, metavar="USD", help="USD per million input tokens "
+                               "(cost estimates; gpt-4.1-mini: see docs/llm.md).")
+PRICE_OUT_OPTION = typer.Option(None, "--price-out", min=0.0, metavar="USD",
+                                help="USD per million output tokens.")
+MAX_TOKENS_OPTION = typer.Option(None, "--max-tokens", min=1, help="Token budget (input + output) of the run; "
+                                 "G stops cleanly when it is used up.")
+MAX_COST_OPTION = typer.Option(None, "--max-cost", min=0.0, metavar="USD", help="Cost budget of the run in USD "
+                               "(needs --price-in and --price-out).")
+TARGET_MOVES_OPTION = typer.Option(False, "--allow-target-moves", help="Let the LLM G move the episode's target "
+                                   "objects (excluded by default, like the built-in G).")
+LLM_CONFIG_OPTION = typer.Option(None, "--llm-config", metavar="FILE", help="LLMConfig JSON file (docs/llm.md); "
+                                 "the flags above override its fields.")
 
 
-def llm_backend(model: str, base_url: str | None, cache_dir: Path | None, what: str):
-    """An LLM backend for ``what`` (e.g. '--generator llm'); one-line errors when no server is configured."""
-    from adaptenv.adapt.llm import LLMConfig, make_backend
-    from adaptenv.errors import ConfigError
+def llm_config(model: str | None, base_url: str | None, cache_dir: Path | None, what: str, *,
+               api: str | None = None, api_key_env: str | None = None, prompts: str | None = None, price_in: float | None = None,
+               price_out: float | None = None, max_tokens: int | None = None, max_cost: float | None = None,
+               allow_target_moves: bool = False, config_file: Path | None = None):
+    """The LLMConfig the flags describe; one-line errors when no server is configured or a value is wrong."""
+    from pydantic import ValidationError
 
-    if base_url is None and not os.environ.get("OPENAI_API_KEY"):
+    from adaptenv.adapt.llm import LLMConfig, load_llm_config
+    from adaptenv.adapt.llm.config import BASE_URL_ENV, OPENAI_BASE_URL
+
+    base = load_llm_config(config_file).model_dump(exclude_defaults=True) if config_file is not None else {}
+    url = base_url or base.get("base_url")
+    if url is None and not os.environ.get(BASE_URL_ENV) and not os.environ.get(
+            api_key_env or base.get("api_key_env") or "OPENAI_API_KEY"):
         raise ConfigError(f"{what} needs a model server: set OPENAI_API_KEY for the OpenAI API, or pass "
                           "--base-url http://localhost:11434/v1 (any OpenAI-compatible server)")
-    provider = "openai" if base_url is None else "openai-compatible"
-    return make_backend(LLMConfig(provider=provider, model=model, base_url=base_url, cache_dir=cache_dir))
+    if base_url is not None:
+        base["provider"] = "openai" if base_url.rstrip("/") == OPENAI_BASE_URL else "openai-compatible"
+    flags = {"model": model, "base_url": base_url, "cache_dir": cache_dir, "api": api, "api_key_env": api_key_env,
+             "prompts": prompts, "price_in": price_in, "price_out": price_out, "max_tokens": max_tokens,
+             "max_cost": max_cost, "allow_target_moves": allow_target_moves or None}
+    fields = {**base, **{k: v for k, v in flags.items() if v is not None}}
+    try:
+        cfg = LLMConfig(**fields)
+        cfg.budget()
+    except ValidationError as exc:
+        err = exc.errors(include_url=False, include_input=False)[0]
+        raise ConfigError(f"{what}: LLM setting {'.'.join(map(str, err['loc']))}: {err['msg']}; fix the flag "
+                          "or the --llm-config file") from None
+    return cfg
+
+
+def llm_backend(model: str | None, base_url: str | None, cache_dir: Path | None, what: str, **kw):
+    """An LLM backend for ``what`` (e.g. '--generator llm'); see :func:`llm_config` for the options."""
+    from adaptenv.adapt.llm import make_backend
+
+    return make_backend(llm_config(model, base_url, cache_dir, what, **kw))
 
 
 def analyze(
@@ -40,9 +87,13 @@ def analyze(
     trajectory: Path = TRAJ_ARGUMENT,
     as_json: bool = typer.Option(False, "--json", help="Print the analysis as JSON."),
     llm: bool = typer.Option(False, "--llm", help="Ask an LLM (vision) instead of the built-in analyzer."),
-    model: str = MODEL_OPTION,
+    model: str | None = MODEL_OPTION,
     base_url: str | None = BASE_URL_OPTION,
+    api: str | None = API_OPTION,
+    api_key_env: str | None = KEY_ENV_OPTION,
     llm_cache: Path | None = CACHE_OPTION,
+    prompts: str | None = PROMPTS_OPTION,
+    llm_config_file: Path | None = LLM_CONFIG_OPTION,
 ) -> None:
     """Analyze one recorded episode (the paper's F): outcome, concerns and suggestions."""
     from adaptenv.adapt.analysis import BuiltinAnalyzer, LLMAnalyzer
@@ -54,7 +105,9 @@ def analyze(
     h = load_house(existing_file(house, "house file"))
     traj = Trajectory.load(existing_file(trajectory, "trajectory file"))
     world = compile_world(h, house.stem)
-    analyzer = LLMAnalyzer(llm_backend(model, base_url, llm_cache, "--llm")) if llm else BuiltinAnalyzer()
+    analyzer = (LLMAnalyzer(llm_backend(model, base_url, llm_cache, "--llm", api=api, api_key_env=api_key_env,
+                                        prompts=prompts, config_file=llm_config_file))
+                if llm else BuiltinAnalyzer())
     result = analyzer.analyze(traj, world)
     typer.echo(result.model_dump_json(indent=1) if as_json else result.to_text())
 
@@ -67,9 +120,18 @@ def adapt(
     steps: int = typer.Option(5, "--steps", min=1, max=50, help="Single-object edits to make."),
     generator: str = typer.Option("builtin", "--generator", help="builtin (offline), llm, or random."),
     analyzer: str = typer.Option("builtin", "--analyzer", help="builtin (offline) or llm."),
-    model: str = MODEL_OPTION,
+    model: str | None = MODEL_OPTION,
     base_url: str | None = BASE_URL_OPTION,
+    api: str | None = API_OPTION,
+    api_key_env: str | None = KEY_ENV_OPTION,
     llm_cache: Path | None = CACHE_OPTION,
+    prompts: str | None = PROMPTS_OPTION,
+    price_in: float | None = PRICE_IN_OPTION,
+    price_out: float | None = PRICE_OUT_OPTION,
+    max_tokens: int | None = MAX_TOKENS_OPTION,
+    max_cost: float | None = MAX_COST_OPTION,
+    allow_target_moves: bool = TARGET_MOVES_OPTION,
+    llm_config_file: Path | None = LLM_CONFIG_OPTION,
     seed: int = typer.Option(0, "--seed", help="Seed of the episode draw and the generator."),
     target: str | None = typer.Option(None, "--target", metavar="TYPE", help="Target object type (e.g. Fridge)."),
     as_json: bool = typer.Option(False, "--json", help="Print the summary as JSON."),
@@ -84,7 +146,6 @@ def adapt(
     from adaptenv.agents.registry import resolve_policy
     from adaptenv.agents.rollout import draw_episode
     from adaptenv.cli._common import existing_file
-    from adaptenv.errors import ConfigError
     from adaptenv.scene.house import load_house
     from adaptenv.sim.world import compile_world
 
@@ -94,21 +155,30 @@ def adapt(
         raise ConfigError(f"--analyzer {analyzer!r}: unknown analyzer; use builtin or llm")
     h = load_house(existing_file(house, "house file"))
     configure_torch()  # one torch thread: G's rollout checks are many tiny batches
+    console = Console()
     backend = None
     if "llm" in (generator, analyzer):
-        backend = llm_backend(model, base_url, llm_cache, f"--{'generator' if generator == 'llm' else 'analyzer'} llm")
+        backend = llm_backend(model, base_url, llm_cache, f"--{'generator' if generator == 'llm' else 'analyzer'} llm",
+                              api=api, api_key_env=api_key_env, prompts=prompts, price_in=price_in,
+                              price_out=price_out, max_tokens=max_tokens, max_cost=max_cost,
+                              allow_target_moves=allow_target_moves, config_file=llm_config_file)
+        if not as_json:
+            d = backend.describe()
+            console.print(f"LLM: {d['model']} at {d['base_url']} ({d['api']} API, prompts {d['prompts']})",
+                          highlight=False)
     gen = make_generator(generator, backend=backend) if generator == "llm" else make_generator(generator)
+    if generator == "llm" and not as_json:
+        gen.progress = lambda text: console.print(f"[dim]{text}[/]", highlight=False)
     f = LLMAnalyzer(backend) if analyzer == "llm" else BuiltinAnalyzer()
     world = compile_world(h, house.stem)
     episode = draw_episode(world, np.random.default_rng([seed, 1]), target)
     result = adapt_scene(h, episode, policy=resolve_policy(policy, seed=seed), analyzer=f, generator=gen, steps=steps,
                          rng=np.random.default_rng(seed), name=house.stem, render=True, render_dir=out / "steps")
-    s = summarize(result, analyzer=f.name, seed=seed)
+    s = summarize(result, analyzer=f, seed=seed)
     write_outputs(result, s, out)
     if as_json:
         typer.echo(json.dumps(s, indent=1, default=str))
     else:
-        console = Console()
         ob, oa = s["objective_before"], s["objective_after"]
         ab, aa = s["agent_before"], s["agent_after"]
         ep = s["episode"]
@@ -123,8 +193,12 @@ def adapt(
                       f"{s['expert_solvable']}, expert success: {s['expert_success_after']}; valid: {s['valid']}")
         for p in s["problems"]:
             console.print(f"  [red]problem:[/] {p}", highlight=False)
-        if s.get("usage"):
-            console.print(f"tokens: {s['usage']}")
+        if s.get("stopped"):
+            console.print(f"[yellow]G stopped early:[/] {s['stopped']}", highlight=False)
+        if s.get("llm"):
+            for role, u in s["usage"]["by_role"].items():
+                console.print(f"tokens {role:6s} {_usage_text(u)}", highlight=False)
+            console.print(f"tokens total  {_usage_text(s['usage'])}", highlight=False)
         console.print(f"wrote {out}/ (house.json, before.png, after.png, analysis.json, edits.json, summary.json)")
     if not s["valid"]:
         raise typer.Exit(1)
@@ -132,6 +206,13 @@ def adapt(
 
 def _fmt(x) -> str:
     return "n/a" if x is None else f"{x:.3f}"
+
+
+def _usage_text(u: dict) -> str:
+    """One line of a usage dict: tokens in (cached) / out, calls, retries, cache hits, cost."""
+    cost = f", ${u['cost_usd']:.4f}" if "cost_usd" in u else ""
+    return (f"{u['input_tokens']:,} in ({u['cached_tokens']:,} cached) / {u['output_tokens']:,} out, "
+            f"{u['calls']} calls, {u['retries']} retries, {u['cache_hits']} cache hits{cost}")
 
 
 def bench_adapt(

@@ -7,6 +7,18 @@ from pathlib import Path
 
 import typer
 
+from adaptenv.cli.adapt import (
+    API_OPTION,
+    CACHE_OPTION,
+    KEY_ENV_OPTION,
+    LLM_CONFIG_OPTION,
+    MAX_COST_OPTION,
+    MAX_TOKENS_OPTION,
+    PRICE_IN_OPTION,
+    PRICE_OUT_OPTION,
+    PROMPTS_OPTION,
+    TARGET_MOVES_OPTION,
+)
 from adaptenv.curriculum.executor import ADDRESS_OPTION, EXECUTOR_OPTION, WORKERS_OPTION
 from adaptenv.errors import ConfigError
 
@@ -24,6 +36,19 @@ def _heldout(values: list[str] | None) -> dict[str, str] | None:
     return out
 
 
+def loop_llm_section(config_file: Path | None, **flags: object) -> dict[str, object]:
+    """The loop config's ``llm`` section from --llm-config and the LLM flags (flags win; never a key)."""
+    from adaptenv.adapt.llm import load_llm_config
+    from adaptenv.adapt.llm.config import OPENAI_BASE_URL
+
+    llm: dict[str, object] = (load_llm_config(config_file).model_dump(mode="json", exclude_defaults=True)
+                              if config_file is not None else {})
+    llm.update({k: v for k, v in flags.items() if v is not None})
+    if flags.get("base_url"):
+        llm["provider"] = "openai" if str(flags["base_url"]).rstrip("/") == OPENAI_BASE_URL else "openai-compatible"
+    return llm
+
+
 def loop(
     policy: str = typer.Option("pretrained", "--policy", help="Starting policy: pretrained or a checkpoint path."),
     houses: str = typer.Option("preset:pretrain-train", "--houses", help="Training scenes: a folder or preset:NAME."),
@@ -39,8 +64,19 @@ def loop(
     heldout_episodes: int = typer.Option(100, "--heldout-episodes", min=1, help="Episodes per held-out set."),
     heldout: list[str] = typer.Option(None, "--heldout", help="Held-out set NAME=HOUSES (repeatable); default: "
                                       "rearranged=preset:pretrain-rearranged and unseen=preset:pretrain-unseen."),
-    model: str = typer.Option(None, "--model", help="LLM model for ours-llm."),
-    base_url: str = typer.Option(None, "--base-url", help="OpenAI-compatible server URL for ours-llm."),
+    model: str = typer.Option(None, "--model", help="LLM model for ours-llm (default gpt-4.1-mini)."),
+    base_url: str = typer.Option(None, "--base-url", help="Server URL ending in /v1 for ours-llm (default "
+                                 "$OPENAI_BASE_URL, else the OpenAI API)."),
+    api: str = API_OPTION,
+    api_key_env: str = KEY_ENV_OPTION,
+    llm_cache: Path = CACHE_OPTION,
+    prompts: str = PROMPTS_OPTION,
+    price_in: float = PRICE_IN_OPTION,
+    price_out: float = PRICE_OUT_OPTION,
+    max_tokens: int = MAX_TOKENS_OPTION,
+    max_cost: float = MAX_COST_OPTION,
+    allow_target_moves: bool = TARGET_MOVES_OPTION,
+    llm_config_file: Path = LLM_CONFIG_OPTION,
     executor: str = EXECUTOR_OPTION,
     workers: int = WORKERS_OPTION,
     address: str = ADDRESS_OPTION,
@@ -55,10 +91,10 @@ def loop(
     from adaptenv.curriculum.loop import LoopConfig, run_loop
 
     console = Console()
-    llm = {}
-    if model or base_url:
-        llm = {"provider": "openai-compatible" if base_url else "openai", **({"model": model} if model else {}),
-               **({"base_url": base_url} if base_url else {})}
+    llm = loop_llm_section(llm_config_file, model=model, base_url=base_url, api=api, api_key_env=api_key_env,
+                           cache_dir=str(llm_cache) if llm_cache else None, prompts=prompts, price_in=price_in,
+                           price_out=price_out, max_tokens=max_tokens, max_cost=max_cost,
+                           allow_target_moves=allow_target_moves or None)
     cfg = LoopConfig(method=method, policy=policy, houses=houses, iterations=iterations, seed=seed,
                      scenes_per_iteration=scenes, edit_steps=edit_steps, finetune_frames=finetune_frames,
                      finetune_lr=finetune_lr,

@@ -24,6 +24,7 @@ from typing import Any
 
 import numpy as np
 
+from adaptenv.adapt.llm.accounting import check_llm_section
 from adaptenv.curriculum.loop import METHODS, LoopConfig, run_loop
 from adaptenv.curriculum.records import atomic_write_text, iteration_dir, read_iterations
 from adaptenv.errors import ConfigError
@@ -71,6 +72,7 @@ class ExperimentConfig:
                 raise ConfigError(f"{p}: methods: {m!r} is unknown; use {', '.join(METHODS)}")
         if not cfg.seeds:
             raise ConfigError(f"{p}: seeds is empty; list at least one seed")
+        check_llm_section(cfg.loop.get("llm") or {}, f"{p}: loop.llm")
         return cfg
 
     def loop_config(self, method: str, seed: int) -> LoopConfig:
@@ -93,6 +95,7 @@ def run_experiment(cfg: ExperimentConfig, out: str | Path, *, executor: Any = No
                    progress: Any = None) -> dict[str, Any]:
     """Run every (method, seed) that is not finished yet, then summarize; returns the summary."""
     out = Path(out)
+    check_llm_section(cfg.loop.get("llm") or {}, "experiment config: loop.llm")  # before anything is saved
     out.mkdir(parents=True, exist_ok=True)
     atomic_write_text(out / "experiment.json", json.dumps(asdict(cfg), indent=1))
     jobs = [(asdict(cfg.loop_config(m, s)), str(run_dir(out, m, s)), command) for m in cfg.methods
@@ -107,11 +110,12 @@ def run_experiment(cfg: ExperimentConfig, out: str | Path, *, executor: Any = No
     return summarize(out, cfg)
 
 
-def _mean_se(values: list[float]) -> tuple[float, float]:
+def _mean_se(values: list[float]) -> tuple[float, float | None]:
+    """Mean and standard error over seeds (None when undefined: fewer than two seeds)."""
     a = np.asarray(values, dtype=float)
     if a.size == 0:
-        return float("nan"), float("nan")
-    se = float(a.std(ddof=1) / math.sqrt(a.size)) if a.size > 1 else 0.0
+        return float("nan"), None
+    se = float(a.std(ddof=1) / math.sqrt(a.size)) if a.size > 1 else None
     return float(a.mean()), se
 
 
@@ -246,7 +250,8 @@ def summary_markdown(summary: dict[str, Any]) -> str:
             f = figs.get(k)
             p = summary["tests"].get(m, {}).get(k)
             mark = f" (p={p:.3f})" if p is not None else ""
-            cells.append(f"{f['mean']:.3f} ± {f['se']:.3f}{mark}" if f else "")
+            se = "n/a" if f and f["se"] is None else f"{f['se']:.3f}" if f else ""
+            cells.append(f"{f['mean']:.3f} ± {se}{mark}" if f else "")
         env = figs.get("env_steps:all", {}).get("mean", float("nan"))
         upd = figs.get("grad_updates:all", {}).get("mean", float("nan"))
         lines.append(f"| {m} | " + " | ".join(cells) + f" | {env:,.0f} | {upd:,.0f} |")

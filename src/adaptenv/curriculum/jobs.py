@@ -18,6 +18,8 @@ import numpy as np
 from adaptenv.adapt.analysis import Analysis, Analyzer, BuiltinAnalyzer, LLMAnalyzer
 from adaptenv.adapt.generators import Generator, make_generator
 from adaptenv.adapt.generators.random_perturbation import random_single_edits
+from adaptenv.adapt.llm.accounting import scene_usage
+from adaptenv.adapt.llm.usage import Usage
 from adaptenv.adapt.step import adapt_scene
 from adaptenv.agents.evaluate import EpisodeResult, run_episodes, sample_episodes
 from adaptenv.agents.houses import HouseSet, load_house_set
@@ -159,7 +161,10 @@ class Generated:
     """Ids of the objects the child's edits moved or turned."""
     valid: bool = True
     """False when the final validation refused the edited house (the child is then the parent, unedited)."""
-    usage: dict[str, int] = field(default_factory=dict)
+    usage: Usage | None = None
+    """LLM usage of F and G for this scene (empty for the built-ins; None for random edits)."""
+    stopped: str = ""
+    """Why G ended early (LLM unavailable, budget used up), else empty."""
 
 
 def run_generate(job: GenerateJob) -> Generated:
@@ -175,12 +180,13 @@ def run_generate(job: GenerateJob) -> Generated:
     res = adapt_scene(job.house, job.rollout.episode, policy=job.weights.policy(), analyzer=analyzer,
                       generator=generator, steps=job.edit_steps, rng=rng, before=job.rollout.trajectory,
                       name=job.name)
-    log = res.generation.to_json_dict()
+    log, gen = res.generation.to_json_dict(), res.generation
+    usage = scene_usage(res.analysis, gen)
     if not res.valid:  # the final check refused the whole edited house: the parent stands, nothing was applied
         log["final_validation"] = res.problems
-        return Generated(job.house, log, 0, res.analysis, res.before, valid=False, usage=res.generation.usage)
+        return Generated(job.house, log, 0, res.analysis, res.before, valid=False, usage=usage, stopped=gen.stopped)
     return Generated(res.house, log, res.edits_applied, res.analysis, res.after,
-                     moved=[e.object_id for e in res.generation.applied], usage=res.generation.usage)
+                     moved=[e.object_id for e in gen.applied], usage=usage, stopped=gen.stopped)
 
 
 def make_fg(kind: GeneratorKind, llm: dict[str, Any]) -> tuple[Analyzer, Generator]:

@@ -35,6 +35,7 @@ from typing import Any
 
 import numpy as np
 
+from adaptenv.adapt.llm.accounting import check_llm_section, same_run, scenes_usage
 from adaptenv.agents.checkpoint import load_checkpoint, save_checkpoint
 from adaptenv.agents.evaluate import EpisodeResult, mean_se
 from adaptenv.agents.houses import load_house_set
@@ -51,6 +52,7 @@ from adaptenv.curriculum.jobs import (
     run_eval,
     run_rollout,
 )
+from adaptenv.curriculum.llm_usage import budget_left, iteration_lines, record_iteration
 from adaptenv.curriculum.methods import METHODS, Iteration, Stream
 from adaptenv.curriculum.records import (
     STATE,
@@ -101,7 +103,8 @@ class LoopConfig:
     gallery: int = 4
     """Adapted scenes per iteration kept with before/after renders for the report."""
     llm: dict[str, Any] = field(default_factory=dict)
-    """LLMConfig fields for ours-llm (provider, model, base_url, ...)."""
+    """LLMConfig fields for ours-llm (provider, model, base_url, api, cache_dir, prompts, price_in, price_out,
+    max_tokens, max_cost, ...; docs/llm.md). Never an API key: name its variable in api_key_env."""
     buffer_capacity: int = 64
     """Level buffer size (plr, accel)."""
 
@@ -117,6 +120,7 @@ class LoopConfig:
         if self.method == "ours-llm" and not self.llm:
             raise ConfigError("loop config: method ours-llm needs an llm section (provider, model, base_url); "
                               "see docs/llm.md")
+        check_llm_section(self.llm, "loop config: llm")
         return self
 
 
@@ -202,6 +206,9 @@ def run_loop(cfg: LoopConfig, run_dir: str | Path, *, resume: bool = False, exec
         _checkpoint(run_dir, cfg, state, records)
 
     for t in range(state.iteration + 1, cfg.iterations + 1):
+        if why := budget_left(run_dir, cfg.llm):  # stop cleanly; raise the budget and --resume to go on
+            say(f"stopping before t={t}: {why}")
+            break
         start = time.perf_counter()
         pi_t = load_checkpoint(iteration_dir(run_dir, t - 1) / "policy.pt").policy()
         shutil.rmtree(iteration_dir(run_dir, t), ignore_errors=True)  # a killed attempt at t starts over
@@ -221,6 +228,12 @@ def run_loop(cfg: LoopConfig, run_dir: str | Path, *, resume: bool = False, exec
         method.update_buffer(it, rolled, rollouts)
         new = method.make_scenes(it, rolled, rollouts)
         train_names = method.train_on(it, rolled, new)
+        llm_usage = None
+        if method.uses_llm:
+            made = [m for _, m in it.made]
+            llm_usage = record_iteration(run_dir, t, scenes_usage(made), cfg.llm).iterations[str(t)]
+            for line in iteration_lines(t, [n for n, _ in it.made], made, run_dir, cfg.llm):
+                say(line)
 
         # 3. fine-tune pi on the chosen scenes with expert labels
         say(f"t={t}: fine-tuning on {len(train_names)} scenes ({cfg.finetune_frames} frames)")
@@ -239,7 +252,7 @@ def run_loop(cfg: LoopConfig, run_dir: str | Path, *, resume: bool = False, exec
         state.iteration = t
         records.append(IterationRecord(iteration=t, env_steps=state.env_steps, grad_updates=state.grad_updates,
                                        edits=state.edits, train=train_metrics, heldout=heldout, gallery=it.gallery,
-                                       wall_time_s=round(time.perf_counter() - start, 2)))
+                                       wall_time_s=round(time.perf_counter() - start, 2), llm_usage=llm_usage))
         (iteration_dir(run_dir, t) / "scenes.json").write_text(json.dumps(
             {"rolled_out": rolled, "trained_on": train_names, "edits_this_iteration": state.edits - edits_before}),
             encoding="utf-8")
@@ -253,7 +266,7 @@ def _open_run(cfg: LoopConfig, run_dir: Path, resume: bool, command: str
     state_path = run_dir / STATE
     if resume and state_path.is_file():
         saved = json.loads(state_path.read_text(encoding="utf-8"))
-        if saved.get("config") != asdict(cfg):
+        if not same_run(saved.get("config"), asdict(cfg)):
             raise ConfigError(f"{run_dir}: --resume with a different config than the interrupted run; "
                               "use the same config or a new output folder")
         state = LoopState(**saved["state"])

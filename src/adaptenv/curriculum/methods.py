@@ -28,6 +28,7 @@ from adaptenv.curriculum import buffer as lb
 from adaptenv.curriculum.executor import Executor
 from adaptenv.curriculum.gallery import gallery_item
 from adaptenv.curriculum.jobs import (
+    Generated,
     GenerateJob,
     GeneratorKind,
     PolicyWeights,
@@ -81,6 +82,8 @@ class Iteration:
     """Rolled-out scene -> the buffer level it was made from (ACCEL's children)."""
     replayed: list[str] = field(default_factory=list)
     """Buffer levels replayed this iteration (ACCEL trains on them)."""
+    made: list[tuple[str, Generated]] = field(default_factory=list)
+    """Every scene the method's generation jobs made this iteration (parent name, what the job returned)."""
 
     def rng(self, stream: Stream) -> np.random.Generator:
         """The generator of one named purpose of this iteration, independent of every other."""
@@ -97,6 +100,8 @@ class Method:
     name: ClassVar[str]
     replaces_parents: ClassVar[bool] = False
     """Made scenes take their parents' places in the pool (scene-editing methods)."""
+    uses_llm: ClassVar[bool] = False
+    """F and G call an LLM: the loop keeps its token ledger and budget."""
 
     def scenes_to_roll_out(self, it: Iteration) -> list[str]:
         """The next ``scenes_per_iteration`` scenes of the pool, round robin."""
@@ -161,6 +166,7 @@ class EditingMethod(Method):
                 for k, (name, ro) in enumerate(zip(rolled, rollouts, strict=True))]
         new = []
         for k, (job, made) in enumerate(zip(jobs, it.executor.map(run_generate, jobs, desc="generation"), strict=True)):
+            it.made.append((job.name, made))
             it.state.edits += made.edits
             new.append(it.store.put(f"{job.name.split('~')[0]}~t{it.t:02d}{self.tag}{k:02d}", made.house))
             if len(it.gallery) < it.cfg.gallery:
@@ -189,6 +195,7 @@ class OursLLM(Ours):
 
     name = "ours-llm"
     generator = "llm"
+    uses_llm = True
 
 
 class PLR(Method):

@@ -17,12 +17,13 @@ An experiment folder holds one run folder per (method, seed): ``EXP_DIR/<method>
 
 from __future__ import annotations
 
+import math
 import os
 import tempfile
 from pathlib import Path
 from typing import Any
 
-from pydantic import BaseModel, Field
+from pydantic import BaseModel, Field, field_validator
 
 from adaptenv.scene.house import House, load_house, save_house
 from adaptenv.sim.world import NavWorld, compile_world
@@ -45,8 +46,15 @@ class SetMetrics(BaseModel):
     spl: float
     collisions: float
     episodes: int
-    success_se: float = 0.0
-    spl_se: float = 0.0
+    success_se: float | None = 0.0
+    """Standard error of ``success``; None when undefined (a single episode)."""
+    spl_se: float | None = 0.0
+
+    @field_validator("success_se", "spl_se", mode="before")
+    @classmethod
+    def _undefined_is_none(cls, v: object) -> object:
+        """NaN (one episode: no standard error) is stored and read back as None."""
+        return None if isinstance(v, float) and not math.isfinite(v) else v
 
 
 class GalleryItem(BaseModel):
@@ -76,6 +84,8 @@ class IterationRecord(BaseModel):
     """pi_{t+1} on each held-out set (e.g. 'rearranged', 'unseen')."""
     gallery: list[GalleryItem] = Field(default_factory=list)
     wall_time_s: float = 0.0
+    llm_usage: dict[str, Any] | None = None
+    """LLM tokens, calls, retries, cache hits (and cost when priced) of this iteration, per role (ours-llm)."""
 
 
 class RunInfo(BaseModel):

@@ -49,6 +49,8 @@ class EditRow:
     """Verifier's reason, validation problems, or why a step was skipped."""
     source: str = ""
     intent: str = ""
+    outcome: str = ""
+    """``no-op`` (changed nothing) or ``undone`` (taken back by its generator); empty otherwise."""
 
 
 @dataclass
@@ -216,9 +218,10 @@ def load_gallery(run_dir: Path, item: GalleryItem) -> GalleryEntry:
 
 
 def _row(edit: Any, **extra: Any) -> EditRow:
+    outcome = "undone" if edit.undone else "no-op" if edit.accepted and not edit.changed else ""
     return EditRow(edit.object_id, (edit.dx_units, edit.dy_units), (edit.achieved_dx_units, edit.achieved_dy_units),
                    edit.rotation, edit.yaw_before, edit.yaw_after, edit.stop_reason, edit.blocked_by, edit.accepted,
-                   source=edit.source, intent=edit.intent, **extra)
+                   source=edit.source, intent=edit.intent, outcome=outcome, **extra)
 
 
 def parse_edits(doc: Any) -> tuple[str, list[EditRow]]:

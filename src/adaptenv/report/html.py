@@ -96,7 +96,8 @@ def set_cell(metric: str, m: SetMetrics | None) -> str:
     if m is None:
         return "<td>–</td>"
     se_val = getattr(m, f"{metric}_se")
-    se = f' <span class="se">± {metric_text(metric, se_val)}</span>' if se_val else ""
+    se = (' <span class="se">± n/a</span>' if se_val is None
+          else f' <span class="se">± {metric_text(metric, se_val)}</span>' if se_val else "")
     return f"<td>{metric_text(metric, getattr(m, metric))}{se}</td>"
 
 
@@ -241,6 +242,8 @@ def _move(d: tuple[float, float]) -> str:
 def _verdict(e: EditRow) -> str:
     if not e.accepted:
         return '<span class="badge bad">rejected</span>' if e.object_id != "-" else f'<span class="badge na">{esc(e.stop_reason)}</span>'
+    if e.outcome:  # no-op or undone: not in the scene, never "accepted" or "verified"
+        return f'<span class="badge na">{esc(e.outcome)}</span>'
     if e.verified is True:
         how = f" ({esc(e.verification)})" if e.verification and e.verification != "none" else ""
         return f'<span class="badge ok">verified{how}</span>'
@@ -322,6 +325,28 @@ def results_table(run: RunData) -> str:
                                 "standard error over episodes when recorded.</p>")
 
 
+def llm_usage_table(run: RunData) -> str:
+    """LLM tokens, calls, retries, cache hits and cost per iteration and role (ours-llm runs); empty otherwise."""
+    rows = []
+    for r in run.iterations:
+        u = r.llm_usage
+        if not u:
+            continue
+        for role, v in [("all", u), *sorted((u.get("by_role") or {}).items())]:
+            cost = f"${v['cost_usd']:.4f}" if "cost_usd" in v else "–"
+            rows.append(f"<tr><td>{r.iteration}</td><td>{esc(role)}</td><td>{num(v['input_tokens'])}</td>"
+                        f"<td>{num(v.get('cached_tokens', 0))}</td><td>{num(v['output_tokens'])}</td>"
+                        f"<td>{num(v['calls'])}</td><td>{num(v.get('retries', 0))}</td>"
+                        f"<td>{num(v.get('cache_hits', 0))}</td><td>{cost}</td></tr>")
+    if not rows:
+        return ""
+    head = ("<tr><th>iteration</th><th>role</th><th>input tokens</th><th>cached</th><th>output tokens</th>"
+            "<th>calls</th><th>retries</th><th>cache hits</th><th>cost</th></tr>")
+    return table(head, rows) + ('<p class="note">Roles: F analysis, G move proposals, verify verification. Cost '
+                                "is estimated from the prices in the run's LLM config (– without prices); the run "
+                                "total is in llm_usage.json.</p>")
+
+
 def _duration(s: float) -> str:
     if s <= 0:
         return "–"
@@ -379,6 +404,9 @@ def write_run_report(run: RunData, out: Path, *, back: tuple[str, str] | None = 
                  block("gallery", "Gallery: before and after each adaptation", gallery_html(run, assets))]
         nav = [("Overview", "#overview"), ("Learning curves", "#curves"), ("Results", "#results"),
                ("Gallery", "#gallery")]
+        if usage := llm_usage_table(run):
+            body.insert(-1, block("llm", "LLM usage per iteration", usage))
+            nav.insert(-1, ("LLM usage", "#llm"))
     if back is not None:
         nav.insert(0, (f"← {back[0]}", back[1]))
     index = out / INDEX

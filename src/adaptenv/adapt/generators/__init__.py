@@ -30,6 +30,7 @@ import numpy as np
 from pydantic import BaseModel, Field
 
 from adaptenv.adapt.edits import Edit, EditLog
+from adaptenv.adapt.llm.usage import Prices, Usage
 from adaptenv.errors import ConfigError
 from adaptenv.render.topdown import png_bytes
 
@@ -42,7 +43,10 @@ if TYPE_CHECKING:
     from adaptenv.sim.task import Episode
     from adaptenv.sim.trajectory import Trajectory
 
-StepStatus = Literal["applied", "rejected", "skipped"]
+StepStatus = Literal["applied", "rejected", "skipped", "no-op"]
+"""``applied``: the step's edit is in the house. ``rejected``: validation refused it. ``skipped``: no
+edit was made (no usable answer, or the step was aborted and its edit undone). ``no-op``: placement
+accepted a move that changed neither position nor heading (never counted as applied or verified)."""
 GENERATORS = ("builtin", "llm", "random")
 
 
@@ -106,7 +110,14 @@ class GenerationResult:
     generator: str
     renders: list[Image.Image] = field(default_factory=list)
     render_paths: list[Path] = field(default_factory=list)
-    usage: dict[str, int] = field(default_factory=dict)
+    usage: Usage = field(default_factory=Usage)
+    """LLM calls of this generation (empty for the offline generators)."""
+    prices: Prices | None = None
+    """Token prices for cost estimates in the written log (None: no cost shown)."""
+    llm: dict[str, Any] | None = None
+    """Provider, API, model, base URL, prompt set and temperature of the LLM used (never the key)."""
+    stopped: str = ""
+    """Why generation ended before ``steps`` steps (LLM unavailable, budget used up), else empty."""
     objective_trace: list[dict[str, float | None]] = field(default_factory=list)
     """Objective values before the first step and after every step."""
 
@@ -116,9 +127,10 @@ class GenerationResult:
 
     def to_json_dict(self) -> dict[str, Any]:
         """The log written next to a run: steps, every tried edit, usage, objective trace."""
-        return {"generator": self.generator, "steps": [s.model_dump(mode="json") for s in self.steps],
-                "edit_log": self.edit_log.model_dump(mode="json")["edits"], "usage": self.usage,
-                "objective_trace": self.objective_trace}
+        return {"generator": self.generator, "llm": self.llm, "stopped": self.stopped,
+                "steps": [s.model_dump(mode="json") for s in self.steps],
+                "edit_log": self.edit_log.model_dump(mode="json")["edits"],
+                "usage": self.usage.to_dict(self.prices), "objective_trace": self.objective_trace}
 
 
 @runtime_checkable

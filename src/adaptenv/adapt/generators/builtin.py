@@ -163,6 +163,11 @@ class BuiltinGenerator:
                 continue
             # The dry run was made on the current scene and found no problem: committing applies it.
             edit = v.commit(chosen.proposal, source=self.name, intent=f"{sug.id} {sug.kind}: {chosen.kind} move")
+            if not edit.changed:  # guard: a move that changes nothing is never applied nor verified
+                record.status, record.edit, record.verified = "no-op", edit, None
+                record.reason = "the chosen move changed neither position nor heading"
+                result.steps.append(record)
+                continue
             record.gain = gain(sug.kind, values, chosen.values)
             world = compile_world(v.house, "candidate")
             values, realism = chosen.values, chosen.realism

@@ -16,13 +16,25 @@ Per step:
 4. Verification (the paper's experiment): the model sees the new render, its intent, what it
    requested and what placement achieved, and answers through ``verify_move``. On "revise" (or a
    rejected move) the step is redone from the scene before it with the revised move, at most
-   ``max_revisions`` times. Transport failures after the backend's retries end the run early
-   with the edits made so far; a bad answer never raises.
+   ``max_revisions`` times. A move that changes neither position nor heading is a failed step:
+   it is re-asked once, then the step is recorded as ``no-op`` (never applied or verified).
+
+Honest accounting: an edit is in the returned house exactly when its step says ``applied``.
+Transport failures after the backend's retries, or a used-up token/cost budget, end the run early
+with the edits of the finished steps; an edit of the unfinished step is undone (its entry in the
+edit log is marked ``undone``). A bad answer never raises. Clamped answers (units above 100,
+rotations outside [0, 360)) are applied as clamped and the clamp is written into the edit's intent.
+
+The episode's target objects are not in the move tool's enum (as with the built-in G) unless
+``allow_target_moves``. With ``prompts="paper"`` the paper's appendix prompt is sent verbatim
+(:data:`adaptenv.adapt.llm.prompts.PAPER_G_PROMPT`), without a system message or object list.
 """
 
 from __future__ import annotations
 
 import logging
+from collections.abc import Callable
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -36,13 +48,23 @@ from adaptenv.adapt.generators import (
     png_bytes,
     render_scene,
 )
+from adaptenv.adapt.llm.errors import BudgetExceeded, LLMUnavailableError, ModelAnswerError
+from adaptenv.adapt.llm.messages import Message
+from adaptenv.adapt.llm.prompts import PAPER_G_PROMPT
+from adaptenv.adapt.llm.tools import MoveInstruction, move_tool, parse_move_instruction
 from adaptenv.adapt.objectives import OBJECTIVE_KINDS, RouteSpec, gain, measure
 from adaptenv.adapt.validation import EditValidator
 from adaptenv.adapt.verification import Check, ask_llm, revise_until_verified
 from adaptenv.scene.house import House
 from adaptenv.sim.world import compile_world
 
+if TYPE_CHECKING:
+    from adaptenv.adapt.llm.backend import LLMBackend
+
 log = logging.getLogger(__name__)
+
+#: Transport failures and budgets that end a generation early (the unfinished step is undone).
+STOPPING_ERRORS = (LLMUnavailableError, BudgetExceeded)
 
 SYSTEM_PROMPT = (
     "You are a level designer for a household navigation robot. You edit apartment floor plans one "
@@ -83,18 +105,21 @@ revised move replaces this one and is applied to the apartment as it was before 
 
 REVISE_PROMPT = "{reason} Propose a revised move with propose_move_instruction; it replaces the previous one."
 
+NOOP_FEEDBACK = ("Your move changed nothing: the object kept its position and heading ({achieved}). Propose a "
+                 "move that changes its position or its heading.")
+
 
 def _rotation(step: int, suggestions: list[Suggestion]) -> Suggestion | None:
     usable = [s for s in sorted(suggestions, key=lambda s: -s.priority) if s.kind in OBJECTIVE_KINDS]
     return usable[step % len(usable)] if usable else None
 
 
-def object_list(v: EditValidator) -> tuple[list[str], str]:
-    """Movable ids and the prompt's object lines (grid position of the footprint centre, yaw)."""
+def object_list(v: EditValidator, exclude_types: frozenset[str] = frozenset()) -> tuple[list[str], str]:
+    """Movable ids (without objects of ``exclude_types``) and the prompt's object lines (grid centre, yaw)."""
     ctx = v.ctx
     ids, lines = [], []
     for k, (oid, typ, movable) in enumerate(zip(ctx.ids, ctx.types, ctx.movable, strict=True)):
-        if not movable:
+        if not movable or typ in exclude_types:
             continue
         gx, gy = ctx.grid.point(float(ctx.centers[k, 0]), float(ctx.centers[k, 1]))
         ids.append(oid)
@@ -102,7 +127,7 @@ def object_list(v: EditValidator) -> tuple[list[str], str]:
     return ids, "\n".join(lines)
 
 
-def describe_request(move) -> str:
+def describe_request(move: MoveInstruction) -> str:
     return (f"{move.object_id} {move.x_direction} {move.x_units:g} units, {move.y_direction} {move.y_units:g} units, "
             f"rotation {move.rotation:g}")
 
@@ -121,26 +146,43 @@ def describe_achieved(edit: Edit) -> str:
 
 
 class LLMGenerator:
-    """G on a vision-language model through an :class:`~adaptenv.adapt.llm.LLMBackend` (see module docstring)."""
+    """G on a vision-language model through an :class:`~adaptenv.adapt.llm.LLMBackend` (see module docstring).
+
+    ``prompts`` and ``allow_target_moves`` default to the backend's config; ``progress`` receives one
+    line per finished step (status, object, running token and cost totals) and per skipped step.
+    """
 
     name = "llm"
 
-    def __init__(self, backend, *, max_attempts: int = 3, max_revisions: int = 2, verify: bool = True):
+    def __init__(self, backend: LLMBackend, *, max_attempts: int = 3, max_revisions: int = 2, verify: bool = True,
+                 prompts: str | None = None, allow_target_moves: bool | None = None,
+                 progress: Callable[[str], None] | None = None):
         self.backend = backend
         self.max_attempts = max_attempts
         self.max_revisions = max_revisions
         self.verify = verify
+        cfg = getattr(backend, "config", None)
+        self.prompts = prompts or getattr(cfg, "prompts", "adaptenv")
+        self.allow_target_moves = (bool(getattr(cfg, "allow_target_moves", False)) if allow_target_moves is None
+                                   else allow_target_moves)
+        self.progress = progress
+
+    @property
+    def system(self) -> str:
+        """The system message (none with the paper's prompts)."""
+        return "" if self.prompts == "paper" else SYSTEM_PROMPT
+
+    def _say(self, text: str) -> None:
+        (self.progress or log.info)(text)
 
     # ----------------------------------------------------------------------------- model calls
-    def _ask_move(self, messages: list, ids: list[str]):
+    def _ask_move(self, messages: list[Message], ids: list[str]) -> tuple[MoveInstruction | None, int, str]:
         """(a validated move or None, attempts used, reason when None); ``messages`` grows with the exchange."""
-        from adaptenv.adapt.llm import Message, ModelAnswerError, move_tool, parse_move_instruction
-
         tool = move_tool(ids)
         last = ""
         for attempt in range(1, self.max_attempts + 1):
             try:
-                call = self.backend.call_tool(SYSTEM_PROMPT, messages, None, tool)
+                call = self.backend.call_tool(self.system, messages, None, tool, role="G")
                 move = parse_move_instruction(call.arguments, ids)
             except ModelAnswerError as exc:
                 last = str(exc)
@@ -151,87 +193,111 @@ class LLMGenerator:
             return move, attempt, ""
         return None, self.max_attempts, f"no valid move after {self.max_attempts} answers (last: {last})"
 
+    def _prompt(self, analysis: Analysis, sug: Suggestion | None, intent: str, lines: str) -> str:
+        """G's user message for one step (the paper's verbatim, or adaptenv's with the object list)."""
+        if self.prompts == "paper":
+            return PAPER_G_PROMPT.format(analysis=analysis.to_text())
+        return STEP_PROMPT.format(analysis=analysis.to_text(), sid=sug.id if sug else "-",
+                                  skind=sug.kind if sug else "any", sdesc=sug.description if sug else intent,
+                                  objects=lines)
+
     # ----------------------------------------------------------------------------- the loop
     def generate(self, house: House, analysis: Analysis, *, steps: int, context: GenerationContext,
                  rng: np.random.Generator) -> GenerationResult:
-        from adaptenv.adapt.llm import LLMUnavailableError
-
         ep = context.episode
         targets, start = [ep.target_type], ep.start[:2]
         v = EditValidator(house, episode_targets=targets, start=start)
         edit_log = EditLog()
         route = RouteSpec.from_episode(ep.target_type, ep.start, context.trajectory)
         values = measure(compile_world(v.house, "llm"), route)
+        cfg = getattr(self.backend, "config", None)
+        describe = getattr(self.backend, "describe", None)
         result = GenerationResult(house=v.house, steps=[], edit_log=edit_log, generator=self.name,
-                                  objective_trace=[values.as_dict()])
+                                  objective_trace=[values.as_dict()],
+                                  prices=cfg.prices() if cfg is not None else None,
+                                  llm=describe() if describe is not None else None)
         with self.backend.track() as counter:
+            result.usage = counter
             for step in range(steps):
-                try:
-                    v, values = self._step(step, v, house, analysis, context, route, values, result, edit_log)
-                except LLMUnavailableError as exc:
-                    result.steps.append(StepRecord(step=step, status="skipped", reason=f"LLM unavailable: {exc}"))
-                    log.warning("stopping after %d steps: %s", step, exc)
+                v, values = self._step(step, v, house, analysis, context, route, values, result, edit_log)
+                rec = result.steps[-1]
+                what = f" {rec.edit.object_id}" if rec.edit is not None and rec.status != "skipped" else ""
+                why = f": {rec.reason}" if rec.status in ("skipped", "rejected", "no-op") and rec.reason else ""
+                self._say(f"G step {step + 1}/{steps}: {rec.status}{what}{why} | tokens so far: "
+                          f"{counter.line(result.prices)}")
+                if result.stopped:
+                    self._say(f"G stopped after {step} finished step(s): {result.stopped}")
                     break
-            result.usage = counter.snapshot()
         result.house = v.house
         return result
 
     def _step(self, step: int, v: EditValidator, original: House, analysis: Analysis, context: GenerationContext,
               route: RouteSpec, values, result: GenerationResult, edit_log: EditLog):
-        """One edit with its revisions; returns the (possibly rebuilt) validator and the new objective values."""
-        from adaptenv.adapt.llm import Message
+        """One edit with its revisions; returns the (possibly rebuilt) validator and the new objective values.
 
+        On a stopping error (LLM unavailable, budget used up) the step's edit is undone, the step is
+        recorded as skipped and ``result.stopped`` says why.
+        """
         sug = _rotation(step, analysis.suggestions)
         record = StepRecord(step=step, status="skipped", suggestion_id=sug.id if sug else None,
                             suggestion_kind=sug.kind if sug else None, objective_before=values.as_dict())
-        ids, lines = object_list(v)
+        result.steps.append(record)
+        exclude = frozenset() if self.allow_target_moves else frozenset({context.episode.target_type})
+        ids, lines = object_list(v, exclude)
         if not ids:
-            record.reason = "the scene has no movable object"
-            result.steps.append(record)
+            record.reason = "the scene has no movable object" + ("" if self.allow_target_moves else
+                                                                 " besides the episode's targets")
             return v, values
         intent = f"[{sug.id}] {sug.kind}: {sug.description}" if sug else "make the apartment more challenging"
-        prompt = STEP_PROMPT.format(analysis=analysis.to_text(), sid=sug.id if sug else "-",
-                                    skind=sug.kind if sug else "any", sdesc=sug.description if sug else intent,
-                                    objects=lines)
-        messages = [Message.user(prompt, png_bytes(render_scene(v.house, context)))]
-        move, attempts, why = self._ask_move(messages, ids)
-        record.attempts = attempts
-        if move is None:
-            record.reason = why
-            result.steps.append(record)
-            return v, values
+        messages = [Message.user(self._prompt(analysis, sug, intent, lines), png_bytes(render_scene(v.house, context)))]
         snapshot = v.house.model_copy(deep=True)
-        state = {"v": v, "fresh": True, "image": None, "unverified": False}
+        state = {"v": v, "image": None, "unverified": False, "noops": 0, "log_at": None}
 
-        def apply(mv) -> Edit:
-            if not state["fresh"]:  # a revision replaces the previous attempt: restart from the snapshot
-                state["v"] = EditValidator(snapshot, episode_targets=[context.episode.target_type],
-                                           start=context.episode.start[:2], original=original)
-            state["fresh"] = False
+        def restart() -> bool:
+            """Undo this step's edit if one is in the scene (log entry marked undone, scene rebuilt from the
+            snapshot); True when something was undone."""
+            k = state["log_at"]
+            if k is None:
+                return False
+            edit_log.edits[k] = edit_log.edits[k].model_copy(update={"undone": True})
+            state["v"] = EditValidator(snapshot, episode_targets=[context.episode.target_type],
+                                       start=context.episode.start[:2], original=original)
+            state["log_at"] = None
+            return True
+
+        def apply(mv: MoveInstruction) -> Edit:
+            restart()  # a revision replaces the previous attempt: restart from the snapshot
             dx, dy = mv.signed_displacement()
-            edit = state["v"].try_edit(mv.object_id, dx, dy, mv.rotation, source=self.name, intent=intent)
+            note = f" [clamped: {', '.join(mv.clamped)}]" if mv.clamped else ""
+            edit = state["v"].try_edit(mv.object_id, dx, dy, mv.rotation, source=self.name, intent=intent + note)
+            state["log_at"] = len(edit_log.edits) if edit.changed else None
             edit_log.append(edit)
             state["image"] = render_scene(state["v"].house, context, highlight={mv.object_id: "gold"})
             return edit
 
-        def check(mv, edit: Edit) -> Check:
+        def check(mv: MoveInstruction, edit: Edit) -> Check:
             if not edit.accepted:
                 return Check(False, "Your move was " + describe_achieved(edit) + ".")
+            if not edit.changed:
+                state["noops"] += 1
+                return Check(False, NOOP_FEEDBACK.format(achieved=describe_achieved(edit)))
             if not self.verify:
                 return Check(True, "not verified")
             messages.append(Message.user(VERIFY_PROMPT.format(oid=mv.object_id, intent=intent,
                                                               requested=describe_request(mv),
                                                               achieved=describe_achieved(edit)),
                                          png_bytes(state["image"])))
-            answer, note = ask_llm(self.backend, SYSTEM_PROMPT, messages, ids, max_attempts=self.max_attempts)
+            answer, note = ask_llm(self.backend, self.system, messages, ids, max_attempts=self.max_attempts)
             if answer is None:
                 state["unverified"] = True
                 return Check(True, f"verification skipped: {note}")
             state["unverified"] = False
-            messages.append(Message.assistant(answer.model_dump_json()))
+            messages.append(Message.assistant(answer.model_dump_json(exclude={"revised_move": {"clamped"}})))
             return Check(answer.matches_intent, answer.reason, revised=answer.revised_move)
 
-        def revise(mv, edit: Edit, chk: Check):
+        def revise(mv: MoveInstruction, edit: Edit, chk: Check) -> MoveInstruction | None:
+            if state["noops"] >= 2:  # a no-op is re-asked once, then the step is given up
+                return None
             if chk.revised is not None:
                 return chk.revised
             messages.append(Message.user(REVISE_PROMPT.format(reason=chk.reason)))
@@ -241,23 +307,37 @@ class LLMGenerator:
                 record.reason = why
             return nxt
 
-        verdict = revise_until_verified(move, apply, check, revise, max_revisions=self.max_revisions,
-                                        method="llm" if self.verify else "none")
+        try:
+            move, attempts, why = self._ask_move(messages, ids)
+            record.attempts = attempts
+            if move is None:
+                record.reason = why
+                return v, values
+            verdict = revise_until_verified(move, apply, check, revise, max_revisions=self.max_revisions,
+                                            method="llm" if self.verify else "none")
+        except STOPPING_ERRORS as exc:
+            undone = restart()
+            kind = "budget used up" if isinstance(exc, BudgetExceeded) else "LLM unavailable"
+            record.reason = f"{kind}: {exc}" + ("; this step's edit was undone" if undone else "")
+            result.stopped = record.reason
+            return state["v"], values
         v, edit = state["v"], verdict.result
         record.edit, record.revisions = edit, verdict.revisions
         record.verification = verdict.method
-        checked = self.verify and edit.accepted and not state["unverified"]
+        if not edit.accepted:
+            record.status, record.reason = "rejected", record.reason or verdict.check.reason
+            return v, values
+        if not edit.changed:
+            record.status, record.verified = "no-op", None
+            record.reason = record.reason or "the move changed neither position nor heading (asked twice)"
+            return v, values
+        checked = self.verify and not state["unverified"]
         record.verified = verdict.check.passed if checked else None
         record.reason = record.reason or verdict.check.reason
-        if not edit.accepted:
-            record.status = "rejected"
-            result.steps.append(record)
-            return v, values
         record.status = "applied"
         after = measure(compile_world(v.house, "llm"), route)
         record.objective_after = after.as_dict()
         record.gain = gain(sug.kind, values, after) if sug else None
         result.objective_trace.append(after.as_dict())
         record.render = keep_render(result, state["image"], context, step)
-        result.steps.append(record)
         return v, after

@@ -60,8 +60,10 @@ class RandomPerturbation:
         for step, k in enumerate(rng.permutation(len(ids))):
             dx, dy, yaw = random_move(rng, self.max_units, self.rotate_p)
             edit = v.try_edit(ids[int(k)], dx, dy, yaw, source=self.name, intent="random perturbation")
-            result.steps.append(StepRecord(step=step, status="applied" if edit.accepted else "rejected", edit=edit,
-                                           reason="; ".join(edit.problems)))
+            status = "rejected" if not edit.accepted else "applied" if edit.changed else "no-op"
+            reason = "; ".join(edit.problems) or ("the move changed neither position nor heading"
+                                                  if status == "no-op" else "")
+            result.steps.append(StepRecord(step=step, status=status, edit=edit, reason=reason))
         if context.render:
             keep_render(result, render_scene(v.house, context), context, 0)
         result.house = v.house

@@ -20,8 +20,9 @@ from adaptenv.adapt.llm.backend import (
     make_backend,
 )
 from adaptenv.adapt.llm.cache import ResponseCache, request_key
-from adaptenv.adapt.llm.config import LLMConfig, load_llm_config, resolve_api_key
+from adaptenv.adapt.llm.config import LLMConfig, load_llm_config, refuse_secrets, resolve_api_key
 from adaptenv.adapt.llm.errors import (
+    BudgetExceeded,
     LLMAuthError,
     LLMError,
     LLMRequestError,
@@ -40,13 +41,13 @@ from adaptenv.adapt.llm.tools import (
     parse_verification,
     verify_tool,
 )
-from adaptenv.adapt.llm.usage import TokenCounter, Usage
+from adaptenv.adapt.llm.usage import Budget, CallRecord, Prices, Tokens, Usage
 
 __all__ = [
-    "ChatCompletionsBackend", "LLMAuthError", "LLMBackend", "LLMConfig", "LLMError", "LLMRequestError",
-    "LLMUnavailableError", "Message", "ModelAnswerError", "MoveInstruction", "MoveInstructionError",
-    "OpenAIResponsesBackend", "ParseResult", "ResponseCache", "StructuredOutputError", "TokenCounter",
-    "ToolCallError", "ToolCallResult", "ToolSpec", "Usage", "Verification", "load_llm_config",
-    "make_backend", "move_tool", "parse_move_instruction", "parse_verification", "request_key",
-    "resolve_api_key", "verify_tool",
+    "Budget", "BudgetExceeded", "CallRecord", "ChatCompletionsBackend", "LLMAuthError", "LLMBackend", "LLMConfig",
+    "LLMError", "LLMRequestError", "LLMUnavailableError", "Message", "ModelAnswerError", "MoveInstruction",
+    "MoveInstructionError", "OpenAIResponsesBackend", "ParseResult", "Prices", "ResponseCache",
+    "StructuredOutputError", "Tokens", "ToolCallError", "ToolCallResult", "ToolSpec", "Usage", "Verification",
+    "load_llm_config", "make_backend", "move_tool", "parse_move_instruction", "parse_verification",
+    "refuse_secrets", "request_key", "resolve_api_key", "verify_tool",
 ]

@@ -3,9 +3,10 @@
 Two implementations share the :class:`LLMBackend` protocol and everything around the HTTP call
 (bounded retries with seeded jitter, the response cache, token counting, error mapping):
 
-* :class:`OpenAIResponsesBackend` speaks the OpenAI Responses API (``provider="openai"``);
+* :class:`OpenAIResponsesBackend` speaks the OpenAI Responses API (``api="responses"``, the default
+  of ``provider="openai"``);
 * :class:`ChatCompletionsBackend` speaks Chat Completions, which vLLM, Ollama and llama.cpp serve
-  (``provider="openai-compatible"``).
+  (``api="chat"``, the default of ``provider="openai-compatible"``).
 
 Both drive the real ``openai`` SDK (imported lazily) with its own retries off, and read the JSON
 body of every answer themselves, so a server that returns a slightly unusual shape still yields a
@@ -21,7 +22,7 @@ import re
 import time
 from collections.abc import Callable, Iterator
 from contextlib import AbstractContextManager, contextmanager
-from dataclasses import dataclass
+from dataclasses import asdict, dataclass
 from typing import TYPE_CHECKING, Any, Generic, Protocol, TypeVar
 
 import numpy as np
@@ -44,7 +45,7 @@ from adaptenv.adapt.llm.messages import (
     to_responses_input,
     with_image,
 )
-from adaptenv.adapt.llm.usage import TokenCounter, Usage
+from adaptenv.adapt.llm.usage import COUNTERS, CallRecord, Role, Tokens, Usage
 
 if TYPE_CHECKING:
     import httpx2
@@ -67,7 +68,7 @@ class ToolCallResult:
     arguments: dict[str, Any]
     raw_arguments: str
     text: str
-    usage: Usage
+    usage: Tokens
     model: str
     cached: bool = False
 
@@ -78,7 +79,7 @@ class ParseResult(Generic[T]):
 
     value: T
     raw_text: str
-    usage: Usage
+    usage: Tokens
     model: str
     cached: bool = False
 
@@ -87,19 +88,19 @@ class LLMBackend(Protocol):
     """What F and G need from a language model; the offline built-ins need none of it."""
 
     config: LLMConfig
-    usage: TokenCounter
+    usage: Usage
 
     def call_tool(self, system: str, messages: list[Message], image_png: bytes | None,
-                  tool: ToolSpec) -> ToolCallResult:
-        """Force one call of ``tool``; ``image_png`` is attached to the last user turn."""
+                  tool: ToolSpec, *, role: Role = "other") -> ToolCallResult:
+        """Force one call of ``tool``; ``image_png`` is attached to the last user turn; ``role`` tags the count."""
         ...
 
     def parse(self, system: str, messages: list[Message], image_png: bytes | None,
-              schema: type[T]) -> ParseResult[T]:
+              schema: type[T], *, role: Role = "other") -> ParseResult[T]:
         """Ask for one answer that validates into the pydantic model ``schema``."""
         ...
 
-    def track(self) -> AbstractContextManager[TokenCounter]:
+    def track(self) -> AbstractContextManager[Usage]:
         """Count the tokens of the calls made inside a ``with`` block (e.g. one generated environment)."""
         ...
 
@@ -110,10 +111,11 @@ class _Answer:
 
     text: str
     calls: list[tuple[str, str]]
-    usage: Usage
+    usage: Tokens
     model: str
     refusal: str | None = None
     incomplete: str | None = None
+    retries: int = 0
 
 
 def import_openai() -> Any:
@@ -182,11 +184,18 @@ class _OpenAIBackendBase:
         self._sleep = sleep
         self._rng = rng if rng is not None else np.random.default_rng(config.seed)
         self._cache = ResponseCache(config.cache_dir) if config.cache_dir is not None else None
-        self.usage = TokenCounter()
-        self._trackers: list[TokenCounter] = []
+        self.usage = Usage()
+        self._trackers: list[Usage] = []
+        self.budget = config.budget()
+        #: Usage spent before this backend was built (e.g. earlier iterations of a loop), counted by the budget.
+        self.prior = Usage()
 
     def __repr__(self) -> str:
         return f"{type(self).__name__}(model={self.config.model!r}, base_url={self.base_url!r})"
+
+    def describe(self) -> dict[str, object]:
+        """Provider, API, model, base URL, prompt set and temperature (never the key), for run records."""
+        return {**self.config.describe(), "api": self.api, "base_url": self.base_url}
 
     def close(self) -> None:
         """Close the underlying HTTP client."""
@@ -201,24 +210,32 @@ class _OpenAIBackendBase:
     # ----- token accounting -------------------------------------------------------------------
 
     @contextmanager
-    def track(self) -> Iterator[TokenCounter]:
-        """Yield a fresh counter that sees every call made inside the block (nesting is fine)."""
-        counter = TokenCounter()
+    def track(self) -> Iterator[Usage]:
+        """Yield a fresh :class:`Usage` that sees every call made inside the block (nesting is fine)."""
+        counter = Usage()
         self._trackers.append(counter)
         try:
             yield counter
         finally:
             self._trackers.remove(counter)
 
-    def _record(self, usage: Usage, *, cached: bool) -> None:
+    def _record(self, record: CallRecord) -> None:
         """Add one answer to the backend total and to every active tracker."""
         for counter in (self.usage, *self._trackers):
-            counter.add(usage, cached=cached)
+            counter.add(record)
+
+    def _check_budget(self) -> None:
+        """Raise BudgetExceeded before a request once this backend plus ``prior`` reached the budget."""
+        if not self.budget.active:
+            return
+        spent = Usage(**{k: getattr(self.usage, k) + getattr(self.prior, k) for k in COUNTERS})
+        self.budget.check(spent)
 
     # ----- retries and error mapping ----------------------------------------------------------
 
-    def _send(self, request: Callable[[], Any]) -> dict[str, Any]:
-        """Run ``request`` (an SDK ``with_raw_response`` call) with bounded retries; return the JSON body."""
+    def _send(self, request: Callable[[], Any]) -> tuple[dict[str, Any], int]:
+        """Run ``request`` (an SDK ``with_raw_response`` call) with bounded retries; (JSON body, retries)."""
+        self._check_budget()
         attempts = self.config.max_retries + 1
         last = ""
         for attempt in range(attempts):
@@ -235,7 +252,7 @@ class _OpenAIBackendBase:
                              attempts - 1, delay)
                     self._sleep(delay)
                 continue
-            return self._json_body(raw)
+            return self._json_body(raw), attempt
         raise LLMUnavailableError(
             f"the LLM server at {self.base_url} gave no usable answer after {attempts} attempt(s) "
             f"(last: {last}); check that it is running and reachable, or raise max_retries or "
@@ -313,7 +330,7 @@ class _OpenAIBackendBase:
     # ----- the two calls ----------------------------------------------------------------------
 
     def call_tool(self, system: str, messages: list[Message], image_png: bytes | None,
-                  tool: ToolSpec) -> ToolCallResult:
+                  tool: ToolSpec, *, role: Role = "other") -> ToolCallResult:
         """Force one call of ``tool`` and return its decoded arguments.
 
         Raises:
@@ -325,22 +342,22 @@ class _OpenAIBackendBase:
         key = self._key("tool", system, msgs, {"tool": tool.as_dict()})
         record = self._cache_get(key)
         if record is not None and record.get("kind") == "tool":
-            usage = Usage(**record["usage"])
-            self._record(usage, cached=True)
+            usage = Tokens(**record["usage"])
+            self._record(CallRecord(role, usage, cache_hit=True, model=record["model"]))
             res = record["result"]
             return ToolCallResult(res["name"], res["arguments"], res["raw_arguments"], res["text"], usage,
                                   record["model"], cached=True)
         answer = self._tool_request(system, msgs, tool)
-        self._record(answer.usage, cached=False)
+        self._record(CallRecord(role, answer.usage, retries=answer.retries, model=answer.model))
         raw, arguments = _decode_tool_call(answer, tool.name)
         result = ToolCallResult(tool.name, arguments, raw, answer.text, answer.usage, answer.model)
-        self._cache_put(key, {"kind": "tool", "model": answer.model, "usage": answer.usage.__dict__,
+        self._cache_put(key, {"kind": "tool", "model": answer.model, "usage": asdict(answer.usage),
                               "result": {"name": tool.name, "arguments": arguments, "raw_arguments": raw,
                                          "text": answer.text}})
         return result
 
     def parse(self, system: str, messages: list[Message], image_png: bytes | None,
-              schema: type[T]) -> ParseResult[T]:
+              schema: type[T], *, role: Role = "other") -> ParseResult[T]:
         """Ask for one JSON answer and validate it into ``schema``.
 
         Raises:
@@ -358,13 +375,13 @@ class _OpenAIBackendBase:
             except ValidationError:
                 log.warning("ignoring a cached answer that no longer fits %s", schema.__name__)
             else:
-                usage = Usage(**record["usage"])
-                self._record(usage, cached=True)
+                usage = Tokens(**record["usage"])
+                self._record(CallRecord(role, usage, cache_hit=True, model=record["model"]))
                 return ParseResult(value, record["result"]["raw_text"], usage, record["model"], cached=True)
         answer = self._parse_request(system, msgs, schema)
-        self._record(answer.usage, cached=False)
+        self._record(CallRecord(role, answer.usage, retries=answer.retries, model=answer.model))
         value = _validate_answer(answer, schema)
-        self._cache_put(key, {"kind": "parse", "model": answer.model, "usage": answer.usage.__dict__,
+        self._cache_put(key, {"kind": "parse", "model": answer.model, "usage": asdict(answer.usage),
                               "result": {"value": value.model_dump(mode="json"), "raw_text": answer.text}})
         return ParseResult(value, answer.text, answer.usage, answer.model)
 
@@ -427,10 +444,11 @@ def _validate_answer(answer: _Answer, schema: type[T]) -> T:
                                     raw=answer.text) from None
 
 
-def _usage_from(raw: object, i_key: str, o_key: str) -> Usage:
-    """Usage from a body's ``usage`` object (missing fields count as zero)."""
+def _usage_from(raw: object, i_key: str, o_key: str, details_key: str) -> Tokens:
+    """Tokens from a body's ``usage`` object (missing fields count as zero; cached from ``details_key``)."""
     u = raw if isinstance(raw, dict) else {}
-    return Usage.of(u.get(i_key), u.get(o_key), u.get("total_tokens"))
+    details = u.get(details_key) if isinstance(u.get(details_key), dict) else {}
+    return Tokens.of(u.get(i_key), u.get(o_key), u.get("total_tokens"), details.get("cached_tokens"))
 
 
 def _arguments_text(args: object) -> str:
@@ -455,17 +473,18 @@ class OpenAIResponsesBackend(_OpenAIBackendBase):
 
     def _tool_request(self, system: str, msgs: list[Message], tool: ToolSpec) -> _Answer:
         kwargs = self._common(system, msgs)
-        body = self._send(lambda: self._client.responses.with_raw_response.create(
+        body, retries = self._send(lambda: self._client.responses.with_raw_response.create(
             **kwargs, tools=[tool.responses_param()], tool_choice={"type": "function", "name": tool.name},
             parallel_tool_calls=False))
-        return self._answer(body)
+        return self._answer(body, retries)
 
     def _parse_request(self, system: str, msgs: list[Message], schema: type[BaseModel]) -> _Answer:
         kwargs = self._common(system, msgs)
-        body = self._send(lambda: self._client.responses.with_raw_response.parse(**kwargs, text_format=schema))
-        return self._answer(body)
+        body, retries = self._send(lambda: self._client.responses.with_raw_response.parse(**kwargs,
+                                                                                          text_format=schema))
+        return self._answer(body, retries)
 
-    def _answer(self, body: dict[str, Any]) -> _Answer:
+    def _answer(self, body: dict[str, Any], retries: int = 0) -> _Answer:
         """Text, function calls, refusal and usage of a Responses API body."""
         texts: list[str] = []
         calls: list[tuple[str, str]] = []
@@ -485,8 +504,9 @@ class OpenAIResponsesBackend(_OpenAIBackendBase):
         if body.get("status") == "incomplete":
             details = body.get("incomplete_details") or {}
             incomplete = str(details.get("reason", "incomplete")) if isinstance(details, dict) else "incomplete"
-        return _Answer("".join(texts), calls, _usage_from(body.get("usage"), "input_tokens", "output_tokens"),
-                       str(body.get("model") or self.config.model), refusal, incomplete)
+        return _Answer("".join(texts), calls,
+                       _usage_from(body.get("usage"), "input_tokens", "output_tokens", "input_tokens_details"),
+                       str(body.get("model") or self.config.model), refusal, incomplete, retries)
 
 
 class ChatCompletionsBackend(_OpenAIBackendBase):
@@ -506,18 +526,18 @@ class ChatCompletionsBackend(_OpenAIBackendBase):
 
     def _tool_request(self, system: str, msgs: list[Message], tool: ToolSpec) -> _Answer:
         kwargs = self._common(to_chat_messages(system, msgs))
-        body = self._send(lambda: self._client.chat.completions.with_raw_response.create(
+        body, retries = self._send(lambda: self._client.chat.completions.with_raw_response.create(
             **kwargs, tools=[tool.chat_param()],
             tool_choice={"type": "function", "function": {"name": tool.name}}, parallel_tool_calls=False))
-        return self._answer(body)
+        return self._answer(body, retries)
 
     def _parse_request(self, system: str, msgs: list[Message], schema: type[BaseModel]) -> _Answer:
         if self._structured == "json_schema":
             kwargs = self._common(to_chat_messages(system, msgs))
             try:
-                body = self._send(lambda: self._client.chat.completions.with_raw_response.parse(
+                body, retries = self._send(lambda: self._client.chat.completions.with_raw_response.parse(
                     **kwargs, response_format=schema))
-                return self._answer(body)
+                return self._answer(body, retries)
             except LLMRequestError as exc:
                 if self.config.structured_output != "auto" or exc.status_code not in SCHEMA_UNSUPPORTED_STATUSES:
                     raise
@@ -528,11 +548,11 @@ class ChatCompletionsBackend(_OpenAIBackendBase):
         system = (f"{system}\n\n" if system else "") + (
             f"Answer with one JSON object only, no other text, that matches this JSON schema:\n{schema_text}")
         kwargs = self._common(to_chat_messages(system, msgs))
-        body = self._send(lambda: self._client.chat.completions.with_raw_response.create(
+        body, retries = self._send(lambda: self._client.chat.completions.with_raw_response.create(
             **kwargs, response_format={"type": "json_object"}))
-        return self._answer(body)
+        return self._answer(body, retries)
 
-    def _answer(self, body: dict[str, Any]) -> _Answer:
+    def _answer(self, body: dict[str, Any], retries: int = 0) -> _Answer:
         """Text, tool calls, refusal and usage of a Chat Completions body."""
         choices = body.get("choices") or [{}]
         choice = choices[0] if isinstance(choices[0], dict) else {}
@@ -547,11 +567,11 @@ class ChatCompletionsBackend(_OpenAIBackendBase):
                 calls.append((str(fn.get("name")), _arguments_text(fn.get("arguments", ""))))
         incomplete = "max_output_tokens" if choice.get("finish_reason") == "length" and not calls else None
         return _Answer(str(content or ""), calls,
-                       _usage_from(body.get("usage"), "prompt_tokens", "completion_tokens"),
-                       str(body.get("model") or self.config.model), msg.get("refusal") or None, incomplete)
+                       _usage_from(body.get("usage"), "prompt_tokens", "completion_tokens", "prompt_tokens_details"),
+                       str(body.get("model") or self.config.model), msg.get("refusal") or None, incomplete, retries)
 
 
 def make_backend(config: LLMConfig, **kwargs: Any) -> OpenAIResponsesBackend | ChatCompletionsBackend:
-    """The backend for ``config.provider`` (Responses for 'openai', Chat Completions otherwise)."""
-    cls = OpenAIResponsesBackend if config.provider == "openai" else ChatCompletionsBackend
+    """The backend of ``config.resolved_api()``: Responses (default for 'openai') or Chat Completions."""
+    cls = OpenAIResponsesBackend if config.resolved_api() == "responses" else ChatCompletionsBackend
     return cls(config, **kwargs)

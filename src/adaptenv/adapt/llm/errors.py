@@ -44,3 +44,7 @@ class ToolCallError(ModelAnswerError):
 
 class StructuredOutputError(ModelAnswerError):
     """A structured (pydantic) answer was missing, refused, cut off or did not validate."""
+
+
+class BudgetExceeded(LLMError):
+    """The run reached its token or cost budget; no further request is sent and the run ends cleanly."""

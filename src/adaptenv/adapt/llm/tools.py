@@ -54,6 +54,8 @@ class MoveInstruction(BaseModel):
     y_direction: Literal["up", "down"]
     y_units: float = Field(ge=0.0, le=UNITS_MAX)
     rotation: float = Field(ge=0.0, lt=ROTATION_MAX)
+    clamped: tuple[str, ...] = ()
+    """What was clamped or wrapped to fit the schema (e.g. ``x_units 120 -> 100``); empty when nothing was."""
 
     def signed_displacement(self) -> tuple[float, float]:
         """(dx_units, dy_units) on the normalized grid, right and up positive."""
@@ -63,7 +65,7 @@ class MoveInstruction(BaseModel):
 
     def to_arguments(self) -> dict[str, Any]:
         """The tool-call arguments this move corresponds to (for logs and replayed turns)."""
-        return self.model_dump(mode="json")
+        return self.model_dump(mode="json", exclude={"clamped"})
 
 
 class Verification(BaseModel):
@@ -167,9 +169,10 @@ def _fields(args: object, expected: tuple[str, ...], problems: list[str], prefix
 
 
 def _move_values(args: object, allowed_ids: list[str], problems: list[str], prefix: str = "") -> dict[str, Any]:
-    """Checked and clamped move fields (units to [0, 100], rotation wrapped into [0, 360))."""
+    """Checked and clamped move fields (units to [0, 100], rotation wrapped into [0, 360)); each clamp is noted."""
     a = _fields(args, MOVE_FIELDS, problems, prefix)
     out: dict[str, Any] = {}
+    clamps: list[str] = []
     if "object_id" in a:
         out["object_id"] = _choice(prefix + "object_id", a["object_id"], allowed_ids, problems)
     for name, options in (("x_direction", X_DIRECTIONS), ("y_direction", Y_DIRECTIONS)):
@@ -178,9 +181,14 @@ def _move_values(args: object, allowed_ids: list[str], problems: list[str], pref
     for name in ("x_units", "y_units"):
         if name in a and (v := _number(prefix + name, a[name], problems)) is not None:
             out[name] = min(max(v, 0.0), UNITS_MAX)
+            if out[name] != v:
+                clamps.append(f"{prefix}{name} {v:g} -> {out[name]:g}")
     if "rotation" in a and (v := _number(prefix + "rotation", a["rotation"], problems)) is not None:
         r = v % ROTATION_MAX
         out["rotation"] = 0.0 if r >= ROTATION_MAX else r
+        if out["rotation"] != v and v != ROTATION_MAX:  # 360 is in the paper's schema and means 0
+            clamps.append(f"{prefix}rotation {v:g} -> {out['rotation']:g}")
+    out["clamped"] = tuple(clamps)
     return out
 
 

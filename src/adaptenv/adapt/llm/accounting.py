@@ -1,0 +1,72 @@
+"""LLM usage of runs: one scene's F + G tokens, a batch's, and the checks a run config's ``llm`` section gets.
+
+For one adapted scene, :func:`scene_usage` adds F's calls (``Analysis.usage``) to G's
+(``GenerationResult.usage``); :func:`scenes_usage` sums a batch. :func:`check_llm_section` refuses an
+API key in a run config (before anything is saved) and validates the fields; :func:`same_run` lets a
+resumed run raise its budget. The closed loop's per-iteration ledger is
+:mod:`adaptenv.curriculum.llm_usage`.
+"""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING, Any
+
+from pydantic import ValidationError
+
+from adaptenv.adapt.llm.config import LLMConfig, refuse_secrets
+from adaptenv.adapt.llm.usage import Usage
+from adaptenv.errors import ConfigError
+
+if TYPE_CHECKING:
+    from adaptenv.adapt.analysis import Analysis
+    from adaptenv.adapt.generators import GenerationResult
+
+def scene_usage(analysis: Analysis | None, generation: GenerationResult | None) -> Usage:
+    """F's and G's calls for one adapted scene, as one :class:`Usage` (empty for the built-ins)."""
+    out = Usage.from_dict(analysis.usage if analysis is not None else None)
+    if generation is not None:
+        out.merge(generation.usage)
+    return out
+
+
+def llm_config_of(llm: dict[str, Any] | LLMConfig | None) -> LLMConfig | None:
+    """An LLMConfig from a run config's ``llm`` section (None when the section is empty)."""
+    if llm is None or isinstance(llm, LLMConfig):
+        return llm
+    return LLMConfig(**llm) if llm else None
+
+
+def check_llm_section(llm: dict[str, Any], where: str) -> None:
+    """Refuse an API key in a run config's ``llm`` section and check its fields (one ConfigError naming them)."""
+    refuse_secrets(llm, where)
+    if not llm:
+        return
+    try:
+        LLMConfig(**llm).budget()
+    except ValidationError as exc:
+        err = exc.errors(include_url=False, include_input=False)[0]
+        raise ConfigError(f"{where}.{'.'.join(map(str, err['loc']))}: {err['msg']}; fix that value") from None
+
+
+#: LLM fields a resumed run may change: budgets can be raised to continue a run that used them up.
+RESUMABLE_LLM_FIELDS = ("max_tokens", "max_cost")
+
+
+def same_run(saved: dict[str, Any] | None, current: dict[str, Any]) -> bool:
+    """Whether a saved run config and the current one describe the same run (budgets may differ)."""
+    def strip(cfg: dict[str, Any] | None) -> dict[str, Any] | None:
+        if cfg is None:
+            return None
+        llm = {k: v for k, v in (cfg.get("llm") or {}).items() if k not in RESUMABLE_LLM_FIELDS}
+        return {**cfg, "llm": llm}
+
+    return strip(saved) == strip(current)
+
+
+def scenes_usage(made: list[Any]) -> Usage:
+    """The LLM usage of a batch of generated scenes (objects with a ``usage`` attribute; None is skipped)."""
+    out = Usage()
+    for g in made:
+        if getattr(g, "usage", None) is not None:
+            out.merge(g.usage)
+    return out
