@@ -180,17 +180,6 @@ def gain(kind: str, before: ObjectiveValues, after: ObjectiveValues) -> float:
     return delta / CLEARANCE_CAP if kind == "narrow_passage" else delta
 
 
-def combined_gain(kinds: dict[str, float], before: ObjectiveValues, after: ObjectiveValues) -> float:
-    """Weighted sum of :func:`gain` over suggestion kinds (weights e.g. the suggestions' priorities)."""
-    total = 0.0
-    for kind, weight in kinds.items():
-        g = gain(kind, before, after)
-        if not math.isfinite(g):
-            return -math.inf
-        total += weight * g
-    return total
-
-
 def suggestion_kind(kind: str) -> SuggestionKind:
     """Check that ``kind`` names an objective (one of :data:`OBJECTIVE_KINDS`)."""
     if kind not in DIRECTION:

@@ -17,7 +17,6 @@ An experiment folder holds one run folder per (method, seed): ``EXP_DIR/<method>
 
 from __future__ import annotations
 
-import json
 import os
 import tempfile
 from pathlib import Path
@@ -133,6 +132,3 @@ def _csv(records: list[IterationRecord]) -> str:
         lines.append(",".join(f"{v:.6g}" if isinstance(v, float) else str(v) for v in row))
     return "\n".join(lines) + "\n"
 
-
-def read_run_info(run_dir: Path) -> RunInfo:
-    return RunInfo.model_validate(json.loads((Path(run_dir) / RUN_INFO).read_text(encoding="utf-8")))
