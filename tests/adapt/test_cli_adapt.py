@@ -91,3 +91,16 @@ def test_adapt_with_llm_generator_against_a_local_server(house_file, tmp_path, m
     assert edits["generator"] == "llm" and edits["steps"][0]["edit"]["object_id"] == oid
     assert edits["usage"]["calls"] == 2
     assert runner.invoke(app, ["validate", str(tmp_path / "house.json")]).exit_code == 0
+
+
+def test_analyze_refuses_a_trajectory_from_another_house(house_file, adapted, tmp_path):
+    from adaptenv.scene.house import save_house
+    from adaptenv.scene.procedural import GenerationConfig, generate_house
+
+    out, _ = adapted
+    other = save_house(generate_house(11, GenerationConfig(n_rooms=3)), tmp_path / "other.json")
+    result = runner.invoke(app, ["analyze", str(other), str(out / "trajectory_before.json")])
+    assert isinstance(result.exception, ConfigError)
+    message = str(result.exception)
+    assert "trajectory_before.json" in message and "other.json" in message and "h'" in message
+    assert "\n" not in message

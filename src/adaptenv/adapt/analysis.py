@@ -188,6 +188,24 @@ def _failure_mode(traj: Trajectory, collisions: int, revisit_ratio: float) -> Fa
     return "timeout"
 
 
+#: Recorded and house target positions may differ by this much (m) and still be the same house.
+SAME_PLACE = 0.01
+
+
+def trajectory_mismatch(traj: Trajectory, world: NavWorld) -> str | None:
+    """Why ``traj`` cannot have been recorded in ``world`` (its targets differ), or None when it fits."""
+    inst = world.instances_of(traj.target_type)
+    have = {i.object_id: (float(i.center[0]), float(i.center[1])) for i in inst}
+    if sorted(have) != sorted(traj.target_ids):
+        return (f"its {traj.target_type} instances are {', '.join(traj.target_ids) or 'none'}, the house's are "
+                f"{', '.join(sorted(have)) or 'none'}")
+    for oid, (x, z) in zip(traj.target_ids, traj.target_positions, strict=False):
+        hx, hz = have[oid]
+        if math.hypot(hx - x, hz - z) > SAME_PLACE:
+            return f"{oid} stands at ({hx:.2f}, {hz:.2f}) m in the house but at ({x:.2f}, {z:.2f}) m in the trajectory"
+    return None
+
+
 def analyze_trajectory(traj: Trajectory, world: NavWorld) -> Analysis:
     """The built-in F: derive outcome, concerns and suggestions from a recorded episode.
 

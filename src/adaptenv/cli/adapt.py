@@ -44,8 +44,9 @@ def analyze(
     llm_cache: Path | None = CACHE_OPTION,
 ) -> None:
     """Analyze one recorded episode (the paper's F): outcome, concerns and suggestions."""
-    from adaptenv.adapt.analysis import BuiltinAnalyzer, LLMAnalyzer
+    from adaptenv.adapt.analysis import BuiltinAnalyzer, LLMAnalyzer, trajectory_mismatch
     from adaptenv.cli._common import existing_file
+    from adaptenv.errors import ConfigError
     from adaptenv.scene.house import load_house
     from adaptenv.sim.trajectory import Trajectory
     from adaptenv.sim.world import compile_world
@@ -53,6 +54,9 @@ def analyze(
     h = load_house(existing_file(house, "house file"))
     traj = Trajectory.load(existing_file(trajectory, "trajectory file"))
     world = compile_world(h, house.stem)
+    if (why := trajectory_mismatch(traj, world)) is not None:
+        raise ConfigError(f"{trajectory}: recorded in house {traj.house!r}, not in {house} ({why}); "
+                          "pass the house the episode ran in")
     analyzer = LLMAnalyzer(llm_backend(model, base_url, llm_cache, "--llm")) if llm else BuiltinAnalyzer()
     result = analyzer.analyze(traj, world)
     typer.echo(result.model_dump_json(indent=1) if as_json else result.to_text())
