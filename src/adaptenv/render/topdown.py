@@ -190,11 +190,15 @@ class MapLayout:
 
 
 _GRID_NOTE = "grid: x grows right, y grows up"
+HIGHLIGHT_LEGEND = "moved object"
+"""The legend's name for the highlight colour (every caller highlights the objects an edit moved)."""
 
 
-def _legend_items(trajectory: bool, grid: bool) -> list[str]:
+def _legend_items(trajectory: bool, grid: bool, highlight: bool = False) -> list[str]:
     items = [_GRID_NOTE] if grid else []
     items += ["movable", "fixed", "small object", "wall decor", "door", "closed door", "window"]
+    if highlight:
+        items.append(HIGHLIGHT_LEGEND)
     if trajectory:
         items += ["path start->end", "start", "end", "collision", "target"]
     return items
@@ -218,7 +222,7 @@ def _wrap_legend(items: list[str], fs: int, width: float) -> list[list[str]]:
 
 
 def map_layout(geometry: SceneGeometry, *, size: int = 1024, grid: bool = False, captions: int = 0,
-               legend: bool = True, trajectory: bool = False) -> MapLayout:
+               legend: bool = True, trajectory: bool = False, highlight: bool = False) -> MapLayout:
     """Fit the house into an image whose longer side is ``size`` px, keeping its aspect ratio.
 
     Margins hold the tick labels (left, bottom) when ``grid``, ``captions`` text lines on top
@@ -239,7 +243,7 @@ def map_layout(geometry: SceneGeometry, *, size: int = 1024, grid: bool = False,
     top = pad + captions * (line_h + 4) + (pad * 0.5 if captions else 0)
     ticks = (fs * 0.6 + line_h + pad * 0.5) if grid else pad
     _, small_h = text_size("Hg", small)
-    items = _legend_items(trajectory, grid) if legend else []
+    items = _legend_items(trajectory, grid, highlight) if legend else []
     rows: list[list[str]] = []
     for _ in range(4):  # the legend may wrap once the width is known; settle in a few rounds
         bottom = ticks + (len(rows) * (small_h + 6) + pad * 0.5 if rows else pad * 0.5)
@@ -835,15 +839,16 @@ def _caption_parts(traj: Trajectory) -> list[tuple[str, RGB]]:
     collisions = sum(1 for s in traj.steps if not s.moved and s.action in _MOVE_ACTIONS)
     parts: list[tuple[str, RGB]] = [(f"target: {traj.target_type}", CAPTION_TEXT)]
     m = traj.metrics
+    bar = "  |  "
     if m is not None:
-        parts += [("   |   ", CAPTION_TEXT),
+        parts += [(bar, CAPTION_TEXT),
                   ("SUCCESS" if m.success else "FAILURE", SUCCESS_TEXT if m.success else FAILURE_TEXT)]
         collisions = m.collisions
-        tail = f"   |   {n} steps   |   {collisions} collisions   |   SPL {m.spl:.2f}"
+        tail = f"{bar}{n} steps{bar}path {m.path_length:.1f} m{bar}{collisions} collisions{bar}SPL {m.spl:.2f}"
     else:
-        tail = f"   |   {n} steps   |   {collisions} collisions"
-    if traj.policy:
-        tail += f"   |   policy: {traj.policy}"
+        tail = f"{bar}{n} steps{bar}{collisions} collisions"
+    if traj.policy and traj.policy != "policy":  # "policy" is a placeholder name, not worth a caption
+        tail += f"{bar}policy: {traj.policy}"
     parts.append((tail, CAPTION_TEXT))
     return parts
 
@@ -859,7 +864,8 @@ def _draw_runs(image: Image.Image, x: float, y: float, parts: list[tuple[str, RG
         x += text_size(s, size, bold)[0]
 
 
-def _draw_legend(image: Image.Image, draw: ImageDraw.ImageDraw, layout: MapLayout, wall_w: int) -> None:
+def _draw_legend(image: Image.Image, draw: ImageDraw.ImageDraw, layout: MapLayout, wall_w: int,
+                 highlight: RGB | None = None) -> None:
     fs = max(9, layout.font_size - 2)
     _, h = text_size("Hg", fs)
     y = layout.legend_top + h / 2
@@ -873,6 +879,8 @@ def _draw_legend(image: Image.Image, draw: ImageDraw.ImageDraw, layout: MapLayou
                 fill, edge = (MOVABLE_FILL, MOVABLE_EDGE) if item == "movable" else (FIXED_FILL, FIXED_EDGE)
                 draw.rectangle([sx - s, sy - s, sx + s, sy + s], fill=fill, outline=edge)
                 draw.line([(sx - s, sy - s), (sx + s, sy - s)], fill=FRONT_TICK, width=2)
+            elif item == HIGHLIGHT_LEGEND:
+                draw.rectangle([sx - s, sy - s, sx + s, sy + s], fill=highlight, outline=(0, 0, 0), width=2)
             elif item == "small object":
                 draw.ellipse([sx - 2.5, sy - 2.5, sx + 2.5, sy + 2.5], fill=SMALL_OBJECT)
             elif item == "wall decor":
@@ -958,7 +966,7 @@ def render_map(house: House | None = None, *, trajectory: Trajectory | None = No
         colours[oid] = _colour(value, oid)
     captions = int(title is not None) + int(trajectory is not None)
     layout = map_layout(geometry, size=size, grid=grid, captions=captions, legend=legend,
-                        trajectory=trajectory is not None)
+                        trajectory=trajectory is not None, highlight=bool(colours))
     t = layout.transform
     image = Image.new("RGB", (layout.width, layout.height), BACKGROUND)
     draw = ImageDraw.Draw(image)
@@ -1035,7 +1043,7 @@ def render_map(house: House | None = None, *, trajectory: Trajectory | None = No
     if trajectory is not None:
         _draw_runs(image, area[0], y, _caption_parts(trajectory), layout.font_size, False, max_w)
     if legend:
-        _draw_legend(image, draw, layout, wall_w)
+        _draw_legend(image, draw, layout, wall_w, next(iter(colours.values()), None))
     return MapRender(image, layout, placed)
 
 

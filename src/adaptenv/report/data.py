@@ -64,6 +64,18 @@ class GalleryEntry:
     edits: list[EditRow] = field(default_factory=list)
     generator: str = ""
     warnings: list[str] = field(default_factory=list)
+    episodes: EpisodePair | None = None
+    """Both houses and both trajectories, when the run recorded them (the report then draws the pair)."""
+
+
+@dataclass
+class EpisodePair:
+    """The files of an adaptation's two episodes: pi_t in e_t and pi_t in e_{t+1}."""
+
+    before_house: Path
+    after_house: Path
+    before_trajectory: Path
+    after_trajectory: Path
 
 
 @dataclass
@@ -198,6 +210,12 @@ def load_gallery(run_dir: Path, item: GalleryItem) -> GalleryEntry:
     for name, rel, found in (("before render", item.before_png, entry.before), ("after render", item.after_png, entry.after)):
         if rel and found is None:
             entry.warnings.append(f"{name} {rel} is missing")
+    pair = [(rel, _inside(run_dir, rel)) for rel in (item.before_house_json, item.after_house_json,
+                                                      item.before_trajectory_json, item.after_trajectory_json)]
+    if all(found is not None for _, found in pair):
+        entry.episodes = EpisodePair(*(found for _, found in pair))
+    else:
+        entry.warnings += [f"{rel} is missing" for rel, found in pair if rel and found is None]
     if (p := _inside(run_dir, item.analysis_json)) is not None:
         try:
             entry.analysis = Analysis.model_validate_json(p.read_text(encoding="utf-8"))

@@ -30,6 +30,7 @@ from adaptenv.curriculum.records import (
     SetMetrics,
 )
 from adaptenv.errors import AdaptenvError
+from adaptenv.render.compare import BeforeAfter, render_before_after
 from adaptenv.report.data import (
     EditRow,
     ExperimentData,
@@ -43,12 +44,16 @@ from adaptenv.report.data import (
     load_gallery,
     load_run,
 )
+from adaptenv.scene.house import load_house
+from adaptenv.sim.trajectory import Trajectory
 
 GENERATOR = "adaptenv report"
 INDEX = "index.html"
 _OWNED = ("img", "plots", "runs", "data")
 """Sub-folders a report owns; cleared before a report is rewritten in place."""
 CSS_FILE = Path(__file__).parent / "static" / "report.css"
+GALLERY_SIZE = 640
+"""Longer side (px) of the before/after renders the report draws itself."""
 
 
 def esc(value: object) -> str:
@@ -169,6 +174,12 @@ class Assets:
         self.used: set[Path] = set()
 
     def copy(self, src: Path, folder: str, name: str) -> Path:
+        dest = self.reserve(folder, name)
+        shutil.copyfile(src, dest)
+        return dest
+
+    def reserve(self, folder: str, name: str) -> Path:
+        """A new, unique, safe path for a file called ``name`` under ``folder`` (parents created)."""
         stem, dot, ext = name.rpartition(".")
         sub = Path(*[safe_name(part) for part in Path(folder).parts])
         dest = self.root / sub / (safe_name(stem)[:60] + dot + safe_name(ext) if dot else safe_name(name)[:60])
@@ -178,7 +189,6 @@ class Assets:
             dest = dest.with_name(f"{stem}-{k}{suffix}")
         self.used.add(dest)
         dest.parent.mkdir(parents=True, exist_ok=True)
-        shutil.copyfile(src, dest)
         return dest
 
     def image(self, src: Path | None, folder: str, name: str, alt: str) -> str:
@@ -188,7 +198,15 @@ class Assets:
         size = _image_size(src)
         if size is None:
             return f'<div class="missing">{esc(alt)}: render unreadable</div>'
-        dest = self.copy(src, folder, name)
+        return self.img_tag(self.copy(src, folder, name), size, alt)
+
+    def drawn(self, image, folder: str, name: str, alt: str) -> str:
+        """Save a PIL image into the report and return its ``<img>``."""
+        dest = self.reserve(folder, name)
+        image.save(dest)
+        return self.img_tag(dest, image.size, alt)
+
+    def img_tag(self, dest: Path, size: tuple[int, int], alt: str) -> str:
         url = href(dest, self.page_dir)
         return (f'<a href="{url}"><img src="{url}" alt="{esc(alt)}" loading="lazy" '
                 f'width="{size[0]}" height="{size[1]}"></a>')
@@ -220,6 +238,7 @@ def analysis_html(analysis) -> str:
         where = f", near grid ({c.where.x:.0f}, {c.where.y:.0f})" if c.where else ""
         steps = (f", steps {c.steps[0]}–{c.steps[-1]}" if len(c.steps) > 1 and c.steps[0] != c.steps[-1]
                  else f", step {c.steps[0]}" if c.steps else "")
+        steps += f", {c.count} times" if c.count > 1 else ""
         objs = f" <span class=\"muted\">objects: {esc(', '.join(c.objects))}</span>" if c.objects else ""
         concerns.append(f'<li><span class="kind">{esc(c.kind)}</span> {esc(c.description)} '
                         f'<span class="muted">[{esc(c.id)}, severity {c.severity:.2f}{esc(where)}{esc(steps)}]</span>{objs}</li>')
@@ -275,14 +294,51 @@ def edits_html(entry: GalleryEntry) -> str:
               "rotation is the requested absolute yaw (yaw before → after).</p>")
 
 
+def draw_pair(entry: GalleryEntry) -> BeforeAfter | None:
+    """Draw the scene's two episodes with :func:`render_before_after` (None, with a warning, when it cannot)."""
+    files = entry.episodes
+    if files is None:
+        return None
+    try:
+        houses = [load_house(p) for p in (files.before_house, files.after_house)]
+        trajs = [Trajectory.load(p) for p in (files.before_trajectory, files.after_trajectory)]
+        return render_before_after(*houses, *trajs, size=GALLERY_SIZE)
+    except (AdaptenvError, ValueError, OSError) as exc:
+        entry.warnings.append(f"cannot draw the two episodes ({str(exc).splitlines()[0]}); showing the recorded renders")
+        return None
+
+
+def changes_html(pair: BeforeAfter) -> str:
+    """The figures of both episodes side by side, coloured by whether the agent did better or worse."""
+    rows = []
+    for c in pair.changes:
+        cls = " class=better" if c.trend > 0 else " class=worse" if c.trend < 0 else ""
+        rows.append(f"<tr><td class=l>{esc(c.name)}</td><td>{esc(c.before)}</td><td{cls}>{esc(c.after)}</td></tr>")
+    moved = ", ".join(f"<code>{esc(m)}</code>" for m in pair.moved) or "none"
+    return ("<h5>What changed for pi_t</h5>" + table("<tr><th class=l>figure</th><th>before (e_t)</th>"
+                                                     "<th>after (e_t+1)</th></tr>", rows)
+            + f'<p class="note">Same start and target on both sides. Moved objects (cyan in the after render): '
+              f"{moved}. Green: better for the agent; red: worse (the edit made the task harder).</p>")
+
+
 def scene_html(entry: GalleryEntry, assets: Assets, t: int, k: int) -> str:
     folder = f"img/iter_{t:04d}/{k:02d}_{safe_name(entry.scene)[:40]}"
-    before = assets.image(entry.before, folder, "before.png", f"{entry.scene}, before")
-    after = assets.image(entry.after, folder, "after.png", f"{entry.scene}, after")
+    pair = draw_pair(entry)
+    if pair is not None:
+        before = assets.drawn(pair.before, folder, "before.png", f"{entry.scene}, before")
+        after = assets.drawn(pair.after, folder, "after.png", f"{entry.scene}, after")
+        after_caption = "after: pi_t's own episode in the edited scene e_t+1 (moved objects in cyan)"
+        changes = changes_html(pair)
+    else:
+        before = assets.image(entry.before, folder, "before.png", f"{entry.scene}, before")
+        after = assets.image(entry.after, folder, "after.png", f"{entry.scene}, after")
+        after_caption = ("after: the edited scene as the run rendered it (this run did not record pi_t's "
+                         "episode there, so any path drawn may be the before episode's)")
+        changes = ""
     summary = f' <span class="muted">— {esc(entry.summary)}</span>' if entry.summary else ""
     return (f'<article class="scene" id="iter-{t}-scene-{k}"><h4><code>{esc(entry.scene)}</code>{summary}</h4>'
             f'<div class="pair"><figure>{before}<figcaption>before: pi_t in e_t</figcaption></figure>'
-            f"<figure>{after}<figcaption>after: the edited scene</figcaption></figure></div>"
+            f"<figure>{after}<figcaption>{esc(after_caption)}</figcaption></figure></div>{changes}"
             f'<div class="analysis">{analysis_html(entry.analysis)}</div><div class="edits">{edits_html(entry)}</div>'
             f"{warnings_box(entry.warnings, 'Missing or unreadable files')}</article>")
 
