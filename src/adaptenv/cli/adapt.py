@@ -82,9 +82,12 @@ def adapt(
 
     from adaptenv.adapt.analysis import BuiltinAnalyzer, LLMAnalyzer
     from adaptenv.adapt.generators import GENERATORS, make_generator
+    from adaptenv.adapt.objectives import MEANING, harder_or_easier
     from adaptenv.adapt.pipeline import adapt_house, resolve_policy_spec
     from adaptenv.cli._common import existing_file
     from adaptenv.errors import ConfigError
+    from adaptenv.progress import ProgressBar
+    from adaptenv.scene.grid import NormalizedGrid
     from adaptenv.scene.house import load_house
 
     if generator not in GENERATORS:
@@ -97,8 +100,9 @@ def adapt(
         backend = llm_backend(model, base_url, llm_cache, f"--{'generator' if generator == 'llm' else 'analyzer'} llm")
     gen = make_generator(generator, backend=backend) if generator == "llm" else make_generator(generator)
     f = LLMAnalyzer(backend) if analyzer == "llm" else BuiltinAnalyzer()
-    result = adapt_house(h, policy=resolve_policy_spec(policy, seed=seed), analyzer=f, generator=gen, steps=steps,
-                         seed=seed, target_type=target, out_dir=out, name=house.stem)
+    with ProgressBar(f"adapting {house.name}: rollout, F, G ({steps} edits), validation, rollout again"):
+        result = adapt_house(h, policy=resolve_policy_spec(policy, seed=seed), analyzer=f, generator=gen,
+                             steps=steps, seed=seed, target_type=target, out_dir=out, name=house.stem)
     s = result.summary
     if as_json:
         typer.echo(json.dumps(s, indent=1, default=str))
@@ -107,13 +111,19 @@ def adapt(
         ob, oa = s["objective_before"], s["objective_after"]
         ab, aa = s["agent_before"], s["agent_after"]
         ep = s["episode"]
-        console.print(f"episode: find a {ep['target_type']} from ({ep['start'][0]:.2f}, {ep['start'][1]:.2f}); "
-                      f"policy {s['policy']}, analyzer {s['analyzer']}, generator {s['generator']}")
+        gx, gy = NormalizedGrid.for_house(h).point(ep["start"][0], ep["start"][1])
+        console.print(f"episode: find a {ep['target_type']} from ({ep['start'][0]:.2f}, {ep['start'][1]:.2f}) m, "
+                      f"grid ({gx:.0f}, {gy:.0f}) of 0..100; policy {s['policy']}, analyzer {s['analyzer']}, "
+                      f"generator {s['generator']}")
         console.print(f"edits applied: {s['edits_applied']} of {s['steps_requested']} "
-                      f"({s['edits_verified']} verified)")
+                      f"({s['edits_verified']} verified); moves are in grid units (0..100 across the house)")
+        console.print("objectives along the episode's route (before -> after):")
         for k in ob:
-            console.print(f"  {k:15s} {_fmt(ob[k])} -> {_fmt(oa[k])}")
-        console.print(f"agent: success {ab['success']} -> {aa['success']}, SPL {ab['spl']:.3f} -> {aa['spl']:.3f}")
+            what, unit = MEANING.get(k, (k, ""))
+            console.print(f"  {k:15s} {_fmt(ob[k])} -> {_fmt(oa[k])} {unit:8s} {what}: "
+                          f"{harder_or_easier(k, ob[k], oa[k])}")
+        console.print(f"agent: success {ab['success']} -> {aa['success']}, SPL {ab['spl']:.3f} -> {aa['spl']:.3f}, "
+                      f"steps {ab['steps']} -> {aa['steps']} (lower success or SPL: the scene got harder)")
         console.print(f"realism: {_fmt(s['realism_before'])} -> {_fmt(s['realism_after'])}; expert solvable: "
                       f"{s['expert_solvable']}, expert success: {s['expert_success_after']}; valid: {s['valid']}")
         for p in s["problems"]:
