@@ -1071,7 +1071,8 @@ def render_house(house: House | None = None, *, trajectory: Trajectory | None = 
             target crosses, and a one-line caption.
         grid: draw the paper's normalized 0..100 grid (ticks every 10 on the bottom and left axes).
         size: the image's longer side in pixels (at least 256).
-        highlight: object id -> colour (a Pillow colour name or '#rrggbb') to fill that object with.
+        highlight: object id -> colour (a Pillow colour name or '#rrggbb') to fill that object with;
+            the legend names the (first) colour "moved object".
         labels: write every floor object's id and each room's type.
         title: a bold line above the map.
         geometry: precomputed ``SceneGeometry.from_house(house)`` (saves ~2 ms per render).
