@@ -463,7 +463,8 @@ def intents_html(run: RunData) -> str:
             for e in load_gallery(run.path, item).edits:
                 if e.object_id == "-":
                     continue
-                label = KIND_TEXT.get(e.kind, e.kind) or (e.intent[:60] if e.intent else "(intent not recorded)")
+                kind = e.kind or next((k for k in KIND_TEXT if k in e.intent), "")  # "s1 narrow_passage: ..."
+                label = KIND_TEXT.get(kind, kind) or (e.intent[:60] if e.intent else "(intent not recorded)")
                 c = counts.setdefault(label, [0, 0, 0])
                 c[0] += 1
                 c[1] += int(e.accepted)
