@@ -1,18 +1,52 @@
-"""The README's Python example runs as written."""
+"""The README's Python snippets run as written, each in a fresh interpreter (as a newcomer would run them)."""
 
 from __future__ import annotations
 
+import os
 import re
+import subprocess
+import sys
 from pathlib import Path
 
-README = Path(__file__).resolve().parents[1] / "README.md"
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+README = ROOT / "README.md"
+BLOCKS = re.findall(r"```python\n(.*?)```", README.read_text(encoding="utf-8"), flags=re.S)
 
 
-def test_readme_python_example_runs():
-    blocks = re.findall(r"```python\n(.*?)```", README.read_text(encoding="utf-8"), flags=re.S)
-    assert blocks, "the README has a Python example"
-    for code in blocks:
-        exec(compile(code, str(README), "exec"), {})
+def run_fresh(code: str, tmp_path: Path) -> subprocess.CompletedProcess:
+    """Run ``code`` in a new Python process whose path starts with this checkout's sources."""
+    env = dict(os.environ, PYTHONPATH=os.pathsep.join([str(ROOT / "src"), os.environ.get("PYTHONPATH", "")]))
+    return subprocess.run([sys.executable, "-c", code], cwd=tmp_path, env=env, capture_output=True, text=True,
+                          timeout=300)
+
+
+def test_readme_has_the_api_and_gymnasium_examples():
+    assert len(BLOCKS) >= 2
+    assert any('gym.make("adaptenv/ObjectNav-v0")' in b for b in BLOCKS)
+
+
+@pytest.mark.parametrize("k", range(len(BLOCKS)))
+def test_readme_python_snippet_runs_in_a_fresh_interpreter(k, tmp_path):
+    proc = run_fresh(BLOCKS[k], tmp_path)
+    assert proc.returncode == 0, proc.stderr[-2000:]
+
+
+@pytest.mark.parametrize("order", ["import gymnasium as gym\nimport adaptenv", "import adaptenv\nimport gymnasium as gym",
+                                   "import adaptenv.sim\nimport gymnasium as gym"])
+def test_import_adaptenv_registers_the_gymnasium_id_in_either_order(order, tmp_path):
+    code = f"{order}\nenv = gym.make('adaptenv/ObjectNav-v0')\nprint(type(env.unwrapped).__name__)"
+    proc = run_fresh(code, tmp_path)
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    assert proc.stdout.strip() == "NavEnv"
+
+
+def test_import_adaptenv_stays_light(tmp_path):
+    proc = run_fresh("import sys, adaptenv\nprint(sorted(m for m in ('gymnasium', 'numpy', 'torch') if m in sys.modules))",
+                     tmp_path)
+    assert proc.returncode == 0, proc.stderr
+    assert proc.stdout.strip() == "[]"
 
 
 def test_readme_first_lines_are_the_two_setup_commands():

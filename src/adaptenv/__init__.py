@@ -3,12 +3,17 @@
 The public API is small and imported lazily so that `import adaptenv` stays fast:
 
 >>> from adaptenv import load_house, save_house
+
+``import adaptenv`` also registers the Gymnasium id ``adaptenv/ObjectNav-v0`` (when gymnasium is
+imported, before or after adaptenv; see :mod:`adaptenv._gym`).
 """
 
 from __future__ import annotations
 
 import importlib
 from typing import Any
+
+from adaptenv import _gym
 
 __version__ = "0.1.0"
 
@@ -30,6 +35,8 @@ _EXPORTS = {
 }
 
 __all__ = sorted(_EXPORTS) + ["__version__"]
+
+_gym.install()
 
 
 def __getattr__(name: str) -> Any:

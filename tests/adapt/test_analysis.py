@@ -5,6 +5,7 @@ from __future__ import annotations
 import pytest
 
 from adaptenv.adapt.analysis import (
+    MAX_ADDRESSED,
     Analysis,
     Analyzer,
     BuiltinAnalyzer,
@@ -124,3 +125,21 @@ def test_analyzer_protocol_and_factory():
 
 def _addressed(a: Analysis, kind: str) -> set[str]:
     return {cid for s in a.suggestions if s.kind == kind for cid in s.addresses}
+
+
+def test_concerns_are_aggregated_per_kind_and_object(desk_room):
+    """A long failed walk gives one concern per (kind, object) with its bouts, and suggestions cite a handful."""
+    traj = run_episode(desk_room, Episode("GarbageCan", (1.5, 1.6, 150.0)), random_policy(0), max_steps=500)
+    a = analyze_trajectory(traj, desk_room)
+    keys = [(c.kind, tuple(c.objects)) for c in a.concerns]
+    assert len(keys) == len(set(keys))
+    assert any(c.count > 1 for c in a.concerns), "this walk bumps into the desk in several bouts"
+    for c in a.concerns:
+        assert c.count == max(1, len(c.occurrences))
+        if c.occurrences:
+            assert c.steps == [c.occurrences[0][0], c.occurrences[-1][1]]
+    blocked = [i for i, s in enumerate(traj.steps) if s.action in ("m", "b") and not s.moved]
+    spans = [o for c in a.concerns if c.kind == "collision" for o in c.occurrences]
+    assert blocked and all(any(lo <= i <= hi for lo, hi in spans) for i in blocked)
+    assert all(len(s.addresses) <= MAX_ADDRESSED for s in a.suggestions)
+    assert max(len(s.addresses) for s in a.suggestions) == MAX_ADDRESSED  # capped, not merely small

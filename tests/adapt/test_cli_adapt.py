@@ -206,3 +206,16 @@ def _llm_config(tmp_path):
     path = tmp_path / "llm.json"
     path.write_text(json.dumps({"max_retries": 0, "timeout_s": 2}))
     return path
+
+
+def test_analyze_refuses_a_trajectory_from_another_house(house_file, adapted, tmp_path):
+    from adaptenv.scene.house import save_house
+    from adaptenv.scene.procedural import GenerationConfig, generate_house
+
+    out, _ = adapted
+    other = save_house(generate_house(11, GenerationConfig(n_rooms=3)), tmp_path / "other.json")
+    result = runner.invoke(app, ["analyze", str(other), str(out / "trajectory_before.json")])
+    assert isinstance(result.exception, ConfigError)
+    message = str(result.exception)
+    assert "trajectory_before.json" in message and "other.json" in message and "h'" in message
+    assert "\n" not in message

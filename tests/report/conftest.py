@@ -165,3 +165,11 @@ def make_experiment(renders):
 def evil() -> str:
     """Text with markup in it, as an LLM's analysis might contain."""
     return EVIL
+
+
+@pytest.fixture(scope="session")
+def adapted():
+    """A real adaptation: the expert in e_t, an object moved onto its path, the expert again in e_{t+1}."""
+    from tests.report.gallery_check import adapted_scene
+
+    return adapted_scene()

@@ -1,4 +1,4 @@
-"""The report in a real headless Chromium: every image loads, no script or console errors.
+"""The report in a real headless Chromium: every image loads, no script or console errors, true "after" pictures.
 
 The report page is copied next to itself with a small probe script injected at the top of
 ``<head>``; the probe opens every ``<details>``, makes lazy images eager, waits for them, and writes
@@ -16,6 +16,7 @@ import subprocess
 from pathlib import Path
 
 import pytest
+from PIL import Image
 
 from adaptenv.report import build_report
 
@@ -109,3 +110,44 @@ def test_probe_detects_a_broken_image(tmp_path, make_run):
     victim.write_bytes(b"not a png")
     found, _ = probe(index, tmp_path)
     assert len(found["broken"]) == 1 and found["broken"][0].endswith("after.png")
+
+
+def screenshot(image_src: str, folder: Path, size: tuple[int, int], tmp_path: Path) -> Image.Image:
+    """Chromium's screenshot of a page in ``folder`` showing one image at 1:1 (``image_src`` relative to it)."""
+    page = folder / "_screenshot.html"
+    page.write_text(f'<!doctype html><html><body style="margin:0;background:#fff">'
+                     f'<img src="{html.escape(image_src)}" style="display:block"></body></html>', encoding="utf-8")
+    shot = tmp_path / "shot.png"
+    try:
+        subprocess.run(chromium_args(tmp_path / "chromium-profile")[:-1]
+                       + [f"--window-size={size[0]},{size[1]}", "--force-device-scale-factor=1",
+                          f"--screenshot={shot}", page.as_uri()], capture_output=True, text=True, timeout=60)
+    finally:
+        page.unlink()
+    assert shot.is_file(), "Chromium wrote no screenshot"
+    return Image.open(shot).convert("RGB").crop((0, 0, *size))
+
+
+def test_gallery_after_render_in_chromium_draws_no_path_through_moved_objects(tmp_path, adapted):
+    """Screenshot each "after" image of the gallery as Chromium shows it; no path pixel may fall in a moved object.
+
+    The same screenshot of the old, wrong picture (the before path over the edited scene) must fail the check.
+    """
+    from adaptenv.render.compare import MOVED_COLOUR, render_before_after
+    from adaptenv.render.topdown import render_map
+    from adaptenv.report.html import GALLERY_SIZE
+    from tests.report.gallery_check import path_pixels_in, write_adapted_run
+
+    index = build_report(write_adapted_run(tmp_path / "run", adapted))
+    text = index.read_text(encoding="utf-8")
+    afters = [src for src, alt in re.findall(r'<img src="([^"]+)" alt="([^"]+)"', text) if alt.endswith(", after")]
+    assert len(afters) == 1
+    pair = render_before_after(adapted.original, adapted.edited, adapted.before, adapted.after, size=GALLERY_SIZE)
+    shown = screenshot(afters[0], index.parent, pair.after.size, tmp_path)
+    assert path_pixels_in(shown, pair.after_layout, adapted.edited, [adapted.moved], adapted.after) == 0
+
+    wrong = render_map(adapted.edited, trajectory=adapted.before, grid=True, size=GALLERY_SIZE,
+                       highlight={adapted.moved: MOVED_COLOUR})
+    wrong.image.save(index.parent / "img" / "wrong.png")
+    shown = screenshot("img/wrong.png", index.parent, wrong.image.size, tmp_path)
+    assert path_pixels_in(shown, wrong.layout, adapted.edited, [adapted.moved], adapted.before) > 50

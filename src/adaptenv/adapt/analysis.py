@@ -61,7 +61,11 @@ class Outcome(BaseModel):
 
 
 class Concern(BaseModel):
-    """A behavioural issue observed during the episode, located in grid coordinates and steps."""
+    """A behavioural issue observed during the episode, located in grid coordinates and steps.
+
+    The built-in F gives one concern per kind and object: repeated bouts (say, five separate runs
+    of bumping into the same bed) are one concern with ``count`` 5 and each bout in ``occurrences``.
+    """
 
     id: str
     kind: ConcernKind
@@ -72,6 +76,14 @@ class Concern(BaseModel):
     where: GridPoint | None = None
     objects: list[str] = Field(default_factory=list)
     """Ids of the objects involved (nearest obstacles), if any."""
+    count: int = Field(default=1, ge=1)
+    """How many separate times it happened."""
+    occurrences: list[tuple[int, int]] = Field(default_factory=list)
+    """First and last step of each time it happened (empty when not located in steps)."""
+
+
+#: A suggestion cites at most this many concerns (the most severe of the kinds it answers).
+MAX_ADDRESSED = 5
 
 
 class Suggestion(BaseModel):
@@ -104,7 +116,8 @@ class Analysis(BaseModel):
         for c in self.concerns or []:
             where = f" near grid ({c.where.x:.0f}, {c.where.y:.0f})" if c.where else ""
             objs = f"; objects: {', '.join(c.objects)}" if c.objects else ""
-            lines.append(f"- [{c.id}] {c.kind} (severity {c.severity:.2f}){where}: {c.description}{objs}")
+            times = f", {c.count} times" if c.count > 1 else ""
+            lines.append(f"- [{c.id}] {c.kind} (severity {c.severity:.2f}{times}){where}: {c.description}{objs}")
         if not self.concerns:
             lines.append("- none")
         lines.append("Suggestions:")
@@ -136,6 +149,24 @@ def _runs(indices: list[int], gap: int = 3) -> list[list[int]]:
     return runs
 
 
+def _by_object(world: NavWorld, traj: Trajectory, indices: list[int], gap: int = 3) -> dict[str, list[list[int]]]:
+    """Step indices grouped by the obstacle nearest to each step, then into runs (see :func:`_runs`)."""
+    groups: dict[str, list[int]] = {}
+    for i in indices:
+        pose = traj.steps[i].pose
+        groups.setdefault(_nearest_obstacle(world, pose.x, pose.z) or "", []).append(i)
+    return {obj: _runs(steps, gap) for obj, steps in groups.items()}
+
+
+def _times(runs: list[list[int]]) -> str:
+    """' in 3 bouts (steps 4-9, 20, 31-33)' for several runs, '' for one."""
+    if len(runs) < 2:
+        return ""
+    spans = [f"{r[0]}-{r[-1]}" if r[-1] != r[0] else str(r[0]) for r in runs[:4]]
+    more = f", +{len(runs) - 4} more" if len(runs) > 4 else ""
+    return f" in {len(runs)} bouts (steps {', '.join(spans)}{more})"
+
+
 def _clearances(world: NavWorld, traj: Trajectory) -> np.ndarray:
     xs = np.array([s.pose.x for s in traj.steps])
     zs = np.array([s.pose.z for s in traj.steps])
@@ -159,6 +190,24 @@ def _failure_mode(traj: Trajectory, collisions: int, revisit_ratio: float) -> Fa
     return "timeout"
 
 
+#: Recorded and house target positions may differ by this much (m) and still be the same house.
+SAME_PLACE = 0.01
+
+
+def trajectory_mismatch(traj: Trajectory, world: NavWorld) -> str | None:
+    """Why ``traj`` cannot have been recorded in ``world`` (its targets differ), or None when it fits."""
+    inst = world.instances_of(traj.target_type)
+    have = {i.object_id: (float(i.center[0]), float(i.center[1])) for i in inst}
+    if sorted(have) != sorted(traj.target_ids):
+        return (f"its {traj.target_type} instances are {', '.join(traj.target_ids) or 'none'}, the house's are "
+                f"{', '.join(sorted(have)) or 'none'}")
+    for oid, (x, z) in zip(traj.target_ids, traj.target_positions, strict=False):
+        hx, hz = have[oid]
+        if math.hypot(hx - x, hz - z) > SAME_PLACE:
+            return f"{oid} stands at ({hx:.2f}, {hz:.2f}) m in the house but at ({x:.2f}, {z:.2f}) m in the trajectory"
+    return None
+
+
 def analyze_trajectory(traj: Trajectory, world: NavWorld) -> Analysis:
     """The built-in F: derive outcome, concerns and suggestions from a recorded episode.
 
@@ -175,39 +224,45 @@ def analyze_trajectory(traj: Trajectory, world: NavWorld) -> Analysis:
 
     concerns: list[Concern] = []
 
-    def add(kind: ConcernKind, severity: float, text: str, steps: list[int], objects: list[str]) -> Concern:
+    def add(kind: ConcernKind, severity: float, text: str, steps: list[int], objects: list[str],
+            runs: list[list[int]] | None = None) -> Concern:
+        """Record a concern; ``runs`` are its separate bouts (default: ``steps`` is one bout)."""
+        runs = runs if runs is not None else ([steps] if steps else [])
         where = None
-        if steps:
-            mid = traj.steps[steps[len(steps) // 2]].pose
+        if runs:
+            longest = max(runs, key=len)
+            mid = traj.steps[longest[len(longest) // 2]].pose
             where = gp(mid.x, mid.z)
+        first, last = (runs[0][0], runs[-1][-1]) if runs else (None, None)
         c = Concern(id=f"c{len(concerns) + 1}", kind=kind, severity=float(np.clip(severity, 0, 1)), description=text,
-                    steps=[steps[0], steps[-1]] if steps else [], where=where, objects=objects)
+                    steps=[first, last] if runs else [], where=where, objects=objects, count=max(1, len(runs)),
+                    occurrences=[(r[0], r[-1]) for r in runs])
         concerns.append(c)
         return c
 
-    # Collisions: blocked moves, grouped into episodes of bumping.
+    # Collisions: blocked moves, one concern per obstacle with every bout of bumping into it.
     blocked = [i for i, s in enumerate(traj.steps) if s.action in ("m", "b") and not s.moved]
-    for run in _runs(blocked):
-        objs = sorted({o for i in run if (o := _nearest_obstacle(world, traj.steps[i].pose.x, traj.steps[i].pose.z))})
-        add("collision", min(1.0, 0.3 + 0.1 * len(run)), f"{len(run)} blocked move(s) against {', '.join(objs) or 'an obstacle'}",
-            run, objs)
+    for obj, runs in _by_object(world, traj, blocked).items():
+        hits = sum(len(r) for r in runs)
+        add("collision", min(1.0, 0.3 + 0.1 * hits), f"{hits} blocked move(s) against {obj or 'an obstacle'}"
+            f"{_times(runs)}", [], [obj] if obj else [], runs)
 
     # Proximity and narrow clearances along the path.
     clear = _clearances(world, traj) if n else np.zeros(0)
     close = [i for i in range(n) if clear[i] < AGENT_RADIUS + PROXIMITY_MARGIN]
-    for run in _runs(close):
-        objs = sorted({o for i in run if (o := _nearest_obstacle(world, traj.steps[i].pose.x, traj.steps[i].pose.z))})
-        gap = float(clear[run].min() - AGENT_RADIUS)
-        add("close_proximity", 1.0 - gap / PROXIMITY_MARGIN, f"the agent's edge came within {max(gap, 0) * 100:.0f} cm of "
-            f"{', '.join(objs) or 'an obstacle'}", run, objs)
+    for obj, runs in _by_object(world, traj, close).items():
+        gap = float(min(clear[r].min() for r in runs) - AGENT_RADIUS)
+        add("close_proximity", 1.0 - gap / PROXIMITY_MARGIN, f"the agent's edge came within {max(gap, 0) * 100:.0f} cm "
+            f"of {obj or 'an obstacle'}{_times(runs)}", [], [obj] if obj else [], runs)
     narrow = [i for i in range(n) if AGENT_RADIUS + PROXIMITY_MARGIN <= clear[i] < NARROW_CLEARANCE
               and traj.steps[i].action == "m"]
-    for run in _runs(narrow, gap=2):
-        if len(run) < 2:
+    for obj, runs in _by_object(world, traj, narrow, gap=2).items():
+        runs = [r for r in runs if len(r) >= 2]
+        if not runs:
             continue
-        objs = sorted({o for i in run if (o := _nearest_obstacle(world, traj.steps[i].pose.x, traj.steps[i].pose.z))})
-        add("narrow_clearance", 0.3 + 0.05 * len(run), f"the route passes a narrow gap ({clear[run].min():.2f} m "
-            f"clearance) between {', '.join(objs) or 'obstacles'}", run, objs)
+        tightest = min(clear[r].min() for r in runs)
+        add("narrow_clearance", 0.3 + 0.05 * max(len(r) for r in runs), f"the route passes a narrow gap "
+            f"({tightest:.2f} m clearance) by {obj or 'obstacles'}{_times(runs)}", [], [obj] if obj else [], runs)
 
     # Detour against the geodesic optimum.
     if m is not None and m.optimal_path_length and m.path_length > 0:
@@ -256,13 +311,14 @@ def analyze_trajectory(traj: Trajectory, world: NavWorld) -> Analysis:
 
 def _suggest(concerns: list[Concern], outcome: Outcome, traj: Trajectory) -> list[Suggestion]:
     """Map concerns to abstract environment changes that train the weakness they reveal."""
-    by_kind: dict[str, list[str]] = {}
+    by_kind: dict[str, list[Concern]] = {}
     for c in concerns:
-        by_kind.setdefault(c.kind, []).append(c.id)
+        by_kind.setdefault(c.kind, []).append(c)
     out: list[Suggestion] = []
 
     def add(kind: SuggestionKind, text: str, kinds: tuple[str, ...], priority: float) -> None:
-        ids = [cid for k in kinds for cid in by_kind.get(k, [])]
+        cited = sorted((c for k in kinds for c in by_kind.get(k, [])), key=lambda c: (-c.severity, -c.count))
+        ids = sorted((c.id for c in cited[:MAX_ADDRESSED]), key=lambda cid: int(cid[1:]))
         out.append(Suggestion(id=f"s{len(out) + 1}", kind=kind, description=text, addresses=ids, priority=priority))
 
     tight = ("collision", "close_proximity", "narrow_clearance")

@@ -41,6 +41,21 @@ MAX_VISIBILITY_POINTS = 80
 #: +1: the objective should grow to make the scene harder; -1: it should shrink.
 DIRECTION: dict[str, int] = {"narrow_passage": -1, "lengthen_route": 1, "occlude_target": -1, "add_clutter": 1}
 OBJECTIVE_KINDS: tuple[str, ...] = tuple(DIRECTION)
+#: What each objective measures and its unit, for people reading a before/after pair.
+MEANING: dict[str, tuple[str, str]] = {
+    "narrow_passage": ("mean clearance along the route", "m"),
+    "lengthen_route": ("shortest route from start to target", "m"),
+    "occlude_target": ("share of route points that see the target", "fraction"),
+    "add_clutter": ("share of route points in narrow gaps", "fraction"),
+}
+
+
+def harder_or_easier(kind: str, before: float | None, after: float | None) -> str:
+    """'harder', 'easier' or 'unchanged' for a change of objective ``kind`` (see :data:`DIRECTION`)."""
+    if before is None or after is None or not (math.isfinite(before) and math.isfinite(after)):
+        return "unchanged" if before == after else "harder" if after is None else "easier"
+    delta = (after - before) * DIRECTION[kind]
+    return "harder" if delta > 1e-9 else "easier" if delta < -1e-9 else "unchanged"
 
 _NEIGHBOURS = [(-1, -1), (-1, 0), (-1, 1), (0, -1), (0, 1), (1, -1), (1, 0), (1, 1)]
 
@@ -178,17 +193,6 @@ def gain(kind: str, before: ObjectiveValues, after: ObjectiveValues) -> float:
         return (b - a) / max(a, 1.0)
     delta = (b - a) * DIRECTION[kind]
     return delta / CLEARANCE_CAP if kind == "narrow_passage" else delta
-
-
-def combined_gain(kinds: dict[str, float], before: ObjectiveValues, after: ObjectiveValues) -> float:
-    """Weighted sum of :func:`gain` over suggestion kinds (weights e.g. the suggestions' priorities)."""
-    total = 0.0
-    for kind, weight in kinds.items():
-        g = gain(kind, before, after)
-        if not math.isfinite(g):
-            return -math.inf
-        total += weight * g
-    return total
 
 
 def suggestion_kind(kind: str) -> SuggestionKind:

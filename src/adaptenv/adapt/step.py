@@ -31,7 +31,8 @@ from adaptenv.adapt.objectives import RouteSpec, measure, realism_score
 from adaptenv.adapt.validation import validate_scene
 from adaptenv.agents.policy import ExpertPolicy, Policy, as_policy
 from adaptenv.agents.rollout import rollout
-from adaptenv.render.topdown import render_house, save_render
+from adaptenv.render.compare import render_before_after
+from adaptenv.render.topdown import save_render
 from adaptenv.scene.house import House, save_house
 from adaptenv.scene.validate import validate_house
 from adaptenv.sim.geodesic import is_solvable
@@ -148,15 +149,15 @@ def _agent(traj: Trajectory) -> dict[str, Any]:
 
 
 def write_outputs(result: AdaptResult, summary: dict[str, Any], out: Path) -> dict[str, Path]:
-    """Write the adapted house, before/after renders, analysis, edit log, trajectories and summary into ``out``."""
+    """Write the adapted house, before/after renders (pi_t's own episode in each house), analysis, edit log,
+    trajectories and summary into ``out``."""
     out.mkdir(parents=True, exist_ok=True)
     files = {"house": save_house(result.house, out / "house.json")}
-    moved = {e.object_id: "gold" for e in result.generation.applied}
-    files["before_png"] = save_render(render_house(result.original, trajectory=result.before, grid=True,
-                                                   title="before"), out / "before.png")
-    files["after_png"] = save_render(render_house(result.house, trajectory=result.after, grid=True,
-                                                  highlight=moved or None, title="after (moved objects in gold)"),
-                                     out / "after.png")
+    pair = render_before_after(result.original, result.house, result.before, result.after,
+                               [e.object_id for e in result.generation.applied])
+    files["before_png"] = save_render(pair.before, out / "before.png")
+    files["after_png"] = save_render(pair.after, out / "after.png")
+    files["before_after_png"] = save_render(pair.side_by_side(), out / "before_after.png")
     files["analysis"] = _write_json(out / "analysis.json", result.analysis.model_dump(mode="json"))
     files["edits"] = _write_json(out / "edits.json", result.generation.to_json_dict())
     files["trajectory_before"] = result.before.save(out / "trajectory_before.json")

@@ -47,6 +47,7 @@ import torch.nn.functional as F
 
 from adaptenv.agents.config import TrainConfig, field_docs
 from adaptenv.errors import ConfigError
+from adaptenv.progress import ProgressBar
 
 if TYPE_CHECKING:
     from adaptenv.agents.network import NavNet
@@ -294,8 +295,8 @@ def train(cfg: TrainConfig, *, worlds: Sequence[Any] | None = None, init_net: An
     h = net.initial_state(B)
     first = np.ones(B, dtype=bool)
     logger = RunLogger(run_dir, cfg.tensorboard)
-    progress = _progress(cfg.progress)
-    task_id = progress.add_task("DAgger", total=cfg.frames, completed=frames) if progress else None
+    progress = ProgressBar("DAgger" if cfg.progress else None, cfg.frames, transient=False).start()
+    progress.update(frames)
     start = time.perf_counter()
     last_save = updates
     try:
@@ -373,7 +374,7 @@ def train(cfg: TrainConfig, *, worlds: Sequence[Any] | None = None, init_net: An
                 row["eval/success"], row["eval/spl"] = s["success"], s["spl"]
             logger.log(row)
             if progress:
-                progress.update(task_id, completed=min(frames, cfg.frames),
+                progress.update(min(frames, cfg.frames),
                                 description=f"DAgger beta={beta:.2f} loss={row['losses/loss']:.3f} "
                                             f"acc={row['losses/accuracy']:.2f}"
                                             + (f" eval={row['eval/success']:.2f}" if "eval/success" in row else ""))
@@ -453,22 +454,3 @@ def _to_tensors(obs: dict[str, np.ndarray]) -> dict[str, torch.Tensor]:
     from adaptenv.agents.network import obs_to_tensors
 
     return obs_to_tensors(obs)
-
-
-def _progress(enabled: bool):
-    """A started rich progress bar, or None."""
-    if not enabled:
-        return None
-    from rich.progress import (
-        BarColumn,
-        MofNCompleteColumn,
-        Progress,
-        TextColumn,
-        TimeElapsedColumn,
-        TimeRemainingColumn,
-    )
-
-    progress = Progress(TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(),
-                        TimeRemainingColumn(), transient=False)
-    progress.start()
-    return progress

@@ -17,15 +17,20 @@ from rich.console import Console
 
 from adaptenv.errors import AdaptenvError
 
+HELP_STYLE = {"rich_markup_mode": None}
+"""Plain (click) help for every command group: it wraps each option's help across the whole terminal
+width, where rich's six-column option table leaves the help a few words wide in 80 columns."""
+
 app = typer.Typer(
     name="adaptenv",
     help="Closed-loop, adaptive environment generation for embodied navigation agents.",
     no_args_is_help=True,
     add_completion=False,
     pretty_exceptions_enable=False,
+    **HELP_STYLE,
 )
 bench = typer.Typer(help="Benchmarks: each prints a table, or one JSON object with --json.",
-                    no_args_is_help=True)
+                    no_args_is_help=True, **HELP_STYLE)
 app.add_typer(bench, name="bench")
 
 err_console = Console(stderr=True)

@@ -96,8 +96,9 @@ def analyze(
     llm_config_file: Path | None = LLM_CONFIG_OPTION,
 ) -> None:
     """Analyze one recorded episode (the paper's F): outcome, concerns and suggestions."""
-    from adaptenv.adapt.analysis import BuiltinAnalyzer, LLMAnalyzer
+    from adaptenv.adapt.analysis import BuiltinAnalyzer, LLMAnalyzer, trajectory_mismatch
     from adaptenv.cli._common import existing_file
+    from adaptenv.errors import ConfigError
     from adaptenv.scene.house import load_house
     from adaptenv.sim.trajectory import Trajectory
     from adaptenv.sim.world import compile_world
@@ -105,6 +106,9 @@ def analyze(
     h = load_house(existing_file(house, "house file"))
     traj = Trajectory.load(existing_file(trajectory, "trajectory file"))
     world = compile_world(h, house.stem)
+    if (why := trajectory_mismatch(traj, world)) is not None:
+        raise ConfigError(f"{trajectory}: recorded in house {traj.house!r}, not in {house} ({why}); "
+                          "pass the house the episode ran in")
     analyzer = (LLMAnalyzer(llm_backend(model, base_url, llm_cache, "--llm", api=api, api_key_env=api_key_env,
                                         prompts=prompts, config_file=llm_config_file))
                 if llm else BuiltinAnalyzer())
@@ -141,11 +145,14 @@ def adapt(
 
     from adaptenv.adapt.analysis import BuiltinAnalyzer, LLMAnalyzer
     from adaptenv.adapt.generators import GENERATORS, make_generator
+    from adaptenv.adapt.objectives import MEANING, harder_or_easier
     from adaptenv.adapt.step import adapt_scene, summarize, write_outputs
     from adaptenv.agents.network import configure_torch
     from adaptenv.agents.registry import resolve_policy
     from adaptenv.agents.rollout import draw_episode
     from adaptenv.cli._common import existing_file
+    from adaptenv.progress import ProgressBar
+    from adaptenv.scene.grid import NormalizedGrid
     from adaptenv.scene.house import load_house
     from adaptenv.sim.world import compile_world
 
@@ -172,8 +179,10 @@ def adapt(
     f = LLMAnalyzer(backend) if analyzer == "llm" else BuiltinAnalyzer()
     world = compile_world(h, house.stem)
     episode = draw_episode(world, np.random.default_rng([seed, 1]), target)
-    result = adapt_scene(h, episode, policy=resolve_policy(policy, seed=seed), analyzer=f, generator=gen, steps=steps,
-                         rng=np.random.default_rng(seed), name=house.stem, render=True, render_dir=out / "steps")
+    with ProgressBar(f"adapting {house.name}: rollout, F, G ({steps} edits), validation, rollout again"):
+        result = adapt_scene(h, episode, policy=resolve_policy(policy, seed=seed), analyzer=f, generator=gen,
+                             steps=steps, rng=np.random.default_rng(seed), name=house.stem, render=True,
+                             render_dir=out / "steps")
     s = summarize(result, analyzer=f, seed=seed)
     write_outputs(result, s, out)
     if as_json:
@@ -182,13 +191,19 @@ def adapt(
         ob, oa = s["objective_before"], s["objective_after"]
         ab, aa = s["agent_before"], s["agent_after"]
         ep = s["episode"]
-        console.print(f"episode: find a {ep['target_type']} from ({ep['start'][0]:.2f}, {ep['start'][1]:.2f}); "
-                      f"policy {s['policy']}, analyzer {s['analyzer']}, generator {s['generator']}")
+        gx, gy = NormalizedGrid.for_house(h).point(ep["start"][0], ep["start"][1])
+        console.print(f"episode: find a {ep['target_type']} from ({ep['start'][0]:.2f}, {ep['start'][1]:.2f}) m, "
+                      f"grid ({gx:.0f}, {gy:.0f}) of 0..100; policy {s['policy']}, analyzer {s['analyzer']}, "
+                      f"generator {s['generator']}")
         console.print(f"edits applied: {s['edits_applied']} of {s['steps_requested']} "
-                      f"({s['edits_verified']} verified)")
+                      f"({s['edits_verified']} verified); moves are in grid units (0..100 across the house)")
+        console.print("objectives along the episode's route (before -> after):")
         for k in ob:
-            console.print(f"  {k:15s} {_fmt(ob[k])} -> {_fmt(oa[k])}")
-        console.print(f"agent: success {ab['success']} -> {aa['success']}, SPL {ab['spl']:.3f} -> {aa['spl']:.3f}")
+            what, unit = MEANING.get(k, (k, ""))
+            console.print(f"  {k:15s} {_fmt(ob[k])} -> {_fmt(oa[k])} {unit:8s} {what}: "
+                          f"{harder_or_easier(k, ob[k], oa[k])}")
+        console.print(f"agent: success {ab['success']} -> {aa['success']}, SPL {ab['spl']:.3f} -> {aa['spl']:.3f}, "
+                      f"steps {ab['steps']} -> {aa['steps']} (lower success or SPL: the scene got harder)")
         console.print(f"realism: {_fmt(s['realism_before'])} -> {_fmt(s['realism_after'])}; expert solvable: "
                       f"{s['expert_solvable']}, expert success: {s['expert_success_after']}; valid: {s['valid']}")
         for p in s["problems"]:

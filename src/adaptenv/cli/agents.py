@@ -67,7 +67,6 @@ def evaluate(
     import json
 
     from rich.console import Console
-    from rich.progress import Progress
     from rich.table import Table
 
     from adaptenv.agents.evaluate import drop, write_report
@@ -75,6 +74,7 @@ def evaluate(
     from adaptenv.agents.houses import load_house_set
     from adaptenv.agents.network import configure_torch
     from adaptenv.agents.registry import resolve_policy
+    from adaptenv.progress import ProgressBar
 
     configure_torch()
     console = Console()
@@ -85,11 +85,9 @@ def evaluate(
     summaries = []
     for spec in houses:
         house_set = load_house_set(spec)
-        with Progress(console=console, transient=True) as bar:
-            task = bar.add_task(f"{policy} on {spec}", total=episodes)
+        with ProgressBar(f"{policy} on {spec}", episodes) as bar:
             report = run_eval(policy if workers > 1 else resolved, house_set, episodes=episodes, seed=seed,
-                              batch=batch, workers=workers,
-                              progress=lambda k, task=task: bar.update(task, completed=k))
+                              batch=batch, workers=workers, progress=bar.update)
         report.policy = policy
         sub = out / _slug(spec) if len(houses) > 1 else out
         report.summary["failure_modes"] = failure_modes(report, house_set)

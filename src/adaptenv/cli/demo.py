@@ -20,6 +20,7 @@ def demo(
     from rich.console import Console
 
     from adaptenv.curriculum.loop import LoopConfig, run_loop
+    from adaptenv.progress import ProgressBar
     from adaptenv.report import build_report
     from adaptenv.scene.house import save_house
     from adaptenv.scene.procedural import generate_houses, rearrange_house
@@ -30,11 +31,14 @@ def demo(
     train, heldout_re, heldout_new = out / "houses" / "train", out / "houses" / "rearranged", out / "houses" / "unseen"
     console.print(f"[bold]1/4[/] generating {houses} training houses, their rearranged variants and "
                   f"{houses} unseen houses")
-    for i, house in enumerate(generate_houses(houses, seed)):
-        save_house(house, train / f"house_{i:02d}.json")
-        save_house(rearrange_house(house, seed + 1000 + i), heldout_re / f"house_{i:02d}.json")
-    for i, house in enumerate(generate_houses(houses, seed + 1)):
-        save_house(house, heldout_new / f"house_{i:02d}.json")
+    with ProgressBar("houses", 3 * houses) as bar:
+        for i, house in enumerate(generate_houses(houses, seed)):
+            save_house(house, train / f"house_{i:02d}.json")
+            save_house(rearrange_house(house, seed + 1000 + i), heldout_re / f"house_{i:02d}.json")
+            bar.advance(2)
+        for i, house in enumerate(generate_houses(houses, seed + 1)):
+            save_house(house, heldout_new / f"house_{i:02d}.json")
+            bar.advance()
 
     console.print(f"[bold]2/4[/] closed loop ({iterations} iterations): roll out the agent, analyze each trajectory (F), "
                   "edit the scenes (G), fine-tune, evaluate on held-out houses")
@@ -46,10 +50,13 @@ def demo(
     records = run_loop(cfg, run_dir, progress=lambda text: console.print(f"    [dim]{text}[/]"),
                        command="adaptenv demo")
 
-    console.print("[bold]3/4[/] held-out success per iteration:")
+    console.print("[bold]3/4[/] held-out success per iteration (± standard error over episodes):")
     for r in records:
-        figs = ", ".join(f"{k} {v.success:.2f}" for k, v in sorted(r.heldout.items()))
-        console.print(f"    t={r.iteration}: {figs}  ({r.edits} edits, {r.env_steps:,} env steps)")
+        figs = ", ".join(f"{k} {v.success:.2f} ± {v.success_se:.2f}" for k, v in sorted(r.heldout.items()))
+        took = f", {r.wall_time_s:.0f} s" if r.wall_time_s else ""
+        console.print(f"    t={r.iteration}: {figs}  ({r.edits} edits, {r.env_steps:,} env steps{took})")
+    console.print(f"    Each figure comes from {cfg.heldout_episodes} episodes per set, so a change smaller than "
+                  "about two standard errors is noise, not learning or forgetting; t=0 is the starting policy.")
 
     console.print("[bold]4/4[/] writing the report")
     index = build_report(run_dir)

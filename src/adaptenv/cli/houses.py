@@ -14,7 +14,7 @@ from adaptenv.cli._common import JSON_OPTION, existing_file
 from adaptenv.errors import ConfigError
 
 houses_app = typer.Typer(help="Procedural ProcTHOR-format houses: generate new ones, rearrange existing ones.",
-                         no_args_is_help=True)
+                         no_args_is_help=True, rich_markup_mode=None)  # plain help, like adaptenv.cli.HELP_STYLE
 
 _ROOMS_HELP = ("Rooms per house: a count from 1 to 10 (e.g. 5) or a comma-separated list of types "
                "(e.g. Kitchen,LivingRoom,Bedroom). Default: 2 to 6 rooms.")
@@ -84,10 +84,10 @@ def generate(
     split: Annotated[str, typer.Option("--split", help="ProcTHOR asset split the furniture comes from.")] = "train",
 ) -> None:
     """Generate procedural ProcTHOR-format houses (loadable in AI2-THOR >= 5.0)."""
-    from rich.progress import Progress
-
+    from adaptenv.progress import ProgressBar
     from adaptenv.scene.house import save_house
-    from adaptenv.scene.procedural import child_seeds, generate_house, generate_preset, preset_spec
+    from adaptenv.scene.procedural import child_seeds, generate_house, generate_preset
+    from adaptenv.scene.procedural.presets import PRESETS
 
     if n < 1 or n > 100_000:
         raise ConfigError(f"--n: expected 1 to 100000 houses, got {n}")
@@ -95,19 +95,19 @@ def generate(
         raise ConfigError(f"--seed: expected a non-negative integer, got {seed}")
     if out.exists() and not out.is_dir():
         raise ConfigError(f"{out}: exists and is not a folder; pass a folder to -o")
+    if preset is not None and preset not in PRESETS:
+        raise ConfigError(f"--preset: unknown preset {preset!r}; use one of {', '.join(PRESETS)}")
+    cfg = _config_for(rooms, split) if preset is None else None  # check the options before any output
     rows = []
-    with Progress(transient=True) as progress:
-        if preset is not None:
-            spec = preset_spec(preset)
-            task = progress.add_task(f"generating {preset}", total=spec.n_houses)
-            named = generate_preset(preset, on_house=lambda i, total: progress.update(task, completed=i + 1, total=total))
-        else:
-            cfg = _config_for(rooms, split)
-            task = progress.add_task("generating houses", total=n)
+    if preset is not None:
+        with ProgressBar(f"generating {preset}", PRESETS[preset].n_houses) as bar:
+            named = generate_preset(preset, on_house=lambda i, total: bar.update(i + 1, total=total))
+    else:
+        with ProgressBar("generating houses", n) as bar:
             named = []
             for i, s in enumerate(child_seeds(seed, n)):
                 named.append((f"house_{i:04d}", generate_house(s, cfg)))
-                progress.update(task, completed=i + 1)
+                bar.advance()
     out.mkdir(parents=True, exist_ok=True)
     for name, house in named:
         save_house(house, out / f"{name}.json")

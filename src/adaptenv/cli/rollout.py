@@ -11,6 +11,10 @@ from adaptenv.cli._common import JSON_OPTION, existing_file
 POLICIES = ("expert", "random")
 _HOUSE = typer.Argument(..., help="A ProcTHOR house JSON file.")
 _OUT = typer.Option(Path("traj.json"), "-o", "--out", help="Where to write the trajectory JSON.")
+UNITS = {"spl": "0..1", "sel": "0..1", "episode_length": "steps", "path_length": "m", "final_geodesic": "m",
+         "collisions": "blocked moves", "min_clearance": "m", "rooms_visited": "rooms", "first_sight_step": "step",
+         "optimal_path_length": "m", "expert_episode_length": "steps (n/a: the expert fails)"}
+"""Units of the metrics ``rollout`` prints."""
 _RENDER = typer.Option(None, "--render", help="Also draw the trajectory top-down to this PNG.")
 
 
@@ -37,7 +41,7 @@ def rollout(
     from rich.table import Table
 
     from adaptenv.scene.house import load_house
-    from adaptenv.sim.rollout import run_episode
+    from adaptenv.sim.rollout import expert_episode_length, run_episode
     from adaptenv.sim.spec import MAX_STEPS
     from adaptenv.sim.task import sample_episode
     from adaptenv.sim.world import compile_world
@@ -47,13 +51,17 @@ def rollout(
     world = compile_world(house_model, name=str(house))
     pol = resolve_policy(policy, seed)
     episode = sample_episode(world, seed, target_type=target, use_house_start=use_house_start)
-    traj = run_episode(world, episode, pol, max_steps=max_steps or MAX_STEPS, policy_name=policy)
+    expert_length = expert_episode_length(world, episode, max_steps=max_steps or MAX_STEPS)
+    traj = run_episode(world, episode, pol, max_steps=max_steps or MAX_STEPS, policy_name=policy,
+                       expert_length=expert_length)
     traj.save(out)
     table = Table(title=f"{policy} looking for {traj.target_type} in {house.name}")
     table.add_column("metric")
     table.add_column("value", justify="right")
+    table.add_column("unit")
     for key, value in traj.metrics.model_dump().items():
-        table.add_row(key, f"{value:.3f}" if isinstance(value, float) else str(value))
+        shown = "n/a" if value is None else f"{value:.3f}" if isinstance(value, float) else str(value)
+        table.add_row(key, shown, UNITS.get(key, ""))
     console = Console()
     console.print(table)
     console.print(f"wrote the trajectory to [bold]{out}[/]")

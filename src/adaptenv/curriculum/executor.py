@@ -42,6 +42,7 @@ from typing import Any, Literal, Protocol, Self, TypeVar, runtime_checkable
 import typer
 
 from adaptenv.errors import AdaptenvError, ConfigError
+from adaptenv.progress import ProgressBar
 
 T = TypeVar("T")
 R = TypeVar("R")
@@ -138,44 +139,6 @@ def check_picklable(fn: Callable[..., Any], kind: str) -> None:
                           "function of an importable module (no lambda or closure), or use --executor inprocess") from exc
 
 
-class _Progress:
-    """A transient rich progress bar when ``desc`` is set and stderr is a terminal, otherwise nothing
-    (so logs and pipes get no bar remnants)."""
-
-    def __init__(self, desc: str | None, total: int):
-        self._bar = None
-        if desc is None or total <= 0:
-            return
-        from rich.console import Console
-
-        console = Console(stderr=True)
-        if console.is_terminal:
-            from rich.progress import (
-                BarColumn,
-                MofNCompleteColumn,
-                Progress,
-                TextColumn,
-                TimeElapsedColumn,
-            )
-
-            self._bar = Progress(TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(),
-                                 TimeElapsedColumn(), console=console, transient=True)
-            self._task = self._bar.add_task(desc, total=total)
-
-    def __enter__(self) -> _Progress:
-        if self._bar is not None:
-            self._bar.start()
-        return self
-
-    def advance(self, n: int = 1) -> None:
-        if self._bar is not None:
-            self._bar.advance(self._task, n)
-
-    def __exit__(self, *exc: object) -> None:
-        if self._bar is not None:
-            self._bar.stop()
-
-
 class _Base:
     """Context-manager plumbing shared by the executors."""
 
@@ -204,7 +167,7 @@ class InProcessExecutor(_Base):
         """``[fn(x) for x in items]`` with an optional progress bar."""
         items = list(items)
         out: list[R] = []
-        with _Progress(desc, len(items)) as bar:
+        with ProgressBar(desc, len(items)) as bar:
             for x in items:
                 out.append(fn(x))
                 bar.advance()
@@ -251,7 +214,7 @@ class ProcessExecutor(_Base):
         check_picklable(fn, "process")
         pool = self._ensure()
         chunks = split(items, chunk_size(len(items), self._workers, self._chunksize))
-        with _Progress(desc, len(items)) as bar:
+        with ProgressBar(desc, len(items)) as bar:
             futures = []
             for chunk in chunks:
                 fut = pool.submit(_run_chunk, fn, chunk)
@@ -274,7 +237,7 @@ class ProcessExecutor(_Base):
         return f"ProcessExecutor(workers={self._workers}, start_method={self._start_method!r})"
 
 
-def _advance_when_done(bar: _Progress, n: int, fut: cf.Future) -> None:
+def _advance_when_done(bar: ProgressBar, n: int, fut: cf.Future) -> None:
     """Done-callback of a chunk future: move the bar unless the chunk was cancelled."""
     if not fut.cancelled():
         bar.advance(n)
@@ -411,7 +374,7 @@ class RayExecutor(_Base):
         refs = [self._remote.remote(fn_ref, chunk) for chunk in chunks]
         sizes = {ref: len(chunk) for ref, chunk in zip(refs, chunks, strict=True)}
         pending = list(refs)
-        with _Progress(desc, len(items)) as bar:
+        with ProgressBar(desc, len(items)) as bar:
             try:
                 while pending:
                     done, pending = ray.wait(pending, num_returns=1)

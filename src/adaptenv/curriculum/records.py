@@ -7,7 +7,8 @@ The loop writes, the report reads; both go through these models, so the layout l
       iterations.jsonl              one IterationRecord per finished iteration (append-only)
       iterations.csv                the same figures, flat, for spreadsheets
       iter_0001/
-        gallery/<scene>/            before.png, after.png, analysis.json, edits.json (adapted scenes)
+        gallery/<scene>/            before.png, after.png, analysis.json, edits.json (adapted scenes),
+                                    and when recorded both houses and both trajectories
         scenes/<scene>.json         training scenes e_{t+1} produced this iteration
         policy.pt                   pi_{t+1}
       state.json                    resume point (written last, atomically)
@@ -58,7 +59,12 @@ class SetMetrics(BaseModel):
 
 
 class GalleryItem(BaseModel):
-    """One adapted scene of an iteration, with paths relative to the run folder."""
+    """One adapted scene of an iteration, with paths relative to the run folder.
+
+    With both houses and both trajectories recorded, the report draws the pair itself
+    (:func:`adaptenv.render.compare.render_before_after`) and states what changed; the PNGs are
+    then only a fallback.
+    """
 
     scene: str
     before_png: str | None = None
@@ -66,6 +72,14 @@ class GalleryItem(BaseModel):
     analysis_json: str | None = None
     edits_json: str | None = None
     summary: str = ""
+    before_house_json: str | None = None
+    """e_t, the house pi_t was rolled out in."""
+    after_house_json: str | None = None
+    """e_{t+1}, the edited house."""
+    before_trajectory_json: str | None = None
+    """pi_t's episode in e_t (the one F analysed)."""
+    after_trajectory_json: str | None = None
+    """pi_t's own episode in e_{t+1}, same start and target."""
 
 
 class IterationRecord(BaseModel):

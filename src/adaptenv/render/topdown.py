@@ -153,11 +153,15 @@ class MapLayout:
 
 
 _GRID_NOTE = "grid: x grows right, y grows up"
+HIGHLIGHT_LEGEND = "moved object"
+"""The legend's name for the highlight colour (every caller highlights the objects an edit moved)."""
 
 
-def _legend_items(trajectory: bool, grid: bool) -> list[str]:
+def _legend_items(trajectory: bool, grid: bool, highlight: bool = False) -> list[str]:
     items = [_GRID_NOTE] if grid else []
     items += ["movable", "fixed", "small object", "wall decor", "door", "closed door", "window"]
+    if highlight:
+        items.append(HIGHLIGHT_LEGEND)
     if trajectory:
         items += ["path start->end", "start", "end", "collision", "target"]
     return items
@@ -181,7 +185,7 @@ def _wrap_legend(items: list[str], fs: int, width: float) -> list[list[str]]:
 
 
 def map_layout(geometry: SceneGeometry, *, size: int = 1024, grid: bool = False, captions: int = 0,
-               legend: bool = True, trajectory: bool = False) -> MapLayout:
+               legend: bool = True, trajectory: bool = False, highlight: bool = False) -> MapLayout:
     """Fit the house into an image whose longer side is ``size`` px, keeping its aspect ratio.
 
     Margins hold the tick labels (left, bottom) when ``grid``, ``captions`` text lines on top
@@ -202,7 +206,7 @@ def map_layout(geometry: SceneGeometry, *, size: int = 1024, grid: bool = False,
     top = pad + captions * (line_h + 4) + (pad * 0.5 if captions else 0)
     ticks = (fs * 0.6 + line_h + pad * 0.5) if grid else pad
     _, small_h = text_size("Hg", small)
-    items = _legend_items(trajectory, grid) if legend else []
+    items = _legend_items(trajectory, grid, highlight) if legend else []
     rows: list[list[str]] = []
     for _ in range(4):  # the legend may wrap once the width is known; settle in a few rounds
         bottom = ticks + (len(rows) * (small_h + 6) + pad * 0.5 if rows else pad * 0.5)
@@ -449,15 +453,16 @@ def _caption_parts(traj: Trajectory) -> list[tuple[str, RGB]]:
     collisions = sum(1 for s in traj.steps if not s.moved and s.action in _MOVE_ACTIONS)
     parts: list[tuple[str, RGB]] = [(f"target: {traj.target_type}", CAPTION_TEXT)]
     m = traj.metrics
+    bar = "  |  "
     if m is not None:
-        parts += [("   |   ", CAPTION_TEXT),
+        parts += [(bar, CAPTION_TEXT),
                   ("SUCCESS" if m.success else "FAILURE", SUCCESS_TEXT if m.success else FAILURE_TEXT)]
         collisions = m.collisions
-        tail = f"   |   {n} steps   |   {collisions} collisions   |   SPL {m.spl:.2f}"
+        tail = f"{bar}{n} steps{bar}path {m.path_length:.1f} m{bar}{collisions} collisions{bar}SPL {m.spl:.2f}"
     else:
-        tail = f"   |   {n} steps   |   {collisions} collisions"
-    if traj.policy:
-        tail += f"   |   policy: {traj.policy}"
+        tail = f"{bar}{n} steps{bar}{collisions} collisions"
+    if traj.policy and traj.policy != "policy":  # "policy" is a placeholder name, not worth a caption
+        tail += f"{bar}policy: {traj.policy}"
     parts.append((tail, CAPTION_TEXT))
     return parts
 
@@ -473,7 +478,8 @@ def _draw_runs(image: Image.Image, x: float, y: float, parts: list[tuple[str, RG
         x += text_size(s, size, bold)[0]
 
 
-def _draw_legend(image: Image.Image, draw: ImageDraw.ImageDraw, layout: MapLayout, wall_w: int) -> None:
+def _draw_legend(image: Image.Image, draw: ImageDraw.ImageDraw, layout: MapLayout, wall_w: int,
+                 highlight: RGB | None = None) -> None:
     fs = max(9, layout.font_size - 2)
     _, h = text_size("Hg", fs)
     y = layout.legend_top + h / 2
@@ -487,6 +493,8 @@ def _draw_legend(image: Image.Image, draw: ImageDraw.ImageDraw, layout: MapLayou
                 fill, edge = (MOVABLE_FILL, MOVABLE_EDGE) if item == "movable" else (FIXED_FILL, FIXED_EDGE)
                 draw.rectangle([sx - s, sy - s, sx + s, sy + s], fill=fill, outline=edge)
                 draw.line([(sx - s, sy - s), (sx + s, sy - s)], fill=FRONT_TICK, width=2)
+            elif item == HIGHLIGHT_LEGEND:
+                draw.rectangle([sx - s, sy - s, sx + s, sy + s], fill=highlight, outline=(0, 0, 0), width=2)
             elif item == "small object":
                 draw.ellipse([sx - 2.5, sy - 2.5, sx + 2.5, sy + 2.5], fill=SMALL_OBJECT)
             elif item == "wall decor":
@@ -583,7 +591,7 @@ def render_map(house: House | None = None, *, trajectory: Trajectory | None = No
     geometry = _geometry_of(house, geometry)
     colours = _highlight_colours(geometry, highlight)
     layout = map_layout(geometry, size=size, grid=grid, captions=int(title is not None) + int(trajectory is not None),
-                        legend=legend, trajectory=trajectory is not None)
+                        legend=legend, trajectory=trajectory is not None, highlight=bool(colours))
     canvas = _Canvas.blank(layout)
     scene = _PixelScene.of(geometry, layout.transform)
     obstacles = label_obstacles(layout, scene.boxes, scene.anchors, scene.wall_segs, scene.wall_w, trajectory,
@@ -602,7 +610,7 @@ def render_map(house: House | None = None, *, trajectory: Trajectory | None = No
         _draw_markers(canvas, trajectory, scene)
     _draw_captions(canvas, title, trajectory)
     if legend:
-        _draw_legend(canvas.image, canvas.draw, layout, scene.wall_w)
+        _draw_legend(canvas.image, canvas.draw, layout, scene.wall_w, next(iter(colours.values()), None))
     return MapRender(canvas.image, layout, placed)
 
 
@@ -714,7 +722,8 @@ def render_house(house: House | None = None, *, trajectory: Trajectory | None = 
             target crosses, and a one-line caption.
         grid: draw the paper's normalized 0..100 grid (ticks every 10 on the bottom and left axes).
         size: the image's longer side in pixels (at least 256).
-        highlight: object id -> colour (a Pillow colour name or '#rrggbb') to fill that object with.
+        highlight: object id -> colour (a Pillow colour name or '#rrggbb') to fill that object with;
+            the legend names the (first) colour "moved object".
         labels: write every floor object's id and each room's type.
         title: a bold line above the map.
         geometry: precomputed ``SceneGeometry.from_house(house)`` (saves ~2 ms per render).

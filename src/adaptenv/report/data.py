@@ -7,6 +7,7 @@ in the report instead of a crash. Only a folder that is neither a run nor an exp
 
 from __future__ import annotations
 
+import csv
 import json
 import math
 import re
@@ -51,6 +52,8 @@ class EditRow:
     intent: str = ""
     outcome: str = ""
     """``no-op`` (changed nothing) or ``undone`` (taken back by its generator); empty otherwise."""
+    kind: str = ""
+    """The suggestion kind the edit answers (narrow_passage, occlude_target, ...), when recorded."""
 
 
 @dataclass
@@ -66,6 +69,18 @@ class GalleryEntry:
     edits: list[EditRow] = field(default_factory=list)
     generator: str = ""
     warnings: list[str] = field(default_factory=list)
+    episodes: EpisodePair | None = None
+    """Both houses and both trajectories, when the run recorded them (the report then draws the pair)."""
+
+
+@dataclass
+class EpisodePair:
+    """The files of an adaptation's two episodes: pi_t in e_t and pi_t in e_{t+1}."""
+
+    before_house: Path
+    after_house: Path
+    before_trajectory: Path
+    after_trajectory: Path
 
 
 @dataclass
@@ -200,6 +215,12 @@ def load_gallery(run_dir: Path, item: GalleryItem) -> GalleryEntry:
     for name, rel, found in (("before render", item.before_png, entry.before), ("after render", item.after_png, entry.after)):
         if rel and found is None:
             entry.warnings.append(f"{name} {rel} is missing")
+    pair = [(rel, _inside(run_dir, rel)) for rel in (item.before_house_json, item.after_house_json,
+                                                      item.before_trajectory_json, item.after_trajectory_json)]
+    if all(found is not None for _, found in pair):
+        entry.episodes = EpisodePair(*(found for _, found in pair))
+    else:
+        entry.warnings += [f"{rel} is missing" for rel, found in pair if rel and found is None]
     if (p := _inside(run_dir, item.analysis_json)) is not None:
         try:
             entry.analysis = Analysis.model_validate_json(p.read_text(encoding="utf-8"))
@@ -243,13 +264,86 @@ def parse_edits(doc: Any) -> tuple[str, list[EditRow]]:
                                     verified=step.verified, verification=step.verification, note=step.reason))
                 continue
             note = step.reason or "; ".join(step.edit.problems)
-            rows.append(_row(step.edit, verified=step.verified, verification=step.verification, note=note))
+            rows.append(_row(step.edit, verified=step.verified, verification=step.verification, note=note,
+                             kind=step.suggestion_kind or ""))
         return str(doc.get("generator", "")), rows
     if isinstance(doc, list):
         doc = {"edits": doc}
     log = EditLog.model_validate(doc)
     rows = [_row(e, note="; ".join(e.problems)) for e in log.edits]
     return (log.edits[0].source if log.edits and all(e.source == log.edits[0].source for e in log.edits) else ""), rows
+
+
+def find_path(run_dir: Path, spec: str) -> Path | None:
+    """A house folder or file named in a run's config: as given, or relative to the run folder or its parents."""
+    p = Path(spec)
+    if p.exists():
+        return p
+    if p.is_absolute():
+        return None
+    for base in (run_dir, *run_dir.resolve().parents):
+        if (base / p).exists():
+            return base / p
+    return None
+
+
+@dataclass
+class HouseSetFiles:
+    """A house set of a run (training or held-out), as the config names it, and the files found."""
+
+    name: str
+    spec: str
+    files: list[Path]
+    note: str = ""
+    """Why no files are listed (a preset, or a folder not found)."""
+
+
+def house_sets(run: RunData) -> list[HouseSetFiles]:
+    """The run's training set and each held-out set, with their house files when they can be found."""
+    cfg = run.info.config if run.info is not None else {}
+    specs = [("training", cfg.get("houses"))] + [(k, v) for k, v in (cfg.get("heldout") or {}).items()]
+    out = []
+    for name, spec in specs:
+        if not isinstance(spec, str) or not spec:
+            continue
+        if spec.startswith("preset:"):
+            out.append(HouseSetFiles(name, spec, [], f"the named set {spec} (regenerate with adaptenv houses "
+                                                     f"generate --preset {spec.partition(':')[2]})"))
+            continue
+        path = find_path(run.path, spec)
+        files = sorted(path.glob("*.json")) if path is not None and path.is_dir() else [path] if path else []
+        out.append(HouseSetFiles(name, spec, files, "" if files else f"{spec} was not found from here"))
+    return out
+
+
+HELDOUT_DIR = "heldout"
+"""``iter_XXXX/heldout/<set>/``: per-house results of that iteration's held-out evaluation, in the
+layout ``adaptenv evaluate`` writes (houses.csv, failures.png, failed/episode_*.json)."""
+
+
+@dataclass
+class HeldoutFiles:
+    """One held-out set's per-house table and failure renders, from the latest iteration that wrote them."""
+
+    name: str
+    iteration: int
+    rows: list[dict[str, str]]
+    failures: Path | None
+
+
+def heldout_files(run: RunData) -> list[HeldoutFiles]:
+    """Per held-out set, the latest ``iter_XXXX/heldout/<set>/houses.csv`` (and failures.png) found."""
+    out = []
+    for name in run.sets:
+        for r in reversed(run.iterations):
+            d = run.path / f"iter_{r.iteration:04d}" / HELDOUT_DIR / name
+            if (d / "houses.csv").is_file():
+                with (d / "houses.csv").open(encoding="utf-8", newline="") as f:
+                    rows = list(csv.DictReader(f))
+                failures = d / "failures.png"
+                out.append(HeldoutFiles(name, r.iteration, rows, failures if failures.is_file() else None))
+                break
+    return out
 
 
 # --------------------------------------------------------------------------- experiments

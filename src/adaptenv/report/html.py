@@ -30,6 +30,8 @@ from adaptenv.curriculum.records import (
     SetMetrics,
 )
 from adaptenv.errors import AdaptenvError
+from adaptenv.render.compare import BeforeAfter, render_before_after
+from adaptenv.render.topdown import render_house
 from adaptenv.report.data import (
     EditRow,
     ExperimentData,
@@ -38,17 +40,23 @@ from adaptenv.report.data import (
     Stat,
     detect,
     final_stat,
+    heldout_files,
+    house_sets,
     last_with,
     load_experiment,
     load_gallery,
     load_run,
 )
+from adaptenv.scene.house import load_house
+from adaptenv.sim.trajectory import Trajectory
 
 GENERATOR = "adaptenv report"
 INDEX = "index.html"
 _OWNED = ("img", "plots", "runs", "data")
 """Sub-folders a report owns; cleared before a report is rewritten in place."""
 CSS_FILE = Path(__file__).parent / "static" / "report.css"
+GALLERY_SIZE = 640
+"""Longer side (px) of the before/after renders the report draws itself."""
 
 
 def esc(value: object) -> str:
@@ -170,6 +178,12 @@ class Assets:
         self.used: set[Path] = set()
 
     def copy(self, src: Path, folder: str, name: str) -> Path:
+        dest = self.reserve(folder, name)
+        shutil.copyfile(src, dest)
+        return dest
+
+    def reserve(self, folder: str, name: str) -> Path:
+        """A new, unique, safe path for a file called ``name`` under ``folder`` (parents created)."""
         stem, dot, ext = name.rpartition(".")
         sub = Path(*[safe_name(part) for part in Path(folder).parts])
         dest = self.root / sub / (safe_name(stem)[:60] + dot + safe_name(ext) if dot else safe_name(name)[:60])
@@ -179,7 +193,6 @@ class Assets:
             dest = dest.with_name(f"{stem}-{k}{suffix}")
         self.used.add(dest)
         dest.parent.mkdir(parents=True, exist_ok=True)
-        shutil.copyfile(src, dest)
         return dest
 
     def image(self, src: Path | None, folder: str, name: str, alt: str) -> str:
@@ -189,7 +202,15 @@ class Assets:
         size = _image_size(src)
         if size is None:
             return f'<div class="missing">{esc(alt)}: render unreadable</div>'
-        dest = self.copy(src, folder, name)
+        return self.img_tag(self.copy(src, folder, name), size, alt)
+
+    def drawn(self, image, folder: str, name: str, alt: str) -> str:
+        """Save a PIL image into the report and return its ``<img>``."""
+        dest = self.reserve(folder, name)
+        image.save(dest)
+        return self.img_tag(dest, image.size, alt)
+
+    def img_tag(self, dest: Path, size: tuple[int, int], alt: str) -> str:
         url = href(dest, self.page_dir)
         return (f'<a href="{url}"><img src="{url}" alt="{esc(alt)}" loading="lazy" '
                 f'width="{size[0]}" height="{size[1]}"></a>')
@@ -221,6 +242,7 @@ def analysis_html(analysis) -> str:
         where = f", near grid ({c.where.x:.0f}, {c.where.y:.0f})" if c.where else ""
         steps = (f", steps {c.steps[0]}–{c.steps[-1]}" if len(c.steps) > 1 and c.steps[0] != c.steps[-1]
                  else f", step {c.steps[0]}" if c.steps else "")
+        steps += f", {c.count} times" if c.count > 1 else ""
         objs = f" <span class=\"muted\">objects: {esc(', '.join(c.objects))}</span>" if c.objects else ""
         concerns.append(f'<li><span class="kind">{esc(c.kind)}</span> {esc(c.description)} '
                         f'<span class="muted">[{esc(c.id)}, severity {c.severity:.2f}{esc(where)}{esc(steps)}]</span>{objs}</li>')
@@ -278,14 +300,51 @@ def edits_html(entry: GalleryEntry) -> str:
               "rotation is the requested absolute yaw (yaw before → after).</p>")
 
 
+def draw_pair(entry: GalleryEntry) -> BeforeAfter | None:
+    """Draw the scene's two episodes with :func:`render_before_after` (None, with a warning, when it cannot)."""
+    files = entry.episodes
+    if files is None:
+        return None
+    try:
+        houses = [load_house(p) for p in (files.before_house, files.after_house)]
+        trajs = [Trajectory.load(p) for p in (files.before_trajectory, files.after_trajectory)]
+        return render_before_after(*houses, *trajs, size=GALLERY_SIZE)
+    except (AdaptenvError, ValueError, OSError) as exc:
+        entry.warnings.append(f"cannot draw the two episodes ({str(exc).splitlines()[0]}); showing the recorded renders")
+        return None
+
+
+def changes_html(pair: BeforeAfter) -> str:
+    """The figures of both episodes side by side, coloured by whether the agent did better or worse."""
+    rows = []
+    for c in pair.changes:
+        cls = " class=better" if c.trend > 0 else " class=worse" if c.trend < 0 else ""
+        rows.append(f"<tr><td class=l>{esc(c.name)}</td><td>{esc(c.before)}</td><td{cls}>{esc(c.after)}</td></tr>")
+    moved = ", ".join(f"<code>{esc(m)}</code>" for m in pair.moved) or "none"
+    return ("<h5>What changed for pi_t</h5>" + table("<tr><th class=l>figure</th><th>before (e_t)</th>"
+                                                     "<th>after (e_t+1)</th></tr>", rows)
+            + f'<p class="note">Same start and target on both sides. Moved objects (cyan in the after render): '
+              f"{moved}. Green: better for the agent; red: worse (the edit made the task harder).</p>")
+
+
 def scene_html(entry: GalleryEntry, assets: Assets, t: int, k: int) -> str:
     folder = f"img/iter_{t:04d}/{k:02d}_{safe_name(entry.scene)[:40]}"
-    before = assets.image(entry.before, folder, "before.png", f"{entry.scene}, before")
-    after = assets.image(entry.after, folder, "after.png", f"{entry.scene}, after")
+    pair = draw_pair(entry)
+    if pair is not None:
+        before = assets.drawn(pair.before, folder, "before.png", f"{entry.scene}, before")
+        after = assets.drawn(pair.after, folder, "after.png", f"{entry.scene}, after")
+        after_caption = "after: pi_t's own episode in the edited scene e_t+1 (moved objects in cyan)"
+        changes = changes_html(pair)
+    else:
+        before = assets.image(entry.before, folder, "before.png", f"{entry.scene}, before")
+        after = assets.image(entry.after, folder, "after.png", f"{entry.scene}, after")
+        after_caption = ("after: the edited scene as the run rendered it (this run did not record pi_t's "
+                         "episode there, so any path drawn may be the before episode's)")
+        changes = ""
     summary = f' <span class="muted">— {esc(entry.summary)}</span>' if entry.summary else ""
     return (f'<article class="scene" id="iter-{t}-scene-{k}"><h4><code>{esc(entry.scene)}</code>{summary}</h4>'
             f'<div class="pair"><figure>{before}<figcaption>before: pi_t in e_t</figcaption></figure>'
-            f"<figure>{after}<figcaption>after: the edited scene</figcaption></figure></div>"
+            f"<figure>{after}<figcaption>{esc(after_caption)}</figcaption></figure></div>{changes}"
             f'<div class="analysis">{analysis_html(entry.analysis)}</div><div class="edits">{edits_html(entry)}</div>'
             f"{warnings_box(entry.warnings, 'Missing or unreadable files')}</article>")
 
@@ -304,6 +363,121 @@ def gallery_html(run: RunData, assets: Assets) -> str:
     if not parts:
         return '<p class="note">No adapted scenes were recorded in the finished iterations.</p>'
     return '<p class="note">Latest iteration first. Click a render to open it at full size.</p>' + "".join(parts)
+
+
+# --------------------------------------------------------------------------- reading aids
+
+GLOSSARY = [
+    ("pi_t", "the agent's policy after t closed-loop iterations; pi_0 is the starting (pretrained) policy."),
+    ("e_t", "a training scene (house) at iteration t; e_t+1 is the scene after G edited it."),
+    ("tau", "a trajectory: one recorded episode of pi_t in e_t (the path drawn on the renders)."),
+    ("F", "the analysis step: reads tau and returns outcome, concerns and abstract suggestions."),
+    ("G", "the generator: turns F's suggestions into single-object moves on the 0..100 grid, each validated "
+          "(and verified when the generator checks its edits)."),
+    ("Delta R", "the improvement on held-out houses: held-out success of pi_t minus that of pi_0 on the same "
+                "episodes. The paper's G is good when Delta R is positive."),
+    ("ours", "the paper's method: F then G on pi_t's own failures (ours-llm: F and G are language models)."),
+    ("dr, plr, accel, random", "baselines: domain randomisation (fresh houses), prioritized level replay, "
+                               "ACCEL (replay plus random edits), and random edits without F."),
+    ("house_00~t02a00", "a scene id: base house house_00, made at iteration t=02 by adaptation (a; r: random "
+                        "edit, c: ACCEL child), 00th of that iteration."),
+    ("grid units", "positions and moves on the paper's normalized map: 0..100 across the house, x right, y up "
+                   "(metres are world units)."),
+]
+
+KIND_TEXT = {"narrow_passage": "narrow a passage", "occlude_target": "hide the target",
+             "lengthen_route": "lengthen the route", "add_clutter": "add clutter"}
+THUMBS = 8
+"""Thumbnails shown per house set."""
+
+
+def glossary_html() -> str:
+    """The paper's symbols and the report's names, in plain words."""
+    rows = "".join(f"<dt><code>{esc(k)}</code></dt><dd>{esc(v)}</dd>" for k, v in GLOSSARY)
+    return f'<dl class="glossary">{rows}</dl>'
+
+
+CURVES_NOTE = ("How to read the curves: each point is held-out success (or SPL) of the policy after that "
+               "iteration, on the same episodes every time; iteration 0 is pi_0. Delta R is a point's height above "
+               "iteration 0. A fall smaller than about two standard errors (the ± in the results table) is noise. "
+               "A steady fall means fine-tuning on the adapted scenes made the agent worse on houses it never "
+               "trains on (forgetting or overfitting to edits), not that those houses got harder: held-out "
+               "houses never change.")
+
+
+def houses_html(run: RunData, assets: Assets) -> str:
+    """Thumbnails of the training and held-out houses named in the run's config."""
+    sets = house_sets(run)
+    if not sets:
+        return '<p class="note">The run records no house sets (run.json has no config).</p>'
+    parts = []
+    for hs in sets:
+        head = f"<h3>{esc(hs.name)} <span class=\"muted\">({esc(hs.spec)}, {len(hs.files)} houses)</span></h3>"
+        if not hs.files:
+            parts.append(head + f'<p class="note">No thumbnails: {esc(hs.note)}.</p>')
+            continue
+        figs = []
+        for f in hs.files[:THUMBS]:
+            try:
+                image = render_house(load_house(f), size=256, labels=False, legend=False, title=f.stem)
+            except (AdaptenvError, ValueError, OSError) as exc:
+                figs.append(f'<div class="missing">{esc(f.name)}: {esc(str(exc).splitlines()[0])}</div>')
+                continue
+            figs.append(f"<figure>{assets.drawn(image, f'img/houses/{hs.name}', f.stem + '.png', f.stem)}</figure>")
+        more = f'<p class="note">and {len(hs.files) - THUMBS} more.</p>' if len(hs.files) > THUMBS else ""
+        parts.append(head + f'<div class="thumbs">{"".join(figs)}</div>{more}')
+    return "".join(parts)
+
+
+def heldout_html(run: RunData, assets: Assets) -> str:
+    """Per held-out set: a table per house and the failed episodes' renders (when the run wrote them)."""
+    found = heldout_files(run)
+    if not found:
+        return ('<p class="note">This run wrote no per-house held-out results (iter_XXXX/heldout/&lt;set&gt;/'
+                "houses.csv); run <code>adaptenv evaluate</code> on a checkpoint for them.</p>")
+    parts = []
+    cols = ("episodes", "success", "spl", "collisions", "steps")
+    for h in found:
+        rows = []
+        for row in h.rows:
+            cells = "".join(f"<td>{esc(_cell(row.get(c, '')))}</td>" for c in cols)
+            rows.append(f"<tr><td class=l><code>{esc(row.get('house', ''))}</code></td>{cells}</tr>")
+        head = "<tr><th class=l>house</th>" + "".join(f"<th>{c}</th>" for c in cols) + "</tr>"
+        fail = (assets.image(h.failures, f"img/heldout/{h.name}", "failures.png", f"{h.name}: failed episodes")
+                if h.failures else '<p class="note">No failed episodes.</p>')
+        parts.append(f"<h3>{esc(h.name)} <span class=\"muted\">(iteration {h.iteration})</span></h3>"
+                     + table(head, rows) + "<h5>Failed episodes</h5>" + fail)
+    return "".join(parts)
+
+
+def _cell(text: str) -> str:
+    try:
+        x = float(text)
+    except ValueError:
+        return text
+    return f"{x:.0f}" if x == round(x) and abs(x) >= 1 else f"{x:.3f}"
+
+
+def intents_html(run: RunData) -> str:
+    """How many gallery edits pursued each intent (narrow a passage, hide the target, ...), and how they ended."""
+    counts: dict[str, list[int]] = {}
+    for r in run.iterations:
+        for item in r.gallery:
+            for e in load_gallery(run.path, item).edits:
+                if e.object_id == "-":
+                    continue
+                kind = e.kind or next((k for k in KIND_TEXT if k in e.intent), "")  # "s1 narrow_passage: ..."
+                label = KIND_TEXT.get(kind, kind) or (e.intent[:60] if e.intent else "(intent not recorded)")
+                c = counts.setdefault(label, [0, 0, 0])
+                c[0] += 1
+                c[1] += int(e.accepted)
+                c[2] += int(bool(e.verified))
+    if not counts:
+        return '<p class="note">No edits recorded in the gallery.</p>'
+    rows = [f"<tr><td class=l>{esc(k)}</td><td>{n}</td><td>{a}</td><td>{v}</td></tr>"
+            for k, (n, a, v) in sorted(counts.items(), key=lambda kv: -kv[1][0])]
+    return (table("<tr><th class=l>intent</th><th>edits</th><th>accepted</th><th>verified</th></tr>", rows)
+            + '<p class="note">Over the adapted scenes of the gallery (not every scene of the run).</p>')
 
 
 # --------------------------------------------------------------------------- run page
@@ -399,14 +573,20 @@ def write_run_report(run: RunData, out: Path, *, back: tuple[str, str] | None = 
         plot = run_curves(run, out / "plots" / "curves.png")
         body += [block("overview", "Overview", overview),
                  block("curves", "Learning curves", plot_img(plot, out, "held-out success and SPL against iterations "
-                                                                        "and environment steps")),
+                                                                        "and environment steps")
+                       + f'<p class="note">{esc(CURVES_NOTE)}</p>'),
                  block("results", "Results per iteration", results_table(run)),
-                 block("gallery", "Gallery: before and after each adaptation", gallery_html(run, assets))]
+                 block("houses", "Houses", houses_html(run, assets)),
+                 block("heldout", "Held-out houses, one by one", heldout_html(run, assets)),
+                 block("intents", "What the edits tried", intents_html(run)),
+                 block("gallery", "Gallery: before and after each adaptation", gallery_html(run, assets)),
+                 block("glossary", "Glossary", glossary_html())]
         nav = [("Overview", "#overview"), ("Learning curves", "#curves"), ("Results", "#results"),
-               ("Gallery", "#gallery")]
-        if usage := llm_usage_table(run):
-            body.insert(-1, block("llm", "LLM usage per iteration", usage))
-            nav.insert(-1, ("LLM usage", "#llm"))
+               ("Houses", "#houses"), ("Held-out", "#heldout"), ("Edits", "#intents"), ("Gallery", "#gallery"),
+               ("Glossary", "#glossary")]
+        if usage := llm_usage_table(run):  # before the gallery
+            body.insert(-2, block("llm", "LLM usage per iteration", usage))
+            nav.insert(-2, ("LLM usage", "#llm"))
     if back is not None:
         nav.insert(0, (f"← {back[0]}", back[1]))
     index = out / INDEX
@@ -527,10 +707,12 @@ def write_experiment_report(exp: ExperimentData, out: Path) -> Path:
             plot = experiment_curves(exp.runs, s, out / "plots" / f"curves_{safe_name(s)}.png")
             curves.append(f"<h3>{esc(s)}</h3>" + plot_img(plot, out, f"{s}: success and SPL per method"))
         body += [block("summary", "Summary", summary_table(exp)),
-                 block("curves", "Learning curves", "".join(curves) or '<p class="note">No held-out evaluations yet.</p>')]
+                 block("curves", "Learning curves", ("".join(curves) or '<p class="note">No held-out evaluations yet.</p>')
+                       + f'<p class="note">{esc(CURVES_NOTE)}</p>')]
         nav += [("Summary", "#summary"), ("Learning curves", "#curves")]
     body.append(block("runs", "Runs", runs_table(exp, links)))
-    nav.append(("Runs", "#runs"))
+    body.append(block("glossary", "Glossary", glossary_html()))
+    nav += [("Runs", "#runs"), ("Glossary", "#glossary")]
     title = f"Experiment report: {exp.path.resolve().name}"
     subtitle = f"Experiment folder: {esc(exp.path)} · methods: {esc(', '.join(exp.methods))}"
     index = out / INDEX
