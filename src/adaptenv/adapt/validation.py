@@ -784,6 +784,29 @@ class EditValidator:
         return edit
 
 
+def reference_target_problems(validator: EditValidator, proposal: Proposal) -> list[ValidationProblem]:
+    """The plain reference for :meth:`EditValidator.propose`'s target check (slow; for tests).
+
+    Compiles the candidate world (``compile_world``) and checks every needed target type: its success
+    region must meet the start's 4-connected navigable component of that world.
+    """
+    res = proposal.result
+    if not res.changed or validator.start is None:
+        return []
+    i = validator.ctx.index[res.object_id]
+    fps = list(validator.geometry.footprints)
+    fps[validator._slot[res.object_id]] = validator._footprint(i, proposal.center, res.yaw_after)
+    world = compile_world(validator.house, geometry=replace(validator.geometry, footprints=fps))
+    start = _cell(world.grid, validator.start)
+    nav = world.grid.navigable(AGENT_RADIUS)
+    if start is None or not nav[start]:
+        return []
+    labels, _ = ndimage.label(nav)
+    component = labels == labels[start]
+    return [ValidationProblem("target_unreachable", f"no {t} could be reached from the start", (t,))
+            for t in sorted(validator.need_targets) if not (success_region(world, t) & component).any()]
+
+
 def check_edit(house: House, object_id: str, dx_units: float, dy_units: float, rotation: float | None = None, *,
                episode_targets: list[str] | None = None, start: Start | None = None, original: House | None = None,
                step: float = DEFAULT_STEP, source: str = "manual", intent: str = "") -> tuple[House, Edit]:
