@@ -229,8 +229,17 @@ class LabelRaster:
         self.boxes = np.array([self._box(m) for m in self.masks], dtype=np.int64).reshape(-1, 4)
 
     def footprint(self, corners: np.ndarray) -> _Inflated:
-        """The cells a footprint (corners (4, 2)) is drawn on (a window with a one-cell margin)."""
-        return _Inflated(*_mask_window(corners, self.x0, self.z0, self.res, 1, self.shape))
+        """The cells a footprint (corners (4, 2)) is drawn on."""
+        return self.tight(_Inflated(*_mask_window(corners, self.x0, self.z0, self.res, 1, self.shape)))
+
+    @staticmethod
+    def tight(m: _Inflated) -> _Inflated:
+        """The same cells in the smallest window holding them."""
+        rows, cols = np.flatnonzero(m.mask.any(axis=1)), np.flatnonzero(m.mask.any(axis=0))
+        if not len(rows):
+            return _Inflated(m.r0, m.c0, m.mask[:0, :0])
+        r0, r1, c0, c1 = rows[0], rows[-1] + 1, cols[0], cols[-1] + 1
+        return _Inflated(m.r0 + int(r0), m.c0 + int(c0), m.mask[r0:r1, c0:c1])
 
     @staticmethod
     def _box(m: _Inflated) -> tuple[int, int, int, int]:
@@ -256,6 +265,19 @@ class LabelRaster:
             cells = m.mask[lr0 - mr0:lr1 - mr0, lc0 - mc0:lc1 - mc0] & free[lr0 - r0:lr1 - r0, lc0 - c0:lc1 - c0]
             label[lr0 - r0:lr1 - r0, lc0 - c0:lc1 - c0][cells] = LABEL_OBJECT0 + k
         return LabelWindow(r0, c0, label, self.tall[label], new)
+
+    def quiet(self, i: int, new: _Inflated) -> bool:
+        """Cheap sufficient test that moving object i to ``new`` changes no occluder: it is low, and
+        neither its old nor its new footprint's window meets another object's or a cell outside the rooms."""
+        if self.tall[LABEL_OBJECT0 + i]:
+            return False
+        bx = self.boxes
+        for r0, c0, r1, c1 in (self._box(self.masks[i]), self._box(new)):
+            hit = (bx[:, 0] < r1) & (bx[:, 2] > r0) & (bx[:, 1] < c1) & (bx[:, 3] > c0)
+            hit[i] = False
+            if hit.any() or (self.base[r0:r1, c0:c1] == LABEL_OUTSIDE).any():
+                return False
+        return True
 
     def changed_cells(self, win: LabelWindow) -> np.ndarray:
         """bool over the window: cells where some line of sight could change (occluder, or which
@@ -500,8 +522,10 @@ class Proposal:
     corners: np.ndarray | None = None
     inflated: _Inflated | None = None
     """The moved object's new centre, footprint corners and inflated raster footprint (when it moved)."""
+    drawn: _Inflated | None = None
+    """The moved object's new footprint cells (when it moved)."""
     labels: LabelWindow | None = None
-    """The label and occluder grids around the moved object's old and new footprints (when it moved)."""
+    """The label and occluder grids around the moved object's old and new footprints (when they were needed)."""
     exact_targets: frozenset[str] = frozenset()
     """The target types the cached success regions could not prove reachable (decided exactly)."""
     witnesses: tuple[tuple[str, int], ...] = ()
@@ -538,6 +562,7 @@ class EditValidator:
         self.labels = LabelRaster(occ, self.geometry.floor_objects)
         self._slot = {f.object_id: k for k, f in enumerate(self.geometry.footprints)}
         self._points: dict[int, tuple[np.ndarray, np.ndarray]] = {}
+        self._candidate_points: dict[tuple[int, bytes], tuple[np.ndarray, np.ndarray]] = {}
         self.room_ids = occ.room_ids
         self.doors = door_threshold_cells(self.geometry, occ)
         self.start = _start_of(self.house, start) if original is None else _start_of(original, start)
@@ -557,6 +582,7 @@ class EditValidator:
         self.objects = {obj.id: obj for obj in self.house.objects}
         self.log = EditLog()
         self._witness: dict[str, int] = {}
+        self._target_witness: dict[str, np.ndarray] = {}  # per type: one cell of its cached region
         self._owner = object()  # proposals remember which validator, and which of its states, they were made on
         self._version = 0
 
@@ -631,15 +657,25 @@ class EditValidator:
         for d in sorted(self.need_doors):
             if not (flat[self.doors[d]] == comp).any():
                 problems.append(ValidationProblem("doorway_blocked", f"the doorway {d} would be blocked", (d,)))
-        unproven = []
-        for t in sorted(self.need_targets):
-            # A cached success region stays valid (as a subset) away from a moved occluder or t.
-            region = self.regions.get(t)
-            if region is not None:
-                region = self._still_valid(region, moved, t, changed)
-            if region is None or not (flat[region[0].astype(np.int64)] == comp).any():
-                unproven.append(t)
+        unproven = [t for t in sorted(self.need_targets) if not self._proven(t, flat, comp, moved, changed)]
         return problems, unproven, flat == comp
+
+    def _proven(self, t: str, flat: np.ndarray, comp: int, moved: int, changed: np.ndarray | None) -> bool:
+        """Whether t's cached success region, still valid after the move, has a cell in the start's component.
+
+        The cell that proved it last time (a cell of the cache) is tried first.
+        """
+        w = self._target_witness.get(t)
+        if w is not None and flat[int(w[0, 0])] == comp and self._still_valid(w, moved, t, changed).shape[1]:
+            return True
+        region = self.regions.get(t)
+        if region is None:
+            return False
+        region = self._still_valid(region, moved, t, changed)  # valid (as a subset) away from the move
+        hit = np.flatnonzero(flat[region[0].astype(np.int64)] == comp)
+        if len(hit):
+            self._target_witness[t] = region[:, hit[:1]]
+        return bool(len(hit))
 
     def _room_reached(self, room_id: str, labels: np.ndarray, comp: int) -> bool:
         flat = labels.ravel()
@@ -671,8 +707,11 @@ class EditValidator:
         """Sample points (and labels) of floor objects ``ks`` (of type t), object ``moved`` at ``corners``."""
         parts = [self._instance_points(k) for k in ks if k != moved]
         if moved in ks:
-            pts = sample_points(corners, self.raster.res)
-            parts.append((pts, np.full(len(pts), LABEL_OBJECT0 + moved, dtype=np.int64)))
+            key = (moved, corners.tobytes())
+            if key not in self._candidate_points:  # kept until the next commit (which may reuse it)
+                pts = sample_points(corners, self.raster.res)
+                self._candidate_points[key] = (pts, np.full(len(pts), LABEL_OBJECT0 + moved, dtype=np.int64))
+            parts.append(self._candidate_points[key])
         if not parts:
             return np.zeros((0, 2)), np.zeros(0, dtype=np.int64)
         return np.concatenate([p for p, _ in parts]), np.concatenate([lb for _, lb in parts])
@@ -704,10 +743,14 @@ class EditValidator:
         corners = self.ctx.corners(i, center, res.yaw_after)
         inf = self.raster.inflate(corners)
         exact = self._footprint(i, center, res.yaw_after).corners
-        drawn = _Inflated(inf.r0, inf.c0, inf.drawn) if np.array_equal(exact, corners) else self.labels.footprint(exact)
-        win = self.labels.window(i, drawn)
-        problems, unproven, component = self._check(self.raster.navigable_with(i, inf), i, self._changed_box(win))
+        drawn = LabelRaster.tight(_Inflated(inf.r0, inf.c0, inf.drawn)) if np.array_equal(exact, corners) \
+            else self.labels.footprint(exact)
+        quiet = self.labels.quiet(i, drawn)
+        win = None if quiet else self.labels.window(i, drawn)
+        problems, unproven, component = self._check(self.raster.navigable_with(i, inf), i,
+                                                    None if quiet else self._changed_box(win))
         if unproven:
+            win = win or self.labels.window(i, drawn)
             # The cached regions prove most targets reachable; the exact success regions decide the rest
             # (a finite geodesic distance is a success-region cell in the start's 4-connected component),
             # on the candidate's label and occluder grids, stopping at the first cell that proves it.
@@ -718,7 +761,7 @@ class EditValidator:
         else:
             found = {}
         return Proposal(**request, problems=tuple(problems), center=center, corners=corners, inflated=inf,
-                        labels=win, exact_targets=frozenset(unproven),
+                        drawn=drawn, labels=win, exact_targets=frozenset(unproven),
                         witnesses=tuple((t, c) for t, c in found.items() if c >= 0))
 
     def commit(self, proposal: Proposal, *, source: str = "manual", intent: str = "") -> Edit:
@@ -753,15 +796,24 @@ class EditValidator:
     def _apply(self, i: int, proposal: Proposal) -> None:
         """Move object i to the proposal's pose in every cache (footprints, regions, context, raster, house)."""
         res, center = proposal.result, proposal.center
-        changed = self._changed_box(proposal.labels)
+        win = proposal.labels or self.labels.window(i, proposal.drawn)
+        changed = self._changed_box(win)
         for t in self.need_targets:
             if self.regions.get(t) is not None:
                 self.regions[t] = self._still_valid(self.regions[t], i, t, changed)
-        self.geometry.footprints[self._slot[res.object_id]] = self._footprint(i, center, res.yaw_after)
+            w = self._target_witness.get(t)
+            if w is not None and not self._still_valid(w, i, t, changed).shape[1]:
+                del self._target_witness[t]  # it left the cache
+        fp = self._footprint(i, center, res.yaw_after)
+        self.geometry.footprints[self._slot[res.object_id]] = fp
         self._points.pop(i, None)
+        key = (i, fp.corners.tobytes())
+        if key in self._candidate_points:
+            self._points[i] = self._candidate_points[key]
+        self._candidate_points.clear()
         self.ctx.commit(i, center, res.yaw_after)
         self.raster.commit(i, proposal.inflated)
-        self.labels.commit(i, proposal.labels)
+        self.labels.commit(i, win)
         move_object(self.objects[res.object_id], res.achieved[0], res.achieved[1], res.yaw_after - res.yaw_before)
         for t, cell in proposal.witnesses:  # the exact check's proof stays in the cache
             old_cells = self.regions[t][0].astype(np.int64) if self.regions.get(t) is not None else np.zeros(0, int)
