@@ -20,7 +20,10 @@ against each other) may overlap.
 
 :class:`EditValidator` is the fast path the generators use: placement plus an incremental raster
 (only the moved object's inflated footprint is re-drawn) and one connected-component labelling
-per candidate. Its public interface is three methods: ``propose`` (a dry run returning a
+per candidate; target types its cached success regions cannot prove reachable are decided exactly on
+incrementally kept label and occluder grids (:class:`LabelRaster`, no world compiled; the slow
+:func:`reference_target_problems` is the plain version tests compare with). Its public interface is
+three methods: ``propose`` (a dry run returning a
 :class:`Proposal`: the placement result and every problem, the scene unchanged), ``commit`` (apply
 a proposal without problems; log it either way as an :class:`~adaptenv.adapt.edits.Edit`) and
 ``try_edit`` (both in one call).
