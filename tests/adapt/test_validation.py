@@ -17,6 +17,7 @@ from adaptenv.adapt.validation import (
     NavRaster,
     StaleProposalError,
     check_edit,
+    reference_target_problems,
     validate_scene,
 )
 from adaptenv.scene.geometry import SceneGeometry
@@ -199,3 +200,37 @@ def test_a_rejected_proposal_commits_as_a_logged_rejection():
     edit = v.commit(proposal)
     assert not edit.accepted and list(v.log) == [edit]
     assert v.house == door_house()
+
+
+def _differential_requests(v: EditValidator, rng: np.random.Generator) -> tuple[str, float, float, float | None]:
+    """A random edit: a target-type object moved (half the time), often onto a doorway."""
+    movable = [ty for ty, m in zip(v.ctx.types, v.ctx.movable, strict=True) if m]
+    targets = [k for k, ty in enumerate(movable) if ty in v.need_targets]
+    k = int(rng.integers(10_000))
+    if targets and rng.random() < 0.5:
+        k = targets[k % len(targets)]
+    yaw = None if rng.random() < 0.5 else float(rng.uniform(0, 355))
+    edit = (k, bool(rng.random() < 0.6), int(rng.integers(100)), *rng.uniform(-30, 30, 2), rng.uniform(0.8, 1.1), yaw)
+    return _request(v, edit)
+
+
+@pytest.mark.parametrize("which", [0, 1, 2])
+def test_fast_target_check_equals_the_compiled_world_check(which):
+    """Differential: propose's target verdicts (cached regions, then the early-exit kernel on the
+    incremental label grids) equal compiling the candidate world, for every needed type."""
+    house = _generated_houses()[which]
+    v = EditValidator(house)
+    rng = np.random.default_rng(100 + which)
+    moved_target = decided = rejected = 0
+    for _ in range(30):
+        proposal = v.propose(*_differential_requests(v, rng))
+        if proposal.result.changed:
+            fast = [p for p in proposal.problems if p.kind == "target_unreachable"]
+            assert _found(fast) == _found(reference_target_problems(v, proposal))
+            moved_target += v.ctx.types[v.ctx.index[proposal.object_id]] in v.need_targets
+            decided += bool(proposal.exact_targets)
+            rejected += bool(fast)
+        v.commit(proposal, source="test")
+    world = compile_world(v.house)  # the incremental label and occluder grids are the compiled world's
+    assert np.array_equal(v.labels.label, world.grid.label) and np.array_equal(v.labels.occluder, world.occluder)
+    assert moved_target >= 5 and decided >= 3 and rejected >= 1  # the exact path ran, moved targets, rejected

@@ -20,7 +20,10 @@ against each other) may overlap.
 
 :class:`EditValidator` is the fast path the generators use: placement plus an incremental raster
 (only the moved object's inflated footprint is re-drawn) and one connected-component labelling
-per candidate. Its public interface is three methods: ``propose`` (a dry run returning a
+per candidate; target types its cached success regions cannot prove reachable are decided exactly on
+incrementally kept label and occluder grids (:class:`LabelRaster`, no world compiled; the slow
+:func:`reference_target_problems` is the plain version tests compare with). Its public interface is
+three methods: ``propose`` (a dry run returning a
 :class:`Proposal`: the placement result and every problem, the scene unchanged), ``commit`` (apply
 a proposal without problems; log it either way as an :class:`~adaptenv.adapt.edits.Edit`) and
 ``try_edit`` (both in one call).
@@ -47,11 +50,22 @@ from adaptenv.adapt.placement import (
 )
 from adaptenv.errors import AdaptenvError
 from adaptenv.scene.assets import AssetCatalog, load_catalog
-from adaptenv.scene.geometry import SceneGeometry, footprint_corners
+from adaptenv.scene.geometry import Footprint, SceneGeometry, footprint_corners
 from adaptenv.scene.house import House, move_object
-from adaptenv.scene.occupancy import DEFAULT_RESOLUTION, LABEL_OBJECT0, OccupancyGrid, rasterize
-from adaptenv.sim.geodesic import geodesic_distance, success_region
+from adaptenv.scene.occupancy import (
+    DEFAULT_RESOLUTION,
+    LABEL_DOOR,
+    LABEL_FREE,
+    LABEL_OBJECT0,
+    LABEL_OUTSIDE,
+    LABEL_WALL,
+    LABEL_WINDOW,
+    OccupancyGrid,
+    rasterize,
+)
+from adaptenv.sim.geodesic import first_region_cell, geodesic_distance, success_region
 from adaptenv.sim.spec import AGENT_RADIUS, SUCCESS_DISTANCE, TARGET_TYPES
+from adaptenv.sim.task import sample_points
 from adaptenv.sim.world import NavWorld, compile_world
 from adaptenv.vocabulary import SEAT_TYPES, TABLE_TYPES
 
@@ -115,6 +129,8 @@ class _Inflated:
     r0: int
     c0: int
     mask: np.ndarray
+    drawn: np.ndarray | None = None
+    """The footprint's own cells in the same window (before inflating), when known."""
 
 
 class NavRaster:
@@ -148,7 +164,7 @@ class NavRaster:
         # Distance to the footprint's cells gives the disc dilation exactly (same rule as the raster).
         dist = ndimage.distance_transform_edt(~m) * self.res
         clear = np.maximum(dist - 0.5 * self.res, 0.0).astype(np.float32)
-        return _Inflated(r0, c0, clear < self.radius)
+        return _Inflated(r0, c0, clear < self.radius, m)
 
     def _add(self, inf: _Inflated, sign: int, count: np.ndarray | None = None) -> None:
         count = self.count if count is None else count
@@ -175,6 +191,114 @@ class NavRaster:
         row = int(math.floor((z - self.z0) / self.res))
         h, w = self.shape
         return (row, col) if 0 <= row < h and 0 <= col < w else None
+
+
+@dataclass(frozen=True)
+class LabelWindow:
+    """The label and occluder grids over a window (rows r0:r1, cols c0:c1) with one object moved."""
+
+    r0: int
+    c0: int
+    label: np.ndarray
+    occluder: np.ndarray
+    footprint: _Inflated
+    """The moved object's new raw footprint (cells it is drawn on)."""
+
+    @property
+    def box(self) -> tuple[slice, slice]:
+        h, w = self.label.shape
+        return slice(self.r0, self.r0 + h), slice(self.c0, self.c0 + w)
+
+
+class LabelRaster:
+    """Incremental label and occluder grids (``NavWorld.grid.label`` / ``NavWorld.occluder``).
+
+    The label of a cell is its wall, door or window label when it has one; otherwise the label of the
+    last floor object (highest index) drawn on it; otherwise outside (no room) or free, exactly as
+    :func:`~adaptenv.scene.occupancy.rasterize` draws them. Moving one object re-labels only the
+    window around its old and new footprints.
+    """
+
+    def __init__(self, occ: OccupancyGrid, floor: list[Footprint]):
+        self.x0, self.z0, self.res, self.shape = occ.x0, occ.z0, occ.resolution, occ.shape
+        self.static = np.isin(occ.label, (LABEL_WALL, LABEL_DOOR, LABEL_WINDOW))
+        self.base = np.where(self.static, occ.label, np.where(occ.room < 0, LABEL_OUTSIDE, LABEL_FREE)).astype(np.int16)
+        self.tall = np.zeros(LABEL_OBJECT0 + len(floor) + 1, dtype=bool)  # the last entry: LABEL_FREE (-1)
+        self.tall[[LABEL_OUTSIDE, LABEL_WALL, LABEL_DOOR, LABEL_WINDOW]] = True
+        self.tall[LABEL_OBJECT0:LABEL_OBJECT0 + len(floor)] = [f.occludes for f in floor]
+        self.label = occ.label.copy()
+        self.occluder = self.tall[self.label]
+        self.masks = [self.footprint(f.corners) for f in floor]
+        self.boxes = np.array([self._box(m) for m in self.masks], dtype=np.int64).reshape(-1, 4)
+
+    def footprint(self, corners: np.ndarray) -> _Inflated:
+        """The cells a footprint (corners (4, 2)) is drawn on."""
+        return self.tight(_Inflated(*_mask_window(corners, self.x0, self.z0, self.res, 1, self.shape)))
+
+    @staticmethod
+    def tight(m: _Inflated) -> _Inflated:
+        """The same cells in the smallest window holding them."""
+        rows, cols = np.flatnonzero(m.mask.any(axis=1)), np.flatnonzero(m.mask.any(axis=0))
+        if not len(rows):
+            return _Inflated(m.r0, m.c0, m.mask[:0, :0])
+        r0, r1, c0, c1 = rows[0], rows[-1] + 1, cols[0], cols[-1] + 1
+        return _Inflated(m.r0 + int(r0), m.c0 + int(c0), m.mask[r0:r1, c0:c1])
+
+    @staticmethod
+    def _box(m: _Inflated) -> tuple[int, int, int, int]:
+        h, w = m.mask.shape
+        return m.r0, m.c0, m.r0 + h, m.c0 + w
+
+    def window(self, i: int, new: _Inflated) -> LabelWindow:
+        """Labels and occluders around object i's old and new footprints if it were drawn at ``new``."""
+        a, b = self._box(self.masks[i]), self._box(new)
+        r0, c0, r1, c1 = min(a[0], b[0]), min(a[1], b[1]), max(a[2], b[2]), max(a[3], b[3])
+        label = self.base[r0:r1, c0:c1].copy()
+        free = ~self.static[r0:r1, c0:c1]
+        bx = self.boxes
+        hit = np.flatnonzero((bx[:, 0] < r1) & (bx[:, 2] > r0) & (bx[:, 1] < c1) & (bx[:, 3] > c0))
+        if i not in hit:
+            hit = np.sort(np.append(hit, i))
+        for k in hit:  # in drawing order: a later object covers an earlier one
+            m = new if k == i else self.masks[k]
+            mr0, mc0, mr1, mc1 = self._box(m)
+            lr0, lc0, lr1, lc1 = max(mr0, r0), max(mc0, c0), min(mr1, r1), min(mc1, c1)
+            if lr0 >= lr1 or lc0 >= lc1:
+                continue
+            cells = m.mask[lr0 - mr0:lr1 - mr0, lc0 - mc0:lc1 - mc0] & free[lr0 - r0:lr1 - r0, lc0 - c0:lc1 - c0]
+            label[lr0 - r0:lr1 - r0, lc0 - c0:lc1 - c0][cells] = LABEL_OBJECT0 + k
+        return LabelWindow(r0, c0, label, self.tall[label], new)
+
+    def quiet(self, i: int, new: _Inflated) -> bool:
+        """Cheap sufficient test that moving object i to ``new`` changes no occluder: it is low, and
+        neither its old nor its new footprint's window meets another object's or a cell outside the rooms."""
+        if self.tall[LABEL_OBJECT0 + i]:
+            return False
+        bx = self.boxes
+        for r0, c0, r1, c1 in (self._box(self.masks[i]), self._box(new)):
+            hit = (bx[:, 0] < r1) & (bx[:, 2] > r0) & (bx[:, 1] < c1) & (bx[:, 3] > c0)
+            hit[i] = False
+            if hit.any() or (self.base[r0:r1, c0:c1] == LABEL_OUTSIDE).any():
+                return False
+        return True
+
+    def changed_cells(self, win: LabelWindow) -> np.ndarray:
+        """bool over the window: cells where some line of sight could change (occluder, or which
+        object an occluding cell belongs to)."""
+        occ0, lab0 = self.occluder[win.box], self.label[win.box]
+        return (occ0 != win.occluder) | (occ0 & (lab0 != win.label))
+
+    def with_window(self, win: LabelWindow) -> tuple[np.ndarray, np.ndarray]:
+        """Full (label, occluder) grids with the window applied (copies; the raster is unchanged)."""
+        label, occ = self.label.copy(), self.occluder.copy()
+        label[win.box], occ[win.box] = win.label, win.occluder
+        return label, occ
+
+    def commit(self, i: int, win: LabelWindow) -> None:
+        self.label[win.box] = win.label
+        self.occluder[win.box] = win.occluder
+        self.masks[i] = win.footprint
+        self.boxes[i] = self._box(win.footprint)
 
 
 def door_threshold_cells(geometry: SceneGeometry, occ: OccupancyGrid) -> dict[str, np.ndarray]:
@@ -401,9 +525,14 @@ class Proposal:
     corners: np.ndarray | None = None
     inflated: _Inflated | None = None
     """The moved object's new centre, footprint corners and inflated raster footprint (when it moved)."""
-    exact_world: NavWorld | None = None
+    drawn: _Inflated | None = None
+    """The moved object's new footprint cells (when it moved)."""
+    labels: LabelWindow | None = None
+    """The label and occluder grids around the moved object's old and new footprints (when they were needed)."""
     exact_targets: frozenset[str] = frozenset()
-    """The world compiled for the exact geodesic check and the target types it decided, if it ran."""
+    """The target types the cached success regions could not prove reachable (decided exactly)."""
+    witnesses: tuple[tuple[str, int], ...] = ()
+    """For each of those found reachable: a success-region cell (flat index) in the start's component."""
 
     @property
     def valid(self) -> bool:
@@ -433,6 +562,10 @@ class EditValidator:
                                                geometry=self.geometry)
         self.raster = NavRaster(self.geometry)
         occ = self.raster.occupancy
+        self.labels = LabelRaster(occ, self.geometry.floor_objects)
+        self._slot = {f.object_id: k for k, f in enumerate(self.geometry.footprints)}
+        self._points: dict[int, tuple[np.ndarray, np.ndarray]] = {}
+        self._candidate_points: dict[tuple[int, bytes], tuple[np.ndarray, np.ndarray]] = {}
         self.room_ids = occ.room_ids
         self.doors = door_threshold_cells(self.geometry, occ)
         self.start = _start_of(self.house, start) if original is None else _start_of(original, start)
@@ -452,44 +585,61 @@ class EditValidator:
         self.objects = {obj.id: obj for obj in self.house.objects}
         self.log = EditLog()
         self._witness: dict[str, int] = {}
+        self._target_witness: dict[str, np.ndarray] = {}  # per type: one cell of its cached region
         self._owner = object()  # proposals remember which validator, and which of its states, they were made on
         self._version = 0
 
     def _refresh_regions(self, world: NavWorld, types: set[str] | None = None) -> None:
         """Cache each needed target type's success region (flat indices) from an exactly compiled world."""
-        w = self.raster.shape[1]
         for t in types if types is not None else self.need_targets:
             if not world.instances_of(t):
                 self.regions[t] = None
                 continue
-            idx = np.flatnonzero(success_region(world, t))
-            x = self.raster.x0 + (idx % w + 0.5) * self.raster.res
-            z = self.raster.z0 + (idx // w + 0.5) * self.raster.res
-            self.regions[t] = np.stack([idx.astype(float), x, z])
+            self.regions[t] = self._region_array(np.flatnonzero(success_region(world, t)))
 
-    def _near(self, region: np.ndarray, corners: np.ndarray) -> np.ndarray:
-        """bool per region cell: within SUCCESS_DISTANCE (plus a margin) of the footprint's bounding box."""
+    def _region_array(self, idx: np.ndarray) -> np.ndarray:
+        """A cached region: (3, n) flat cell index, cell-centre x and z."""
+        w = self.raster.shape[1]
+        x = self.raster.x0 + (idx % w + 0.5) * self.raster.res
+        z = self.raster.z0 + (idx // w + 0.5) * self.raster.res
+        return np.stack([idx.astype(float), x, z])
+
+    def _near(self, region: np.ndarray, box: np.ndarray) -> np.ndarray:
+        """bool per region cell: within SUCCESS_DISTANCE (plus a margin) of a box ((2, 2): min and max x, z)."""
         m = SUCCESS_DISTANCE + 2 * self.raster.res
-        lo = corners.min(axis=0) - m
-        hi = corners.max(axis=0) + m
+        lo, hi = box[0] - m, box[1] + m
         x, z = region[1], region[2]
         return (x >= lo[0]) & (x <= hi[0]) & (z >= lo[1]) & (z <= hi[1])
 
-    def _still_valid(self, region: np.ndarray, i: int, t: str, new_corners: np.ndarray) -> np.ndarray:
+    def _changed_box(self, win: LabelWindow) -> np.ndarray | None:
+        """World box ((2, 2)) of the window's cells where a line of sight may change; None if none does."""
+        rows, cols = np.nonzero(self.labels.changed_cells(win))
+        if not len(rows):
+            return None
+        res = self.raster.res
+        lo = (self.raster.x0 + (win.c0 + cols.min()) * res, self.raster.z0 + (win.r0 + rows.min()) * res)
+        hi = (self.raster.x0 + (win.c0 + cols.max() + 1) * res, self.raster.z0 + (win.r0 + rows.max() + 1) * res)
+        return np.array([lo, hi])
+
+    def _still_valid(self, region: np.ndarray, i: int, t: str, changed: np.ndarray | None) -> np.ndarray:
         """The part of a cached success region of ``t`` that stays valid when object i moves.
 
         Cells near the old footprint may have seen only that instance (if it is a ``t``); cells
-        near the new footprint may lose their line of sight (if it is tall). Far cells keep both.
+        near a cell whose occluder (or occluding object) changes may lose their line of sight
+        (``changed``: the box of those cells). Far cells keep both.
         """
+        if self.raster.types[i] != t and changed is None:
+            return region
         keep = np.ones(region.shape[1], dtype=bool)
         if self.raster.types[i] == t:
-            keep &= ~self._near(region, self.ctx.objects.verts[i])
-        if self.tall[i]:
-            keep &= ~self._near(region, new_corners)
+            old = self.ctx.objects.verts[i]
+            keep &= ~self._near(region, np.array([old.min(axis=0), old.max(axis=0)]))
+        if changed is not None:
+            keep &= ~self._near(region, changed)
         return region[:, keep]
 
     # ---------------------------------------------------------------- checks
-    def _check(self, nav: np.ndarray, moved: int, corners: np.ndarray
+    def _check(self, nav: np.ndarray, moved: int, changed: np.ndarray | None
                ) -> tuple[list[ValidationProblem], list[str], np.ndarray | None]:
         """Problems of the candidate navigable raster (start, rooms, doorways), the target types the
         cached success regions cannot prove reachable (the exact check decides those), and the start's
@@ -510,19 +660,25 @@ class EditValidator:
         for d in sorted(self.need_doors):
             if not (flat[self.doors[d]] == comp).any():
                 problems.append(ValidationProblem("doorway_blocked", f"the doorway {d} would be blocked", (d,)))
-        unproven = []
-        for t in sorted(self.need_targets):
-            # A cached success region stays valid (as a subset) away from a moved occluder or t.
-            region = self.regions.get(t)
-            if region is not None and self._affects(moved, t):
-                region = self._still_valid(region, moved, t, corners)
-            if region is None or not (flat[region[0].astype(np.int64)] == comp).any():
-                unproven.append(t)
+        unproven = [t for t in sorted(self.need_targets) if not self._proven(t, flat, comp, moved, changed)]
         return problems, unproven, flat == comp
 
-    def _affects(self, i: int, target_type: str) -> bool:
-        """Whether moving object i can change where ``target_type`` is visible from (tall, or a target itself)."""
-        return bool(self.tall[i]) or self.raster.types[i] == target_type
+    def _proven(self, t: str, flat: np.ndarray, comp: int, moved: int, changed: np.ndarray | None) -> bool:
+        """Whether t's cached success region, still valid after the move, has a cell in the start's component.
+
+        The cell that proved it last time (a cell of the cache) is tried first.
+        """
+        w = self._target_witness.get(t)
+        if w is not None and flat[int(w[0, 0])] == comp and self._still_valid(w, moved, t, changed).shape[1]:
+            return True
+        region = self.regions.get(t)
+        if region is None:
+            return False
+        region = self._still_valid(region, moved, t, changed)  # valid (as a subset) away from the move
+        hit = np.flatnonzero(flat[region[0].astype(np.int64)] == comp)
+        if len(hit):
+            self._target_witness[t] = region[:, hit[:1]]
+        return bool(len(hit))
 
     def _room_reached(self, room_id: str, labels: np.ndarray, comp: int) -> bool:
         flat = labels.ravel()
@@ -536,12 +692,40 @@ class EditValidator:
             return True
         return False
 
-    def _trial_world(self, i: int, center: np.ndarray, yaw: float) -> NavWorld:
-        """The compiled world with object i at a candidate pose (slow; for the exact fallback)."""
-        fps = list(self.geometry.footprints)
-        k = next(k for k, f in enumerate(fps) if f.object_id == self.ctx.ids[i])
-        fps[k] = replace(fps[k], center=(float(center[0]), float(center[1])), yaw=float(yaw) % 360.0)
-        return compile_world(self.house, geometry=replace(self.geometry, footprints=fps))
+    def _footprint(self, i: int, center: np.ndarray, yaw: float) -> Footprint:
+        """Object i's footprint at a pose, exactly as ``SceneGeometry.from_house`` of the edited house has it."""
+        fp = self.geometry.footprints[self._slot[self.ctx.ids[i]]]
+        return replace(fp, center=(float(center[0]), float(center[1])), yaw=float(yaw) % 360.0)
+
+    def _instance_points(self, k: int) -> tuple[np.ndarray, np.ndarray]:
+        """Sample points of floor object k where it stands (as ``sim.task.target_points``) and their labels."""
+        if k not in self._points:
+            fp = self.geometry.footprints[self._slot[self.ctx.ids[k]]]
+            pts = sample_points(fp.corners, self.raster.res)
+            self._points[k] = (pts, np.full(len(pts), LABEL_OBJECT0 + k, dtype=np.int64))
+        return self._points[k]
+
+    def _target_points(self, t: str, ks: list[int], moved: int | None = None,
+                       corners: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+        """Sample points (and labels) of floor objects ``ks`` (of type t), object ``moved`` at ``corners``."""
+        parts = [self._instance_points(k) for k in ks if k != moved]
+        if moved in ks:
+            key = (moved, corners.tobytes())
+            if key not in self._candidate_points:  # kept until the next commit (which may reuse it)
+                pts = sample_points(corners, self.raster.res)
+                self._candidate_points[key] = (pts, np.full(len(pts), LABEL_OBJECT0 + moved, dtype=np.int64))
+            parts.append(self._candidate_points[key])
+        if not parts:
+            return np.zeros((0, 2)), np.zeros(0, dtype=np.int64)
+        return np.concatenate([p for p, _ in parts]), np.concatenate([lb for _, lb in parts])
+
+    def _exact_witness(self, t: str, i: int, corners: np.ndarray, component: np.ndarray,
+                       grids: tuple[np.ndarray, np.ndarray]) -> int:
+        """A cell of t's exact success region (object i at ``corners``) in the start's component; -1 if none."""
+        label, occ = grids
+        pts, lab = self._target_points(t, self.of_type.get(t, []), i, corners)
+        r = self.raster
+        return first_region_cell(component.reshape(r.shape), occ, label, r.x0, r.z0, r.res, pts, lab)
 
     # ---------------------------------------------------------------- editing
     def propose(self, object_id: str, dx_units: float, dy_units: float, rotation: float | None = None) -> Proposal:
@@ -561,16 +745,27 @@ class EditValidator:
         center = self.ctx.centers[i] + np.array(res.achieved)
         corners = self.ctx.corners(i, center, res.yaw_after)
         inf = self.raster.inflate(corners)
-        problems, unproven, component = self._check(self.raster.navigable_with(i, inf), i, corners)
-        world = None
+        exact = self._footprint(i, center, res.yaw_after).corners
+        drawn = LabelRaster.tight(_Inflated(inf.r0, inf.c0, inf.drawn)) if np.array_equal(exact, corners) \
+            else self.labels.footprint(exact)
+        quiet = self.labels.quiet(i, drawn)
+        win = None if quiet else self.labels.window(i, drawn)
+        problems, unproven, component = self._check(self.raster.navigable_with(i, inf), i,
+                                                    None if quiet else self._changed_box(win))
         if unproven:
+            win = win or self.labels.window(i, drawn)
             # The cached regions prove most targets reachable; the exact success regions decide the rest
-            # (a finite geodesic distance is a success-region cell in the start's 4-connected component).
-            world = self._trial_world(i, center, res.yaw_after)
+            # (a finite geodesic distance is a success-region cell in the start's 4-connected component),
+            # on the candidate's label and occluder grids, stopping at the first cell that proves it.
+            grids = self.labels.with_window(win)
+            found = {t: self._exact_witness(t, i, exact, component, grids) for t in unproven}
             problems += [ValidationProblem("target_unreachable", f"no {t} could be reached from the start", (t,))
-                         for t in unproven if not component[success_region(world, t).ravel()].any()]
+                         for t in unproven if found[t] < 0]
+        else:
+            found = {}
         return Proposal(**request, problems=tuple(problems), center=center, corners=corners, inflated=inf,
-                        exact_world=world, exact_targets=frozenset(unproven))
+                        drawn=drawn, labels=win, exact_targets=frozenset(unproven),
+                        witnesses=tuple((t, c) for t, c in found.items() if c >= 0))
 
     def commit(self, proposal: Proposal, *, source: str = "manual", intent: str = "") -> Edit:
         """Apply a proposal from :meth:`propose` when it has no problems, log it either way; returns the Edit.
@@ -603,18 +798,29 @@ class EditValidator:
 
     def _apply(self, i: int, proposal: Proposal) -> None:
         """Move object i to the proposal's pose in every cache (footprints, regions, context, raster, house)."""
-        res, center, corners = proposal.result, proposal.center, proposal.corners
-        fps = self.geometry.footprints
-        k = next(k for k, f in enumerate(fps) if f.object_id == res.object_id)
-        fps[k] = replace(fps[k], center=(float(center[0]), float(center[1])), yaw=res.yaw_after % 360.0)
+        res, center = proposal.result, proposal.center
+        win = proposal.labels or self.labels.window(i, proposal.drawn)
+        changed = self._changed_box(win)
         for t in self.need_targets:
-            if self.regions.get(t) is not None and self._affects(i, t):
-                self.regions[t] = self._still_valid(self.regions[t], i, t, corners)
+            if self.regions.get(t) is not None:
+                self.regions[t] = self._still_valid(self.regions[t], i, t, changed)
+            w = self._target_witness.get(t)
+            if w is not None and not self._still_valid(w, i, t, changed).shape[1]:
+                del self._target_witness[t]  # it left the cache
+        fp = self._footprint(i, center, res.yaw_after)
+        self.geometry.footprints[self._slot[res.object_id]] = fp
+        self._points.pop(i, None)
+        key = (i, fp.corners.tobytes())
+        if key in self._candidate_points:
+            self._points[i] = self._candidate_points[key]
+        self._candidate_points.clear()
         self.ctx.commit(i, center, res.yaw_after)
         self.raster.commit(i, proposal.inflated)
+        self.labels.commit(i, win)
         move_object(self.objects[res.object_id], res.achieved[0], res.achieved[1], res.yaw_after - res.yaw_before)
-        if proposal.exact_world is not None:
-            self._refresh_regions(proposal.exact_world, set(proposal.exact_targets))
+        for t, cell in proposal.witnesses:  # the exact check's proof stays in the cache
+            old_cells = self.regions[t][0].astype(np.int64) if self.regions.get(t) is not None else np.zeros(0, int)
+            self.regions[t] = self._region_array(np.union1d(old_cells, [cell]))
         self._version += 1
 
     def _record(self, res: PlacementResult, dx_units: float, dy_units: float, rotation: float | None, source: str,
@@ -631,6 +837,29 @@ class EditValidator:
                     problems=[str(p) for p in problems], source=source, intent=intent)
         self.log.append(edit)
         return edit
+
+
+def reference_target_problems(validator: EditValidator, proposal: Proposal) -> list[ValidationProblem]:
+    """The plain reference for :meth:`EditValidator.propose`'s target check (slow; for tests).
+
+    Compiles the candidate world (``compile_world``) and checks every needed target type: its success
+    region must meet the start's 4-connected navigable component of that world.
+    """
+    res = proposal.result
+    if not res.changed or validator.start is None:
+        return []
+    i = validator.ctx.index[res.object_id]
+    fps = list(validator.geometry.footprints)
+    fps[validator._slot[res.object_id]] = validator._footprint(i, proposal.center, res.yaw_after)
+    world = compile_world(validator.house, geometry=replace(validator.geometry, footprints=fps))
+    start = _cell(world.grid, validator.start)
+    nav = world.grid.navigable(AGENT_RADIUS)
+    if start is None or not nav[start]:
+        return []
+    labels, _ = ndimage.label(nav)
+    component = labels == labels[start]
+    return [ValidationProblem("target_unreachable", f"no {t} could be reached from the start", (t,))
+            for t in sorted(validator.need_targets) if not (success_region(world, t) & component).any()]
 
 
 def check_edit(house: House, object_id: str, dx_units: float, dy_units: float, rotation: float | None = None, *,

@@ -165,6 +165,47 @@ def _region(clear, occ, lab, x0, z0, res, radius, pts, plab, max_d, out):
                     out[row, col] = True
 
 
+@numba.njit(cache=True)
+def _first_region_cell(mask, occ, lab, x0, z0, res, pts, plab, max_d):
+    """The first cell (flat index) of ``mask`` that sees a sample point within max_d, -1 if none:
+    :func:`_region` restricted to ``mask`` (instead of clearance >= radius), stopping there."""
+    h, w = mask.shape
+    reach = int(math.ceil(max_d / res)) + 1
+    max_d2 = max_d * max_d
+    for p in range(pts.shape[0]):
+        px, pz = pts[p, 0], pts[p, 1]
+        pc = int(math.floor((px - x0) / res))
+        pr = int(math.floor((pz - z0) / res))
+        for row in range(max(0, pr - reach), min(h, pr + reach + 1)):
+            cz = z0 + (row + 0.5) * res
+            for col in range(max(0, pc - reach), min(w, pc + reach + 1)):
+                if not mask[row, col]:
+                    continue
+                cx = x0 + (col + 0.5) * res
+                dx, dz = px - cx, pz - cz
+                if dx * dx + dz * dz > max_d2:
+                    continue
+                if los_clear(occ, lab, x0, z0, res, cx, cz, px, pz, plab[p]):
+                    return row * w + col
+    return -1
+
+
+def first_region_cell(mask: np.ndarray, occluder: np.ndarray, label: np.ndarray, x0: float, z0: float, res: float,
+                 points: np.ndarray, point_labels: np.ndarray) -> int:
+    """A cell (flat index) where the success region of the sample ``points`` (labels ``point_labels``)
+    meets ``mask``, or -1 when they do not meet.
+
+    With ``mask`` a subset of the navigable cells (e.g. the start's component) the answer is >= 0
+    exactly when ``(success_region(world, t) & mask).any()`` for a world with these occluder and
+    label grids and the points of ``target_points(world, t)``; the whole region is never computed.
+    """
+    if not len(points):
+        return -1
+    return int(_first_region_cell(mask, occluder, label, float(x0), float(z0), float(res),
+                                  np.ascontiguousarray(points, dtype=np.float64),
+                                  np.ascontiguousarray(point_labels, dtype=np.int64), SUCCESS_DISTANCE))
+
+
 def success_region(world: NavWorld, target_type: str) -> np.ndarray:
     """bool (H, W): navigable cells from whose centre turning toward some instance makes ``end`` succeed.
 
