@@ -13,11 +13,33 @@ import importlib.abc
 import importlib.machinery
 import sys
 from types import ModuleType
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    import gymnasium
 
 
 def register_envs() -> None:
-    """Register the ids (importing :mod:`adaptenv.sim` does it; it is idempotent)."""
-    importlib.import_module("adaptenv.sim")
+    """Register the ids (idempotent)."""
+    import gymnasium  # loaded by now: this runs only once gymnasium is imported
+
+    from adaptenv.sim import OBJECTNAV_ID
+
+    if OBJECTNAV_ID not in gymnasium.registry:
+        gymnasium.register(id=OBJECTNAV_ID, entry_point="adaptenv._gym:objectnav_env",
+                           vector_entry_point="adaptenv.sim.env:NavVectorEnv", disable_env_checker=False)
+
+
+def objectnav_env(**kwargs) -> gymnasium.Env:
+    """``adaptenv/ObjectNav-v0``: a :class:`~adaptenv.sim.env.NavEnv` that renders with the top-down renderer."""
+    from adaptenv.render.topdown import (
+        env_frame,  # the simulator and renderer load only when an env is made
+    )
+    from adaptenv.sim.env import NavEnv
+
+    if kwargs.get("render_mode") is not None:
+        kwargs.setdefault("renderer", env_frame)
+    return NavEnv(**kwargs)
 
 
 class _RegisterAfterLoad(importlib.abc.Loader):

@@ -9,8 +9,9 @@ import numpy as np
 import pytest
 from gymnasium.utils.env_checker import check_env
 
-import adaptenv.sim  # noqa: F401  (registers the ids)
+import adaptenv  # noqa: F401  (registers the ids)
 from adaptenv.errors import ConfigError
+from adaptenv.render.topdown import env_frame
 from adaptenv.sim.env import NavEnv, NavVectorEnv, make_sync_vector_env
 from adaptenv.sim.spec import END, MOVE_AHEAD, N_ACTIONS, NO_ACTION, ROTATE_LEFT, class_id
 from adaptenv.sim.world import compile_world
@@ -91,7 +92,7 @@ def test_terminated_without_success_reports_spl_zero(small_house):
 
 
 def test_render_rgb_array(small_house):
-    env = NavEnv(houses=[small_house], render_mode="rgb_array")
+    env = NavEnv(houses=[small_house], render_mode="rgb_array", renderer=env_frame)
     env.reset(seed=0)
     for a in (MOVE_AHEAD, ROTATE_LEFT, MOVE_AHEAD):
         env.step(a)
@@ -99,6 +100,20 @@ def test_render_rgb_array(small_house):
     assert frame.ndim == 3 and frame.shape[2] == 3 and frame.dtype == np.uint8
     assert len(env.trajectory().steps) == 3
     assert NavEnv(houses=[small_house]).render() is None
+
+
+def test_the_simulator_does_not_import_the_renderer(small_house):
+    """Rendering sits above the simulator: a NavEnv renders through the renderer it is given."""
+    with pytest.raises(ConfigError, match="needs a renderer"):
+        NavEnv(houses=[small_house], render_mode="rgb_array")
+    import subprocess
+    import sys
+
+    code = ("import sys, adaptenv.sim.env, adaptenv.sim.vector, adaptenv.sim.rollout; "
+            "print(sorted(m for m in sys.modules if m.startswith('adaptenv.') and not m.startswith(('adaptenv.sim', "
+            "'adaptenv.scene', 'adaptenv.errors', 'adaptenv.vocabulary', 'adaptenv._gym'))))")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
+    assert out.strip() == "[]", f"the simulator imported upper layers: {out}"
 
 
 def test_vector_env_steps_and_autoresets(real_house_path, small_house):

@@ -710,6 +710,12 @@ def _draw_leader(draw: ImageDraw.ImageDraw, lab: PlacedLabel) -> None:
     draw.ellipse([ax - 2, ay - 2, ax + 2, ay + 2], fill=LEADER)
 
 
+def env_frame(house: House | None, geometry: SceneGeometry, trajectory: Trajectory) -> np.ndarray:
+    """The Gymnasium env's ``render()`` frame: the house and the episode so far, 512 px, no labels or legend."""
+    image = render_house(house, geometry=geometry, trajectory=trajectory, size=512, labels=False, legend=False)
+    return np.asarray(image.convert("RGB"), dtype=np.uint8)
+
+
 def render_house(house: House | None = None, *, trajectory: Trajectory | None = None, grid: bool = False,
                  size: int = 1024, highlight: dict[str, str] | None = None, labels: bool = True,
                  title: str | None = None, geometry: SceneGeometry | None = None,

@@ -9,7 +9,7 @@ one of a small built-in set of procedural houses (generated once, from ``builtin
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -21,6 +21,9 @@ from gymnasium.vector.utils import batch_space
 
 from adaptenv.errors import ConfigError
 from adaptenv.sim.spec import ACTIONS, MAX_STEPS, N_ACTIONS, N_RAYS, TARGET_TYPES, n_classes
+
+FrameRenderer = Callable[[Any, Any, Any], np.ndarray]
+"""``renderer(house or None, SceneGeometry, Trajectory) -> (H, W, 3) uint8``: what ``NavEnv.render`` returns."""
 
 HouseLike = Any
 """A ``House``, a path to a house JSON file, or a compiled ``NavWorld``."""
@@ -94,6 +97,9 @@ class NavEnv(gymnasium.Env):
         max_steps: episode cap (truncation).
         render_mode: None or ``"rgb_array"`` (a top-down image of the house and the agent).
         builtin_seed: seed of the built-in procedural house set.
+        renderer: draws a frame for ``render()``: ``renderer(house, geometry, trajectory) -> (H, W, 3)
+            uint8``; the registered id passes :func:`adaptenv.render.topdown.env_frame` (rendering sits
+            above the simulator, so the simulator never imports it).
 
     Example::
 
@@ -105,9 +111,15 @@ class NavEnv(gymnasium.Env):
     metadata = {"render_modes": ["rgb_array"], "render_fps": 5}
 
     def __init__(self, houses: Sequence[HouseLike] | None = None, target_types: Sequence[str] | None = None,
-                 max_steps: int = MAX_STEPS, render_mode: str | None = None, builtin_seed: int = 0) -> None:
+                 max_steps: int = MAX_STEPS, render_mode: str | None = None, builtin_seed: int = 0,
+                 renderer: FrameRenderer | None = None) -> None:
         if render_mode not in (None, "rgb_array"):
             raise ConfigError(f"render_mode: expected None or 'rgb_array', got {render_mode!r}")
+        if render_mode is not None and renderer is None:
+            raise ConfigError("render_mode 'rgb_array' needs a renderer; make the env with "
+                              "gymnasium.make('adaptenv/ObjectNav-v0', render_mode='rgb_array') or pass "
+                              "renderer=adaptenv.render.topdown.env_frame")
+        self.renderer = renderer
         self.observation_space = observation_space()
         self.action_space = spaces.Discrete(N_ACTIONS)
         self.render_mode = render_mode
@@ -218,13 +230,7 @@ class NavEnv(gymnasium.Env):
             return None
         if self._world is None:
             raise gymnasium.error.ResetNeeded("call reset() before render()")
-        try:
-            from adaptenv.render.topdown import render_house
-        except ImportError as exc:  # pragma: no cover - the render module ships with adaptenv
-            raise ConfigError(f"render: adaptenv.render.topdown cannot be imported ({exc})") from exc
-        image = render_house(self._house, geometry=self._world.geometry, trajectory=self.trajectory(),
-                             size=512, labels=False, legend=False)
-        return np.asarray(image.convert("RGB"), dtype=np.uint8)
+        return self.renderer(self._house, self._world.geometry, self.trajectory())
 
     def trajectory(self):
         """The current episode as a :class:`~adaptenv.sim.trajectory.Trajectory` (steps recorded when rendering)."""
