@@ -64,6 +64,9 @@ def check_config(cfg: TrainConfig) -> None:
     if cfg.buffer_frames < cfg.rollout_steps * cfg.num_envs:
         raise ConfigError(f"--buffer-frames ({cfg.buffer_frames}) must hold at least one block of "
                           f"rollout_steps * num_envs = {cfg.rollout_steps * cfg.num_envs} frames")
+    if cfg.end_weight <= 0 or cfg.calibrate_episodes < 0:
+        raise ConfigError(f"--end-weight must be positive and --calibrate-episodes >= 0, got {cfg.end_weight} "
+                          f"and {cfg.calibrate_episodes}")
     for name in ("beta_start", "beta_end", "beta_decay_fraction"):
         if not 0.0 <= getattr(cfg, name) <= 1.0:
             raise ConfigError(f"--{name.replace('_', '-')} must lie in [0, 1], got {getattr(cfg, name)}")
@@ -149,7 +152,8 @@ LOG_KEYS = ("iteration", "frames", "updates", "wall_time", "charts/beta", "chart
 class RunLogger:
     """Metrics to ``metrics.csv`` always and to TensorBoard when it is importable."""
 
-    def __init__(self, run_dir: Path | None, tensorboard: bool):
+    def __init__(self, run_dir: Path | None, tensorboard: bool, keys: Sequence[str] = LOG_KEYS):
+        self.keys = tuple(keys)
         self.rows: list[dict[str, Any]] = []
         self.csv_path = run_dir / "metrics.csv" if run_dir else None
         self.writer = None
@@ -166,10 +170,10 @@ class RunLogger:
         if self.csv_path is not None:
             new = not self.csv_path.exists()
             with self.csv_path.open("a", newline="", encoding="utf-8") as f:
-                w = csv.DictWriter(f, fieldnames=list(LOG_KEYS), extrasaction="ignore")
+                w = csv.DictWriter(f, fieldnames=list(self.keys), extrasaction="ignore")
                 if new:
                     w.writeheader()
-                w.writerow({k: row.get(k, "") for k in LOG_KEYS})
+                w.writerow({k: row.get(k, "") for k in self.keys})
         if self.writer is not None:
             for k, v in row.items():
                 if "/" in k and v is not None and v != "":
@@ -221,9 +225,10 @@ def train(cfg: TrainConfig, *, worlds: Sequence[Any] | None = None, init_net: An
         configure_torch,
         count_parameters,
     )
+    from adaptenv.agents.stop import calibrate_end_threshold
     from adaptenv.sim import task
     from adaptenv.sim.expert import ShortestPathExpert
-    from adaptenv.sim.spec import N_RAYS
+    from adaptenv.sim.spec import END, N_RAYS
     from adaptenv.sim.vector import BatchSim
 
     check_config(cfg)
@@ -253,6 +258,8 @@ def train(cfg: TrainConfig, *, worlds: Sequence[Any] | None = None, init_net: An
         net = NavNet(NetConfig(hidden=cfg.hidden, feature_dim=cfg.feature_dim))
     hidden = net.config.hidden
     optimizer = torch.optim.Adam(net.parameters(), lr=cfg.learning_rate, eps=1e-5)
+    class_weight = torch.ones(net.config.n_actions)
+    class_weight[END] = cfg.end_weight
     n_blocks = max(1, cfg.buffer_frames // (cfg.rollout_steps * cfg.num_envs))
     buffer = SequenceBuffer(n_blocks, cfg.rollout_steps, cfg.num_envs, cfg.chunk_len, hidden, N_RAYS)
     frames, updates, iteration, wall_before = 0, 0, 0, 0.0
@@ -342,7 +349,8 @@ def train(cfg: TrainConfig, *, worlds: Sequence[Any] | None = None, init_net: An
                     group["lr"] = lr
                 batch = buffer.sample(cfg.batch_chunks, rng)
                 logits, _ = net(batch, batch["first"], batch["h0"])
-                loss = F.cross_entropy(logits.reshape(-1, logits.shape[-1]), batch["label"].reshape(-1))
+                loss = F.cross_entropy(logits.reshape(-1, logits.shape[-1]), batch["label"].reshape(-1),
+                                       weight=class_weight)
                 optimizer.zero_grad()
                 loss.backward()
                 torch.nn.utils.clip_grad_norm_(net.parameters(), cfg.max_grad_norm)
@@ -385,9 +393,14 @@ def train(cfg: TrainConfig, *, worlds: Sequence[Any] | None = None, init_net: An
     if progress:
         progress.stop()
 
-    # final evaluation of the greedy policy on fresh episodes in the training houses
+    # the stop decision: choose the end threshold on fresh held-in episodes (never a held-out set)
+    end_threshold, calibration = cfg.end_threshold, None
+    if cfg.calibrate_episodes:
+        calibration = calibrate_end_threshold(net, worlds, episodes=cfg.calibrate_episodes, seed=cfg.seed + 4_241)
+        end_threshold = calibration.threshold
+    # final evaluation of the policy on fresh episodes in the training houses
     episodes = sample_episodes(worlds, cfg.final_eval_episodes, seed=cfg.seed + 7_919)
-    res, _ = run_episodes(worlds, episodes, NeuralPolicy(net, end_threshold=cfg.end_threshold), batch=128)
+    res, _ = run_episodes(worlds, episodes, NeuralPolicy(net, end_threshold=end_threshold), batch=128)
     final = summarize(res)
     wall = wall_before + time.perf_counter() - start
     card = {
@@ -395,7 +408,8 @@ def train(cfg: TrainConfig, *, worlds: Sequence[Any] | None = None, init_net: An
         "wall_time_s": round(wall, 1), "seed": cfg.seed, "parameters": count_parameters(net),
         "final_train_success": final["success"], "final_train_success_ci95": final["success_ci95"],
         "final_train_spl": final["spl"], "final_eval_episodes": final["episodes"],
-        "end_threshold": cfg.end_threshold,
+        "end_threshold": end_threshold, "end_weight": cfg.end_weight,
+        "end_threshold_calibration": calibration.card() if calibration else None,
         "torch_threads": threads, "cpus": os.cpu_count(), "config": asdict(cfg)}
     logger.log({"iteration": iteration, "frames": frames, "updates": updates, "wall_time": wall,
                 "eval/success": final["success"], "eval/spl": final["spl"]})
