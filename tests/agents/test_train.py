@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from adaptenv.agents.checkpoint import load_checkpoint
-from adaptenv.agents.train import SequenceBuffer, TrainConfig, beta_at, field_docs, finetune, train
+from adaptenv.agents.train import SequenceBuffer, TrainConfig, beta_at, field_docs, finetune_policy, train
 from adaptenv.errors import ConfigError
 
 
@@ -17,7 +17,8 @@ def tiny_config(tmp_path, **overrides) -> TrainConfig:
     settings = dict(houses="preset:tiny", frames=4096, output=str(tmp_path / "p.pt"), run_dir=str(tmp_path / "run"),
                     num_envs=16, rollout_steps=32, chunk_len=16, batch_chunks=16, updates_per_iter=8,
                     hidden=32, feature_dim=32, learning_rate=3e-3, eval_every=0, final_eval_episodes=6,
-                    save_every=16, progress=False, tensorboard=False, max_episode_steps=100, threads=1)
+                    save_every=16, progress=False, tensorboard=False, max_episode_steps=100, threads=1,
+                    calibrate_episodes=0)
     settings.update(overrides)
     return TrainConfig(**settings)
 
@@ -100,7 +101,7 @@ def test_resume_after_interruption_continues_from_the_checkpoint(tmp_path, monke
 def test_finetune_returns_a_new_policy(tiny_set, tmp_path):
     base = train(tiny_config(tmp_path, frames=1024, output="", run_dir=""))
     before = {k: v.clone() for k, v in base.net.state_dict().items()}
-    policy = finetune(base.policy(), tiny_set.houses, 1024, num_envs=16, rollout_steps=32, chunk_len=16,
+    policy = finetune_policy(base.policy(), tiny_set.houses, 1024, num_envs=16, rollout_steps=32, chunk_len=16,
                       batch_chunks=16, updates_per_iter=4, final_eval_episodes=4, tensorboard=False, threads=1)
     assert policy.net is not base.net
     assert any(not (v == policy.net.state_dict()[k]).all() for k, v in before.items())

@@ -45,10 +45,10 @@ import numpy as np
 import torch
 import torch.nn.functional as F
 
-from adaptenv.agents.config import TrainConfig, field_docs
+from adaptenv.agents.config import FinetuneConfig, PPOConfig, TrainConfig, field_docs
 from adaptenv.errors import ConfigError
 
-__all__ = ["TrainConfig", "field_docs", "train", "finetune"]
+__all__ = ["TrainConfig", "FinetuneConfig", "field_docs", "train", "finetune", "finetune_policy"]
 
 
 def check_config(cfg: TrainConfig) -> None:
@@ -422,7 +422,41 @@ def train(cfg: TrainConfig, *, worlds: Sequence[Any] | None = None, init_net: An
     return TrainResult(net, card, logger.rows)
 
 
-def finetune(policy: Any, houses: Sequence[Any] | str, frames: int, *, seed: int = 0, **overrides: Any) -> Any:
+def finetune(net: Any, worlds: Sequence[Any], cfg: FinetuneConfig, seed: int) -> tuple[Any, dict[str, Any]]:
+    """Fine-tune a copy of ``net`` (a NavNet) on ``worlds`` (NavWorlds) as ``cfg`` says; returns (new net, card).
+
+    ``algo='dagger'``: DAgger from the current weights with a fresh Adam optimizer, expert-action
+    probability ``beta`` throughout, ``rollout_steps``-step blocks that are also the training
+    sequences, a dataset holding the whole run. ``algo='ppo'``: :func:`adaptenv.agents.ppo.train_ppo`
+    on the simulator's reward with PPOConfig's defaults for the rest (value warm-up at most half the
+    iterations). Nothing is written to disk.
+    """
+    if cfg.algo not in ("dagger", "ppo"):
+        raise ConfigError(f"FinetuneConfig.algo must be 'dagger' or 'ppo', got {cfg.algo!r}")
+    evals = cfg.final_eval_episodes or len(worlds)
+    if cfg.algo == "ppo":
+        from adaptenv.agents.ppo import train_ppo  # ppo.py imports this module
+
+        iterations = -(-cfg.frames // (cfg.num_envs * cfg.rollout_steps))
+        pc = PPOConfig(houses="(in memory)", value_warmup_iters=min(PPOConfig.value_warmup_iters, iterations // 2), frames=cfg.frames, init="", output="", seed=seed, num_envs=cfg.num_envs,
+                       rollout_steps=cfg.rollout_steps, chunk_len=cfg.rollout_steps,
+                       learning_rate=cfg.learning_rate, end_threshold=cfg.end_threshold,
+                       calibrate_episodes=cfg.calibrate_episodes, eval_every=0, final_eval_episodes=evals,
+                       progress=False, tensorboard=False)
+        result = train_ppo(pc, worlds=worlds, init_net=net)
+        return result.net, result.card
+    steps = cfg.rollout_steps
+    tc = TrainConfig(houses="(in memory)", frames=cfg.frames, output="", seed=seed, num_envs=cfg.num_envs,
+                     rollout_steps=steps, chunk_len=steps, batch_chunks=cfg.batch_chunks,
+                     updates_per_iter=cfg.updates_per_iter, buffer_frames=max(cfg.frames, steps * cfg.num_envs),
+                     beta_start=cfg.beta, beta_end=cfg.beta, end_threshold=cfg.end_threshold,
+                     calibrate_episodes=cfg.calibrate_episodes, eval_every=0, final_eval_episodes=evals,
+                     progress=False, tensorboard=False, learning_rate=cfg.learning_rate, save_every=10**9)
+    result = train(tc, worlds=worlds, init_net=net)
+    return result.net, result.card
+
+
+def finetune_policy(policy: Any, houses: Sequence[Any] | str, frames: int, *, seed: int = 0, **overrides: Any) -> Any:
     """Continue training ``policy`` (a NeuralPolicy or checkpoint path) on ``houses``; returns a new policy.
 
     ``houses`` may be House objects, NavWorlds or a ``--houses`` spec. DAgger keeps the expert in
@@ -436,7 +470,7 @@ def finetune(policy: Any, houses: Sequence[Any] | str, frames: int, *, seed: int
     net = load_checkpoint(policy).net if isinstance(policy, (str, Path)) else getattr(policy, "net", policy)
     worlds = load_house_set(houses).worlds if isinstance(houses, str) else compile_houses(list(houses))
     settings = {"frames": frames, "seed": seed, "output": "", "houses": "(in memory)", "beta_start": 0.8,
-                "progress": False, "eval_every": 0, "final_eval_episodes": 64, **overrides}
+                "progress": False, "eval_every": 0, "final_eval_episodes": 64, "calibrate_episodes": 0, **overrides}
     cfg = TrainConfig(**settings)
     return train(cfg, worlds=worlds, init_net=net).policy()
 
