@@ -8,7 +8,14 @@ import numpy as np
 import pytest
 
 from adaptenv.agents.checkpoint import load_checkpoint
-from adaptenv.agents.train import SequenceBuffer, TrainConfig, beta_at, field_docs, finetune_policy, train
+from adaptenv.agents.train import (
+    SequenceBuffer,
+    TrainConfig,
+    beta_at,
+    field_docs,
+    finetune_policy,
+    train,
+)
 from adaptenv.errors import ConfigError
 
 
