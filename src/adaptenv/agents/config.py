@@ -73,6 +73,8 @@ class TrainConfig:
     """Save the checkpoint and resume state every this many gradient updates."""
     threads: int = 0
     """Torch threads (0: half the cores, i.e. 1 on a 2-core machine; see configure_torch)."""
+    overlap: bool = True
+    """Run an iteration's gradient steps in a second thread while the next block is collected (its weights lag one iteration)."""
     progress: bool = True
     """Show a progress bar."""
     tensorboard: bool = True

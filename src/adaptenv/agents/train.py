@@ -37,6 +37,7 @@ import json
 import os
 import time
 from collections.abc import Sequence
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
@@ -226,10 +227,9 @@ def train(cfg: TrainConfig, *, worlds: Sequence[Any] | None = None, init_net: An
         count_parameters,
     )
     from adaptenv.agents.stop import calibrate_end_threshold
-    from adaptenv.sim import task
     from adaptenv.sim.expert import ShortestPathExpert
     from adaptenv.sim.spec import END, N_RAYS
-    from adaptenv.sim.vector import BatchSim
+    from adaptenv.sim.vector import BatchSim, EpisodeSampler
 
     check_config(cfg)
     threads = configure_torch(cfg.threads or None)
@@ -263,6 +263,7 @@ def train(cfg: TrainConfig, *, worlds: Sequence[Any] | None = None, init_net: An
     n_blocks = max(1, cfg.buffer_frames // (cfg.rollout_steps * cfg.num_envs))
     buffer = SequenceBuffer(n_blocks, cfg.rollout_steps, cfg.num_envs, cfg.chunk_len, hidden, N_RAYS)
     frames, updates, iteration, wall_before = 0, 0, 0, 0.0
+    learn_rng = np.random.default_rng([cfg.seed, 1])  # minibatches (its own stream: the learner may run in a thread)
     if cfg.resume:
         saved = torch.load(state_path, map_location="cpu", weights_only=False)
         net.load_state_dict(saved["net"])
@@ -270,7 +271,9 @@ def train(cfg: TrainConfig, *, worlds: Sequence[Any] | None = None, init_net: An
         buffer.load_state_dict(saved["buffer"])
         frames, updates, iteration, wall_before = saved["frames"], saved["updates"], saved["iteration"], saved["wall_time"]
         rng.bit_generator.state = saved["numpy_rng"]
+        learn_rng.bit_generator.state = saved.get("learn_rng", learn_rng.bit_generator.state)
         torch.set_rng_state(saved["torch_rng"])
+        del saved  # the dataset copy in it is large
 
     def save_state() -> None:
         """Atomically write the policy checkpoint and the full resume state."""
@@ -281,115 +284,147 @@ def train(cfg: TrainConfig, *, worlds: Sequence[Any] | None = None, init_net: An
             atomic_torch_save({"net": net.state_dict(), "optimizer": optimizer.state_dict(),
                                "buffer": buffer.state_dict(), "frames": frames, "updates": updates,
                                "iteration": iteration, "wall_time": wall_before + time.perf_counter() - start,
-                               "numpy_rng": rng.bit_generator.state, "torch_rng": torch.get_rng_state(),
+                               "numpy_rng": rng.bit_generator.state, "learn_rng": learn_rng.bit_generator.state,
+                               "torch_rng": torch.get_rng_state(),
                                "config": asdict(cfg)}, state_path)
 
     def new_episodes(n: int) -> tuple[list[Any], np.ndarray]:
         """Fresh training episodes: a random house each, then a random target and start in it."""
-        envs = rng.integers(0, len(worlds), n)
-        return [task.sample_episode(worlds[e], rng) for e in envs.tolist()], envs
+        return sampler.draw(rng, n)
+
+    def collect(beta: float) -> tuple[dict[str, np.ndarray], list[float], list[int], float]:
+        """One (T, B) block with the beta-mixture of expert and ``actor``: (block, successes, lengths, seconds)."""
+        nonlocal obs, h, first
+        t0 = time.perf_counter()
+        block = {"depth": np.empty((T, B, N_RAYS), np.float16), "semantic": np.empty((T, B, N_RAYS), np.uint8),
+                 "target": np.empty((T, B), np.uint8), "prev_action": np.empty((T, B), np.uint8),
+                 "collided": np.empty((T, B), np.uint8), "first": np.empty((T, B), np.bool_),
+                 "label": np.empty((T, B), np.uint8), "h0": np.empty((T // L, B, hidden), np.float16)}
+        ep_success, ep_length = [], []
+        for t in range(T):
+            if t % L == 0:
+                block["h0"][t // L] = h.numpy()
+            for k in ("depth", "semantic", "target", "prev_action", "collided"):
+                block[k][t] = obs[k]
+            block["first"][t] = first
+            labels = np.asarray(expert.act_batch(sim.worlds, sim.env, sim.target_types, sim.x, sim.z, sim.yaw),
+                                dtype=np.int64)
+            block["label"][t] = labels
+            with torch.no_grad():
+                logits, h = actor.step(_to_tensors(obs), torch.from_numpy(first), h)
+            own = choose_actions(logits, rng.random(B) if cfg.sample_actions else None, cfg.end_threshold)
+            actions = np.where(rng.random(B) < beta, labels, own)
+            obs, _, terminated, truncated, info = sim.step(actions)
+            finished = np.flatnonzero(terminated | truncated)
+            first = np.zeros(B, dtype=bool)
+            if finished.size:
+                ep_success += info["success"][finished].tolist()
+                ep_length += info["steps"][finished].tolist()
+                eps, envs = new_episodes(finished.size)
+                obs = sim.reset_at(finished, eps, envs)
+                first[finished] = True
+        return block, ep_success, ep_length, time.perf_counter() - t0
+
+    def learn(frames_now: int) -> dict[str, Any]:
+        """``updates_per_iter`` Adam steps of cross-entropy against the expert's labels on sequences from the dataset."""
+        t0 = time.perf_counter()
+        net.train()
+        losses, accs = [], []
+        lr = cfg.learning_rate * (max(0.0, 1.0 - frames_now / cfg.frames) if cfg.anneal_lr else 1.0)
+        for group in optimizer.param_groups:
+            group["lr"] = lr
+        for _ in range(cfg.updates_per_iter):
+            batch = buffer.sample(cfg.batch_chunks, learn_rng)
+            logits, _ = net(batch, batch["first"], batch["h0"])
+            loss = F.cross_entropy(logits.reshape(-1, logits.shape[-1]), batch["label"].reshape(-1),
+                                   weight=class_weight)
+            optimizer.zero_grad()
+            loss.backward()
+            torch.nn.utils.clip_grad_norm_(net.parameters(), cfg.max_grad_norm)
+            optimizer.step()
+            losses.append(loss.item())
+            accs.append((logits.argmax(-1) == batch["label"]).float().mean().item())
+        net.eval()
+        return {"charts/learning_rate": lr, "losses/loss": float(np.mean(losses)),
+                "losses/accuracy": float(np.mean(accs)),
+                "charts/train_fps": cfg.updates_per_iter * cfg.batch_chunks * L / (time.perf_counter() - t0)}
 
     expert = ShortestPathExpert()
-    sim = BatchSim(worlds, max_steps=cfg.max_episode_steps)
+    sampler = EpisodeSampler(worlds)
+    # with overlap the learner thread takes the second core, so the simulator kernel runs serially
+    sim = BatchSim(worlds, max_steps=cfg.max_episode_steps, threads=1 if cfg.overlap else None)
     B, T, L = cfg.num_envs, cfg.rollout_steps, cfg.chunk_len
     eps, envs = new_episodes(B)
     obs, _ = sim.reset(eps, envs)
-    h = net.initial_state(B)
+    actor = NavNet(net.config).eval()  # the collecting copy of the weights (synchronised after every learn)
+    actor.load_state_dict(net.state_dict())
+    actor.requires_grad_(False)
+    h = actor.initial_state(B)
     first = np.ones(B, dtype=bool)
     logger = RunLogger(run_dir, cfg.tensorboard)
     progress = _progress(cfg.progress)
     task_id = progress.add_task("DAgger", total=cfg.frames, completed=frames) if progress else None
+    pool = ThreadPoolExecutor(max_workers=1) if cfg.overlap else None
     start = time.perf_counter()
     last_save = updates
+    learning: Any = None  # the gradient steps of the last iteration (a Future with overlap)
+    row: dict[str, Any] = {}
+
+    def finish_learning() -> None:
+        """Wait for the last iteration's gradient steps, then log its row (with a periodic evaluation)."""
+        nonlocal learning, updates, last_save
+        if learning is None:
+            return
+        row.update(learning.result() if pool else learning)
+        learning = None
+        updates += cfg.updates_per_iter
+        row["updates"] = updates
+        actor.load_state_dict(net.state_dict())
+        if cfg.eval_every and row["iteration"] % cfg.eval_every == 0:
+            episodes = sample_episodes(worlds, cfg.eval_episodes, seed=cfg.seed * 100_003 + row["iteration"])
+            res, _ = run_episodes(worlds, episodes, NeuralPolicy(net, end_threshold=cfg.end_threshold),
+                                  batch=min(cfg.eval_episodes, 128))
+            s = summarize(res)
+            row["eval/success"], row["eval/spl"] = s["success"], s["spl"]
+        logger.log(dict(row))
+        if progress:
+            progress.update(task_id, completed=min(row["frames"], cfg.frames),
+                            description=f"DAgger beta={row['charts/beta']:.2f} loss={row['losses/loss']:.3f} "
+                                        f"acc={row['losses/accuracy']:.2f}"
+                                        + (f" eval={row['eval/success']:.2f}" if "eval/success" in row else ""))
+        if updates - last_save >= cfg.save_every:
+            save_state()
+            last_save = updates
+
     try:
         while frames < cfg.frames:
-            # 1. collect a (T, B) block with the beta-mixture of expert and network
+            # 1. collect a (T, B) block (with overlap: while the learner thread runs the last iteration's steps)
             beta = beta_at(cfg, frames)
-            t0 = time.perf_counter()
-            block = {"depth": np.empty((T, B, N_RAYS), np.float16), "semantic": np.empty((T, B, N_RAYS), np.uint8),
-                     "target": np.empty((T, B), np.uint8), "prev_action": np.empty((T, B), np.uint8),
-                     "collided": np.empty((T, B), np.uint8), "first": np.empty((T, B), np.bool_),
-                     "label": np.empty((T, B), np.uint8), "h0": np.empty((T // L, B, hidden), np.float16)}
-            ep_success, ep_length = [], []
-            net.eval()
-            for t in range(T):
-                if t % L == 0:
-                    block["h0"][t // L] = h.numpy()
-                for k in ("depth", "semantic", "target", "prev_action", "collided"):
-                    block[k][t] = obs[k]
-                block["first"][t] = first
-                labels = np.asarray(expert.act_batch(sim.worlds, sim.env, sim.target_types, sim.x, sim.z, sim.yaw),
-                                    dtype=np.int64)
-                block["label"][t] = labels
-                with torch.no_grad():
-                    logits, h = net.step(_to_tensors(obs), torch.from_numpy(first), h)
-                own = choose_actions(logits, rng.random(B) if cfg.sample_actions else None, cfg.end_threshold)
-                actions = np.where(rng.random(B) < beta, labels, own)
-                obs, _, terminated, truncated, info = sim.step(actions)
-                finished = np.flatnonzero(terminated | truncated)
-                first = np.zeros(B, dtype=bool)
-                if finished.size:
-                    ep_success += info["success"][finished].tolist()
-                    ep_length += info["steps"][finished].tolist()
-                    eps, envs = new_episodes(finished.size)
-                    obs = sim.reset_at(finished, eps, envs)
-                    first[finished] = True
+            block, ep_success, ep_length, collect_time = collect(beta)
+            finish_learning()
+            # 2. aggregate
             buffer.add(block)
             frames += T * B
             iteration += 1
-            collect_time = time.perf_counter() - t0
-
-            # 2. learn: cross-entropy against the expert's labels on sequences from the whole dataset
-            t0 = time.perf_counter()
-            net.train()
-            losses, accs = [], []
-            for _ in range(cfg.updates_per_iter):
-                lr = cfg.learning_rate * (max(0.0, 1.0 - frames / cfg.frames) if cfg.anneal_lr else 1.0)
-                for group in optimizer.param_groups:
-                    group["lr"] = lr
-                batch = buffer.sample(cfg.batch_chunks, rng)
-                logits, _ = net(batch, batch["first"], batch["h0"])
-                loss = F.cross_entropy(logits.reshape(-1, logits.shape[-1]), batch["label"].reshape(-1),
-                                       weight=class_weight)
-                optimizer.zero_grad()
-                loss.backward()
-                torch.nn.utils.clip_grad_norm_(net.parameters(), cfg.max_grad_norm)
-                optimizer.step()
-                updates += 1
-                losses.append(loss.item())
-                accs.append((logits.argmax(-1) == batch["label"]).float().mean().item())
-            train_time = time.perf_counter() - t0
-
-            row: dict[str, Any] = {
-                "iteration": iteration, "frames": frames, "updates": updates,
-                "wall_time": wall_before + time.perf_counter() - start, "charts/beta": beta,
-                "charts/learning_rate": lr, "charts/collect_fps": T * B / collect_time,
-                "charts/train_fps": cfg.updates_per_iter * cfg.batch_chunks * L / train_time,
-                "charts/episodes": len(ep_success),
-                "charts/episode_success": float(np.mean(ep_success)) if ep_success else "",
-                "charts/episode_length": float(np.mean(ep_length)) if ep_length else "",
-                "charts/buffer_frames": buffer.frames, "losses/loss": float(np.mean(losses)),
-                "losses/accuracy": float(np.mean(accs))}
-            if cfg.eval_every and iteration % cfg.eval_every == 0:
-                episodes = sample_episodes(worlds, cfg.eval_episodes, seed=cfg.seed * 100_003 + iteration)
-                res, _ = run_episodes(worlds, episodes, NeuralPolicy(net, end_threshold=cfg.end_threshold), batch=min(cfg.eval_episodes, 128))
-                s = summarize(res)
-                row["eval/success"], row["eval/spl"] = s["success"], s["spl"]
-            logger.log(row)
-            if progress:
-                progress.update(task_id, completed=min(frames, cfg.frames),
-                                description=f"DAgger beta={beta:.2f} loss={row['losses/loss']:.3f} "
-                                            f"acc={row['losses/accuracy']:.2f}"
-                                            + (f" eval={row['eval/success']:.2f}" if "eval/success" in row else ""))
-            if updates - last_save >= cfg.save_every:
-                save_state()
-                last_save = updates
+            row = {"iteration": iteration, "frames": frames, "charts/beta": beta,
+                   "charts/collect_fps": T * B / collect_time, "charts/episodes": len(ep_success),
+                   "charts/episode_success": float(np.mean(ep_success)) if ep_success else "",
+                   "charts/episode_length": float(np.mean(ep_length)) if ep_length else "",
+                   "charts/buffer_frames": buffer.frames}
+            # 3. learn on the whole dataset (in the learner thread with overlap)
+            learning = pool.submit(learn, frames) if pool else learn(frames)
+            row["wall_time"] = wall_before + time.perf_counter() - start
+        finish_learning()
     except KeyboardInterrupt:
+        finish_learning()
         save_state()
         logger.close()
         if progress:
             progress.stop()
         raise
+    finally:
+        if pool:
+            pool.shutdown(wait=True)
     if progress:
         progress.stop()
 
