@@ -6,6 +6,7 @@ import json
 
 import numpy as np
 import pytest
+import torch
 
 from adaptenv.agents.checkpoint import load_checkpoint
 from adaptenv.agents.train import (
@@ -113,3 +114,30 @@ def test_finetune_returns_a_new_policy(tiny_set, tmp_path):
     assert policy.net is not base.net
     assert any(not (v == policy.net.state_dict()[k]).all() for k, v in before.items())
     assert all((v == base.net.state_dict()[k]).all() for k, v in before.items())  # the input is untouched
+
+
+@pytest.mark.slow
+def test_overlapped_learning_does_not_depend_on_timing(tmp_path):
+    runs = [train(tiny_config(tmp_path, frames=2048, output="", run_dir="", final_eval_episodes=1)) for _ in range(2)]
+    a, b = (r.net.state_dict() for r in runs)
+    assert all(torch.equal(a[k], b[k]) for k in a)
+    serial = train(tiny_config(tmp_path, frames=2048, output="", run_dir="", final_eval_episodes=1, overlap=False))
+    assert any(not torch.equal(a[k], serial.net.state_dict()[k]) for k in a)  # the collecting weights lag
+
+
+def _iteration_seconds(rows: list[dict], first: int) -> list[float]:
+    """Wall seconds of each logged training iteration from the ``first``-th iteration on."""
+    it = [(r["iteration"], r["wall_time"]) for r in rows if "losses/loss" in r]
+    return [w1 - w0 for (i0, w0), (i1, w1) in zip(it, it[1:], strict=False) if i1 == i0 + 1 and i1 > first]
+
+
+@pytest.mark.slow
+def test_resumed_run_is_about_as_fast_as_a_fresh_one(tmp_path):
+    cfg = tiny_config(tmp_path, frames=4096, save_every=10**6, final_eval_episodes=1)
+    train(tiny_config(tmp_path / "warm", frames=1024, final_eval_episodes=1))  # compile and warm the caches
+    fresh = train(cfg)
+    resumed = train(tiny_config(tmp_path, frames=8192, resume=True, save_every=10**6, final_eval_episodes=1))
+    t_fresh = float(np.median(_iteration_seconds(fresh.rows, first=2)))
+    t_resumed = float(np.median(_iteration_seconds(resumed.rows, first=10)))
+    assert len(_iteration_seconds(resumed.rows, first=10)) >= 5
+    assert t_resumed < 2.5 * t_fresh, (t_fresh, t_resumed)

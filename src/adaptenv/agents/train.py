@@ -378,7 +378,7 @@ def train(cfg: TrainConfig, *, worlds: Sequence[Any] | None = None, init_net: An
         row.update(learning.result() if pool else learning)
         learning = None
         updates += cfg.updates_per_iter
-        row["updates"] = updates
+        row["updates"], row["wall_time"] = updates, wall_before + time.perf_counter() - start
         actor.load_state_dict(net.state_dict())
         if cfg.eval_every and row["iteration"] % cfg.eval_every == 0:
             episodes = sample_episodes(worlds, cfg.eval_episodes, seed=cfg.seed * 100_003 + row["iteration"])
@@ -413,7 +413,8 @@ def train(cfg: TrainConfig, *, worlds: Sequence[Any] | None = None, init_net: An
                    "charts/buffer_frames": buffer.frames}
             # 3. learn on the whole dataset (in the learner thread with overlap)
             learning = pool.submit(learn, frames) if pool else learn(frames)
-            row["wall_time"] = wall_before + time.perf_counter() - start
+            if not pool:
+                finish_learning()
         finish_learning()
     except KeyboardInterrupt:
         finish_learning()
