@@ -201,11 +201,20 @@ def _slug(spec: str) -> str:
 
 def bench_train(as_json: bool = JSON_OPTION,
                 envs: int = typer.Option(256, "--envs", help="Agents simulated at once."),
-                steps: int = typer.Option(200, "--steps", help="Steps timed per measurement.")) -> None:
-    """Training throughput: labelled frames/s, gradient frames/s, inference steps/s, parameter count."""
-    from adaptenv.bench.train import run
+                steps: int = typer.Option(200, "--steps", help="Steps timed per measurement."),
+                algo: str = typer.Option("dagger", "--algo", help="dagger (imitation figures and end to end) or ppo."),
+                iterations: int = typer.Option(3, "--iterations", min=0,
+                                               help="Training iterations timed end to end (0: skip that figure).")
+                ) -> None:
+    """Training throughput: labelled, gradient and end-to-end frames/s, inference steps/s, parameter count."""
+    from adaptenv.bench.train import run, run_ppo
 
-    run(as_json=as_json, envs=envs, steps=steps)
+    if algo == "ppo":
+        run_ppo(as_json=as_json, iterations=max(1, iterations))
+    elif algo == "dagger":
+        run(as_json=as_json, envs=envs, steps=steps, iterations=iterations)
+    else:
+        raise typer.BadParameter(f"expected dagger or ppo, got {algo!r}", param_hint="--algo")
 
 
 def register(app: typer.Typer, bench: typer.Typer) -> None:
