@@ -15,7 +15,12 @@ Each iteration:
    expert labels joins a FIFO dataset of at most ``buffer_frames`` frames.
 3. **Learn.** ``updates_per_iter`` Adam steps of cross-entropy on minibatches of ``batch_chunks``
    sequences of ``chunk_len`` steps drawn uniformly from the dataset. The GRU is unrolled through
-   each chunk, resetting its memory where an episode starts inside it.
+   each chunk, resetting its memory where an episode starts inside it. With ``overlap`` (the
+   default) these steps run in a learner thread while the next block is collected by a copy of
+   the weights synchronised after every iteration (so collection lags one iteration).
+
+After the last iteration the ``end`` threshold is chosen on fresh episodes in the training houses
+(``calibrate_episodes``; :mod:`adaptenv.agents.stop`) and saved in the checkpoint.
 
 Memory at chunk starts (the choice the GRU forces): every chunk begins with the hidden state the
 network itself had at that step while collecting (R2D2's "stored state"); chunks that begin an
