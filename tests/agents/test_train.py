@@ -6,15 +6,15 @@ import json
 
 import numpy as np
 import pytest
+import torch
 
 from adaptenv.agents.checkpoint import load_checkpoint
 from adaptenv.agents.train import (
-    FinetuneConfig,
     SequenceBuffer,
     TrainConfig,
     beta_at,
     field_docs,
-    finetune,
+    finetune_policy,
     train,
 )
 from adaptenv.errors import ConfigError
@@ -25,7 +25,8 @@ def tiny_config(tmp_path, **overrides) -> TrainConfig:
     settings = dict(houses="preset:tiny", frames=4096, output=str(tmp_path / "p.pt"), run_dir=str(tmp_path / "run"),
                     num_envs=16, rollout_steps=32, chunk_len=16, batch_chunks=16, updates_per_iter=8,
                     hidden=32, feature_dim=32, learning_rate=3e-3, eval_every=0, final_eval_episodes=6,
-                    save_every=16, progress=False, tensorboard=False, max_episode_steps=100, threads=1)
+                    save_every=16, progress=False, tensorboard=False, max_episode_steps=100, threads=1,
+                    calibrate_episodes=0)
     settings.update(overrides)
     return TrainConfig(**settings)
 
@@ -108,7 +109,35 @@ def test_resume_after_interruption_continues_from_the_checkpoint(tmp_path, monke
 def test_finetune_returns_a_new_policy(tiny_set, tmp_path):
     base = train(tiny_config(tmp_path, frames=1024, output="", run_dir=""))
     before = {k: v.clone() for k, v in base.net.state_dict().items()}
-    net, card = finetune(base.net, tiny_set.worlds, FinetuneConfig(frames=1024, num_envs=16, batch_chunks=16))
-    assert net is not base.net and card["frames"] >= 1024
-    assert any(not (v == net.state_dict()[k]).all() for k, v in before.items())
+    policy = finetune_policy(base.policy(), tiny_set.houses, 1024, num_envs=16, rollout_steps=32, chunk_len=16,
+                      batch_chunks=16, updates_per_iter=4, final_eval_episodes=4, tensorboard=False, threads=1)
+    assert policy.net is not base.net
+    assert any(not (v == policy.net.state_dict()[k]).all() for k, v in before.items())
     assert all((v == base.net.state_dict()[k]).all() for k, v in before.items())  # the input is untouched
+
+
+@pytest.mark.slow
+def test_overlapped_learning_does_not_depend_on_timing(tmp_path):
+    runs = [train(tiny_config(tmp_path, frames=2048, output="", run_dir="", final_eval_episodes=1)) for _ in range(2)]
+    a, b = (r.net.state_dict() for r in runs)
+    assert all(torch.equal(a[k], b[k]) for k in a)
+    serial = train(tiny_config(tmp_path, frames=2048, output="", run_dir="", final_eval_episodes=1, overlap=False))
+    assert any(not torch.equal(a[k], serial.net.state_dict()[k]) for k in a)  # the collecting weights lag
+
+
+def _iteration_seconds(rows: list[dict], first: int) -> list[float]:
+    """Wall seconds of each logged training iteration from the ``first``-th iteration on."""
+    it = [(r["iteration"], r["wall_time"]) for r in rows if "losses/loss" in r]
+    return [w1 - w0 for (i0, w0), (i1, w1) in zip(it, it[1:], strict=False) if i1 == i0 + 1 and i1 > first]
+
+
+@pytest.mark.slow
+def test_resumed_run_is_about_as_fast_as_a_fresh_one(tmp_path):
+    cfg = tiny_config(tmp_path, frames=4096, save_every=10**6, final_eval_episodes=1)
+    train(tiny_config(tmp_path / "warm", frames=1024, final_eval_episodes=1))  # compile and warm the caches
+    fresh = train(cfg)
+    resumed = train(tiny_config(tmp_path, frames=8192, resume=True, save_every=10**6, final_eval_episodes=1))
+    t_fresh = float(np.median(_iteration_seconds(fresh.rows, first=2)))
+    t_resumed = float(np.median(_iteration_seconds(resumed.rows, first=10)))
+    assert len(_iteration_seconds(resumed.rows, first=10)) >= 5
+    assert t_resumed < 2.5 * t_fresh, (t_fresh, t_resumed)

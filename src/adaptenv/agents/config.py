@@ -54,7 +54,11 @@ class TrainConfig:
     sample_actions: bool = True
     """Sample the network's own motions while collecting, as NeuralPolicy does (else its most likely motion)."""
     end_threshold: float = 0.8
-    """The network ends an episode only with at least this probability of end (collection and the saved policy)."""
+    """The network ends an episode only with at least this probability of end while collecting (and in the saved policy unless calibrated)."""
+    end_weight: float = 1.0
+    """Weight of the end label in the cross-entropy (> 1 balances the rare stop labels; 1: plain imitation)."""
+    calibrate_episodes: int = 200
+    """Fresh episodes in the training houses on which the saved end threshold is chosen (agents/stop.py; 0: keep end_threshold)."""
     hidden: int = 256
     """GRU memory size."""
     feature_dim: int = 128
@@ -69,10 +73,114 @@ class TrainConfig:
     """Save the checkpoint and resume state every this many gradient updates."""
     threads: int = 0
     """Torch threads (0: half the cores, i.e. 1 on a 2-core machine; see configure_torch)."""
+    overlap: bool = True
+    """Run an iteration's gradient steps in a second thread while the next block is collected (its weights lag one iteration)."""
     progress: bool = True
     """Show a progress bar."""
     tensorboard: bool = True
     """Also log to TensorBoard when the tensorboard package is importable."""
+
+
+@dataclass
+class PPOConfig:
+    """Settings of one PPO run (``adaptenv ppo``): the simulator's SPOC-style reward, warm-started from a checkpoint."""
+
+    houses: str = "preset:pretrain-train"
+    """Training houses: a folder of house JSON files, one house file, or preset:NAME."""
+    frames: int = 1_000_000
+    """Environment frames to collect (the training budget)."""
+    init: str = "pretrained"
+    """Warm start: a checkpoint (e.g. from `adaptenv train`, BC/DAgger), 'pretrained' for the shipped one, '' for random weights."""
+    output: str = "runs/ppo.pt"
+    """Policy checkpoint to write; its training card goes next to it with .json ('' writes none)."""
+    run_dir: str = ""
+    """Folder for config.json, metrics.csv and TensorBoard logs (default runs/ppo/<output stem>)."""
+    seed: int = 0
+    """Seed of torch, numpy and the episode sampler."""
+    num_envs: int = 64
+    """Agents simulated in parallel while collecting."""
+    rollout_steps: int = 128
+    """Steps per agent per iteration (a multiple of chunk_len)."""
+    chunk_len: int = 32
+    """Length of the sequences the GRU is unrolled through in the update (stored memory at their starts)."""
+    num_minibatches: int = 4
+    """Minibatches per epoch (each num_envs * rollout_steps / num_minibatches frames)."""
+    update_epochs: int = 4
+    """Passes over each rollout."""
+    learning_rate: float = 1e-4
+    """Adam learning rate (small: fine-tuning a pretrained policy)."""
+    anneal_lr: bool = True
+    """Decay the learning rate linearly to zero over the run."""
+    gamma: float = 0.99
+    """Discount factor."""
+    gae_lambda: float = 0.95
+    """GAE lambda."""
+    clip_coef: float = 0.2
+    """PPO's surrogate clipping coefficient."""
+    ent_coef: float = 0.01
+    """Entropy bonus weight."""
+    vf_coef: float = 0.5
+    """Value loss weight."""
+    max_grad_norm: float = 0.5
+    """Gradient clipping norm."""
+    target_kl: float = 0.0
+    """Stop an iteration's epochs early when the approximate KL exceeds this (0: never)."""
+    bc_coef: float = 0.0
+    """Weight of an auxiliary cross-entropy to the shortest-path expert's labels (a DAgger regulariser; 0: pure RL)."""
+    value_warmup_iters: int = 4
+    """First iterations train only the value head, so a warm-started policy is not moved by a random critic."""
+    stop_rule: str = "threshold"
+    """How end is chosen while collecting: 'threshold' (as the saved policy acts; RL trains the motions) or 'sample' (from the full softmax)."""
+    end_threshold: float = 0.8
+    """End threshold while collecting with stop_rule 'threshold' (and in the saved policy unless calibrated)."""
+    calibrate_episodes: int = 200
+    """Fresh episodes in the training houses on which the saved end threshold is chosen (agents/stop.py; 0: keep end_threshold)."""
+    max_episode_steps: int = 300
+    """Episode cap while collecting (evaluation uses the benchmark's 600)."""
+    hidden: int = 256
+    """GRU memory size (with init '')."""
+    feature_dim: int = 128
+    """Size of the per-step feature vector (with init '')."""
+    eval_every: int = 10
+    """Evaluate the policy on fresh training episodes every this many iterations (0: never)."""
+    eval_episodes: int = 96
+    """Episodes per periodic evaluation."""
+    final_eval_episodes: int = 200
+    """Episodes of the final evaluation on the training houses (recorded in the card)."""
+    threads: int = 0
+    """Torch threads (0: half the cores; see configure_torch)."""
+    progress: bool = True
+    """Show a progress bar."""
+    tensorboard: bool = True
+    """Also log to TensorBoard when the tensorboard package is importable."""
+
+
+@dataclass
+class FinetuneConfig:
+    """Settings of one fine-tuning run on houses held in memory (``agents.train.finetune``; what the loop calls)."""
+
+    algo: str = "dagger"
+    """Learning algorithm: 'dagger' (imitation of the shortest-path expert) or 'ppo' (the simulator's reward)."""
+    frames: int = 16_384
+    """Environment frames to collect."""
+    num_envs: int = 64
+    """Agents simulated in parallel."""
+    learning_rate: float = 1e-4
+    """Adam learning rate, annealed linearly to zero over the run."""
+    rollout_steps: int = 32
+    """Steps per agent per iteration (DAgger: also the sequence length)."""
+    batch_chunks: int = 64
+    """DAgger: sequences per gradient step."""
+    updates_per_iter: int = 4
+    """DAgger: gradient steps after each collection."""
+    beta: float = 0.8
+    """DAgger: probability of executing the expert's action, constant over the run."""
+    end_threshold: float = 0.8
+    """End threshold while collecting."""
+    calibrate_episodes: int = 0
+    """Fresh episodes in the training houses on which the returned card's end threshold is chosen (0: keep end_threshold)."""
+    final_eval_episodes: int = 0
+    """Episodes of the final evaluation on the training houses (0: one per house)."""
 
 
 def field_docs(cls: type) -> dict[str, str]:

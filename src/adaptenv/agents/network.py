@@ -98,6 +98,12 @@ class NavNet(nn.Module):
 
         ``done[t, b]`` resets agent b's memory to zero before step t (an episode starts there).
         """
+        z, h = self.core(obs, done, h0)
+        return self.head(z), h
+
+    def core(self, obs: dict[str, torch.Tensor], done: torch.Tensor, h0: torch.Tensor
+             ) -> tuple[torch.Tensor, torch.Tensor]:
+        """What the heads read, (T, B, hidden + feature_dim): memory and current features; and the final memory."""
         feats = self.encode(obs)
         keep = (~done).float()[..., None]
         h = h0
@@ -105,8 +111,7 @@ class NavNet(nn.Module):
         for t in range(feats.shape[0]):
             h = self.gru(feats[t], h * keep[t])
             outs.append(h)
-        hs = torch.stack(outs)
-        return self.head(torch.cat([hs, feats], dim=-1)), h
+        return torch.cat([torch.stack(outs), feats], dim=-1), h
 
     def step(self, obs: dict[str, torch.Tensor], done: torch.Tensor, h: torch.Tensor
              ) -> tuple[torch.Tensor, torch.Tensor]:

@@ -15,7 +15,12 @@ Each iteration:
    expert labels joins a FIFO dataset of at most ``buffer_frames`` frames.
 3. **Learn.** ``updates_per_iter`` Adam steps of cross-entropy on minibatches of ``batch_chunks``
    sequences of ``chunk_len`` steps drawn uniformly from the dataset. The GRU is unrolled through
-   each chunk, resetting its memory where an episode starts inside it.
+   each chunk, resetting its memory where an episode starts inside it. With ``overlap`` (the
+   default) these steps run in a learner thread while the next block is collected by a copy of
+   the weights synchronised after every iteration (so collection lags one iteration).
+
+After the last iteration the ``end`` threshold is chosen on fresh episodes in the training houses
+(``calibrate_episodes``; :mod:`adaptenv.agents.stop`) and saved in the checkpoint.
 
 Memory at chunk starts (the choice the GRU forces): every chunk begins with the hidden state the
 network itself had at that step while collecting (R2D2's "stored state"); chunks that begin an
@@ -37,23 +42,20 @@ import json
 import os
 import time
 from collections.abc import Sequence
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
 import torch
 import torch.nn.functional as F
 
-from adaptenv.agents.config import TrainConfig, field_docs
+from adaptenv.agents.config import FinetuneConfig, PPOConfig, TrainConfig, field_docs
 from adaptenv.errors import ConfigError
 from adaptenv.progress import ProgressBar
 
-if TYPE_CHECKING:
-    from adaptenv.agents.network import NavNet
-    from adaptenv.sim.world import NavWorld
-
-__all__ = ["TrainConfig", "field_docs", "train", "finetune"]
+__all__ = ["TrainConfig", "FinetuneConfig", "field_docs", "train", "finetune", "finetune_policy"]
 
 
 def check_config(cfg: TrainConfig) -> None:
@@ -69,6 +71,9 @@ def check_config(cfg: TrainConfig) -> None:
     if cfg.buffer_frames < cfg.rollout_steps * cfg.num_envs:
         raise ConfigError(f"--buffer-frames ({cfg.buffer_frames}) must hold at least one block of "
                           f"rollout_steps * num_envs = {cfg.rollout_steps * cfg.num_envs} frames")
+    if cfg.end_weight <= 0 or cfg.calibrate_episodes < 0:
+        raise ConfigError(f"--end-weight must be positive and --calibrate-episodes >= 0, got {cfg.end_weight} "
+                          f"and {cfg.calibrate_episodes}")
     for name in ("beta_start", "beta_end", "beta_decay_fraction"):
         if not 0.0 <= getattr(cfg, name) <= 1.0:
             raise ConfigError(f"--{name.replace('_', '-')} must lie in [0, 1], got {getattr(cfg, name)}")
@@ -154,7 +159,8 @@ LOG_KEYS = ("iteration", "frames", "updates", "wall_time", "charts/beta", "chart
 class RunLogger:
     """Metrics to ``metrics.csv`` always and to TensorBoard when it is importable."""
 
-    def __init__(self, run_dir: Path | None, tensorboard: bool):
+    def __init__(self, run_dir: Path | None, tensorboard: bool, keys: Sequence[str] = LOG_KEYS):
+        self.keys = tuple(keys)
         self.rows: list[dict[str, Any]] = []
         self.csv_path = run_dir / "metrics.csv" if run_dir else None
         self.writer = None
@@ -171,10 +177,10 @@ class RunLogger:
         if self.csv_path is not None:
             new = not self.csv_path.exists()
             with self.csv_path.open("a", newline="", encoding="utf-8") as f:
-                w = csv.DictWriter(f, fieldnames=list(LOG_KEYS), extrasaction="ignore")
+                w = csv.DictWriter(f, fieldnames=list(self.keys), extrasaction="ignore")
                 if new:
                     w.writeheader()
-                w.writerow({k: row.get(k, "") for k in LOG_KEYS})
+                w.writerow({k: row.get(k, "") for k in self.keys})
         if self.writer is not None:
             for k, v in row.items():
                 if "/" in k and v is not None and v != "":
@@ -226,10 +232,10 @@ def train(cfg: TrainConfig, *, worlds: Sequence[Any] | None = None, init_net: An
         configure_torch,
         count_parameters,
     )
-    from adaptenv.sim import task
+    from adaptenv.agents.stop import calibrate_end_threshold
     from adaptenv.sim.expert import ShortestPathExpert
-    from adaptenv.sim.spec import N_RAYS
-    from adaptenv.sim.vector import BatchSim
+    from adaptenv.sim.spec import END, N_RAYS
+    from adaptenv.sim.vector import BatchSim, EpisodeSampler
 
     check_config(cfg)
     threads = configure_torch(cfg.threads or None)
@@ -258,9 +264,12 @@ def train(cfg: TrainConfig, *, worlds: Sequence[Any] | None = None, init_net: An
         net = NavNet(NetConfig(hidden=cfg.hidden, feature_dim=cfg.feature_dim))
     hidden = net.config.hidden
     optimizer = torch.optim.Adam(net.parameters(), lr=cfg.learning_rate, eps=1e-5)
+    class_weight = torch.ones(net.config.n_actions)
+    class_weight[END] = cfg.end_weight
     n_blocks = max(1, cfg.buffer_frames // (cfg.rollout_steps * cfg.num_envs))
     buffer = SequenceBuffer(n_blocks, cfg.rollout_steps, cfg.num_envs, cfg.chunk_len, hidden, N_RAYS)
     frames, updates, iteration, wall_before = 0, 0, 0, 0.0
+    learn_rng = np.random.default_rng([cfg.seed, 1])  # minibatches (its own stream: the learner may run in a thread)
     if cfg.resume:
         saved = torch.load(state_path, map_location="cpu", weights_only=False)
         net.load_state_dict(saved["net"])
@@ -268,7 +277,9 @@ def train(cfg: TrainConfig, *, worlds: Sequence[Any] | None = None, init_net: An
         buffer.load_state_dict(saved["buffer"])
         frames, updates, iteration, wall_before = saved["frames"], saved["updates"], saved["iteration"], saved["wall_time"]
         rng.bit_generator.state = saved["numpy_rng"]
+        learn_rng.bit_generator.state = saved.get("learn_rng", learn_rng.bit_generator.state)
         torch.set_rng_state(saved["torch_rng"])
+        del saved  # the dataset copy in it is large
 
     def save_state() -> None:
         """Atomically write the policy checkpoint and the full resume state."""
@@ -279,120 +290,159 @@ def train(cfg: TrainConfig, *, worlds: Sequence[Any] | None = None, init_net: An
             atomic_torch_save({"net": net.state_dict(), "optimizer": optimizer.state_dict(),
                                "buffer": buffer.state_dict(), "frames": frames, "updates": updates,
                                "iteration": iteration, "wall_time": wall_before + time.perf_counter() - start,
-                               "numpy_rng": rng.bit_generator.state, "torch_rng": torch.get_rng_state(),
+                               "numpy_rng": rng.bit_generator.state, "learn_rng": learn_rng.bit_generator.state,
+                               "torch_rng": torch.get_rng_state(),
                                "config": asdict(cfg)}, state_path)
 
     def new_episodes(n: int) -> tuple[list[Any], np.ndarray]:
         """Fresh training episodes: a random house each, then a random target and start in it."""
-        envs = rng.integers(0, len(worlds), n)
-        return [task.sample_episode(worlds[e], rng) for e in envs.tolist()], envs
+        return sampler.draw(rng, n)
+
+    def collect(beta: float) -> tuple[dict[str, np.ndarray], list[float], list[int], float]:
+        """One (T, B) block with the beta-mixture of expert and ``actor``: (block, successes, lengths, seconds)."""
+        nonlocal obs, h, first
+        t0 = time.perf_counter()
+        block = {"depth": np.empty((T, B, N_RAYS), np.float16), "semantic": np.empty((T, B, N_RAYS), np.uint8),
+                 "target": np.empty((T, B), np.uint8), "prev_action": np.empty((T, B), np.uint8),
+                 "collided": np.empty((T, B), np.uint8), "first": np.empty((T, B), np.bool_),
+                 "label": np.empty((T, B), np.uint8), "h0": np.empty((T // L, B, hidden), np.float16)}
+        ep_success, ep_length = [], []
+        for t in range(T):
+            if t % L == 0:
+                block["h0"][t // L] = h.numpy()
+            for k in ("depth", "semantic", "target", "prev_action", "collided"):
+                block[k][t] = obs[k]
+            block["first"][t] = first
+            labels = np.asarray(expert.act_batch(sim.worlds, sim.env, sim.target_types, sim.x, sim.z, sim.yaw),
+                                dtype=np.int64)
+            block["label"][t] = labels
+            with torch.no_grad():
+                logits, h = actor.step(_to_tensors(obs), torch.from_numpy(first), h)
+            own = choose_actions(logits, rng.random(B) if cfg.sample_actions else None, cfg.end_threshold)
+            actions = np.where(rng.random(B) < beta, labels, own)
+            obs, _, terminated, truncated, info = sim.step(actions)
+            finished = np.flatnonzero(terminated | truncated)
+            first = np.zeros(B, dtype=bool)
+            if finished.size:
+                ep_success += info["success"][finished].tolist()
+                ep_length += info["steps"][finished].tolist()
+                eps, envs = new_episodes(finished.size)
+                obs = sim.reset_at(finished, eps, envs)
+                first[finished] = True
+        return block, ep_success, ep_length, time.perf_counter() - t0
+
+    def learn(frames_now: int) -> dict[str, Any]:
+        """``updates_per_iter`` Adam steps of cross-entropy against the expert's labels on sequences from the dataset."""
+        t0 = time.perf_counter()
+        net.train()
+        losses, accs = [], []
+        lr = cfg.learning_rate * (max(0.0, 1.0 - frames_now / cfg.frames) if cfg.anneal_lr else 1.0)
+        for group in optimizer.param_groups:
+            group["lr"] = lr
+        for _ in range(cfg.updates_per_iter):
+            batch = buffer.sample(cfg.batch_chunks, learn_rng)
+            logits, _ = net(batch, batch["first"], batch["h0"])
+            loss = F.cross_entropy(logits.reshape(-1, logits.shape[-1]), batch["label"].reshape(-1),
+                                   weight=class_weight)
+            optimizer.zero_grad()
+            loss.backward()
+            torch.nn.utils.clip_grad_norm_(net.parameters(), cfg.max_grad_norm)
+            optimizer.step()
+            losses.append(loss.item())
+            accs.append((logits.argmax(-1) == batch["label"]).float().mean().item())
+        net.eval()
+        return {"charts/learning_rate": lr, "losses/loss": float(np.mean(losses)),
+                "losses/accuracy": float(np.mean(accs)),
+                "charts/train_fps": cfg.updates_per_iter * cfg.batch_chunks * L / (time.perf_counter() - t0)}
 
     expert = ShortestPathExpert()
-    sim = BatchSim(worlds, max_steps=cfg.max_episode_steps)
+    sampler = EpisodeSampler(worlds)
+    # with overlap the learner thread takes the second core, so the simulator kernel runs serially
+    sim = BatchSim(worlds, max_steps=cfg.max_episode_steps, threads=1 if cfg.overlap else None)
     B, T, L = cfg.num_envs, cfg.rollout_steps, cfg.chunk_len
     eps, envs = new_episodes(B)
     obs, _ = sim.reset(eps, envs)
-    h = net.initial_state(B)
+    actor = NavNet(net.config).eval()  # the collecting copy of the weights (synchronised after every learn)
+    actor.load_state_dict(net.state_dict())
+    actor.requires_grad_(False)
+    h = actor.initial_state(B)
     first = np.ones(B, dtype=bool)
     logger = RunLogger(run_dir, cfg.tensorboard)
     progress = ProgressBar("DAgger" if cfg.progress else None, cfg.frames, transient=False).start()
     progress.update(frames)
+    pool = ThreadPoolExecutor(max_workers=1) if cfg.overlap else None
     start = time.perf_counter()
     last_save = updates
+    learning: Any = None  # the gradient steps of the last iteration (a Future with overlap)
+    row: dict[str, Any] = {}
+
+    def finish_learning() -> None:
+        """Wait for the last iteration's gradient steps, then log its row (with a periodic evaluation)."""
+        nonlocal learning, updates, last_save
+        if learning is None:
+            return
+        row.update(learning.result() if pool else learning)
+        learning = None
+        updates += cfg.updates_per_iter
+        row["updates"], row["wall_time"] = updates, wall_before + time.perf_counter() - start
+        actor.load_state_dict(net.state_dict())
+        if cfg.eval_every and row["iteration"] % cfg.eval_every == 0:
+            episodes = sample_episodes(worlds, cfg.eval_episodes, seed=cfg.seed * 100_003 + row["iteration"])
+            res, _ = run_episodes(worlds, episodes, NeuralPolicy(net, end_threshold=cfg.end_threshold),
+                                  batch=min(cfg.eval_episodes, 128))
+            s = summarize(res)
+            row["eval/success"], row["eval/spl"] = s["success"], s["spl"]
+        logger.log(dict(row))
+        if progress:
+            progress.update(min(row["frames"], cfg.frames),
+                            description=f"DAgger beta={row['charts/beta']:.2f} loss={row['losses/loss']:.3f} "
+                                        f"acc={row['losses/accuracy']:.2f}"
+                                        + (f" eval={row['eval/success']:.2f}" if "eval/success" in row else ""))
+        if updates - last_save >= cfg.save_every:
+            save_state()
+            last_save = updates
+
     try:
         while frames < cfg.frames:
-            # 1. collect a (T, B) block with the beta-mixture of expert and network
+            # 1. collect a (T, B) block (with overlap: while the learner thread runs the last iteration's steps)
             beta = beta_at(cfg, frames)
-            t0 = time.perf_counter()
-            block = {"depth": np.empty((T, B, N_RAYS), np.float16), "semantic": np.empty((T, B, N_RAYS), np.uint8),
-                     "target": np.empty((T, B), np.uint8), "prev_action": np.empty((T, B), np.uint8),
-                     "collided": np.empty((T, B), np.uint8), "first": np.empty((T, B), np.bool_),
-                     "label": np.empty((T, B), np.uint8), "h0": np.empty((T // L, B, hidden), np.float16)}
-            ep_success, ep_length = [], []
-            net.eval()
-            for t in range(T):
-                if t % L == 0:
-                    block["h0"][t // L] = h.numpy()
-                for k in ("depth", "semantic", "target", "prev_action", "collided"):
-                    block[k][t] = obs[k]
-                block["first"][t] = first
-                labels = np.asarray(expert.act_batch(sim.worlds, sim.env, sim.target_types, sim.x, sim.z, sim.yaw),
-                                    dtype=np.int64)
-                block["label"][t] = labels
-                with torch.no_grad():
-                    logits, h = net.step(_to_tensors(obs), torch.from_numpy(first), h)
-                own = choose_actions(logits, rng.random(B) if cfg.sample_actions else None, cfg.end_threshold)
-                actions = np.where(rng.random(B) < beta, labels, own)
-                obs, _, terminated, truncated, info = sim.step(actions)
-                finished = np.flatnonzero(terminated | truncated)
-                first = np.zeros(B, dtype=bool)
-                if finished.size:
-                    ep_success += info["success"][finished].tolist()
-                    ep_length += info["steps"][finished].tolist()
-                    eps, envs = new_episodes(finished.size)
-                    obs = sim.reset_at(finished, eps, envs)
-                    first[finished] = True
+            block, ep_success, ep_length, collect_time = collect(beta)
+            finish_learning()
+            # 2. aggregate
             buffer.add(block)
             frames += T * B
             iteration += 1
-            collect_time = time.perf_counter() - t0
-
-            # 2. learn: cross-entropy against the expert's labels on sequences from the whole dataset
-            t0 = time.perf_counter()
-            net.train()
-            losses, accs = [], []
-            for _ in range(cfg.updates_per_iter):
-                lr = cfg.learning_rate * (max(0.0, 1.0 - frames / cfg.frames) if cfg.anneal_lr else 1.0)
-                for group in optimizer.param_groups:
-                    group["lr"] = lr
-                batch = buffer.sample(cfg.batch_chunks, rng)
-                logits, _ = net(batch, batch["first"], batch["h0"])
-                loss = F.cross_entropy(logits.reshape(-1, logits.shape[-1]), batch["label"].reshape(-1))
-                optimizer.zero_grad()
-                loss.backward()
-                torch.nn.utils.clip_grad_norm_(net.parameters(), cfg.max_grad_norm)
-                optimizer.step()
-                updates += 1
-                losses.append(loss.item())
-                accs.append((logits.argmax(-1) == batch["label"]).float().mean().item())
-            train_time = time.perf_counter() - t0
-
-            row: dict[str, Any] = {
-                "iteration": iteration, "frames": frames, "updates": updates,
-                "wall_time": wall_before + time.perf_counter() - start, "charts/beta": beta,
-                "charts/learning_rate": lr, "charts/collect_fps": T * B / collect_time,
-                "charts/train_fps": cfg.updates_per_iter * cfg.batch_chunks * L / train_time,
-                "charts/episodes": len(ep_success),
-                "charts/episode_success": float(np.mean(ep_success)) if ep_success else "",
-                "charts/episode_length": float(np.mean(ep_length)) if ep_length else "",
-                "charts/buffer_frames": buffer.frames, "losses/loss": float(np.mean(losses)),
-                "losses/accuracy": float(np.mean(accs))}
-            if cfg.eval_every and iteration % cfg.eval_every == 0:
-                episodes = sample_episodes(worlds, cfg.eval_episodes, seed=cfg.seed * 100_003 + iteration)
-                res, _ = run_episodes(worlds, episodes, NeuralPolicy(net, end_threshold=cfg.end_threshold), batch=min(cfg.eval_episodes, 128))
-                s = summarize(res)
-                row["eval/success"], row["eval/spl"] = s["success"], s["spl"]
-            logger.log(row)
-            if progress:
-                progress.update(min(frames, cfg.frames),
-                                description=f"DAgger beta={beta:.2f} loss={row['losses/loss']:.3f} "
-                                            f"acc={row['losses/accuracy']:.2f}"
-                                            + (f" eval={row['eval/success']:.2f}" if "eval/success" in row else ""))
-            if updates - last_save >= cfg.save_every:
-                save_state()
-                last_save = updates
+            row = {"iteration": iteration, "frames": frames, "charts/beta": beta,
+                   "charts/collect_fps": T * B / collect_time, "charts/episodes": len(ep_success),
+                   "charts/episode_success": float(np.mean(ep_success)) if ep_success else "",
+                   "charts/episode_length": float(np.mean(ep_length)) if ep_length else "",
+                   "charts/buffer_frames": buffer.frames}
+            # 3. learn on the whole dataset (in the learner thread with overlap)
+            learning = pool.submit(learn, frames) if pool else learn(frames)
+            if not pool:
+                finish_learning()
+        finish_learning()
     except KeyboardInterrupt:
+        finish_learning()
         save_state()
         logger.close()
         if progress:
             progress.stop()
         raise
+    finally:
+        if pool:
+            pool.shutdown(wait=True)
     if progress:
         progress.stop()
 
-    # final evaluation of the greedy policy on fresh episodes in the training houses
+    # the stop decision: choose the end threshold on fresh held-in episodes (never a held-out set)
+    end_threshold, calibration = cfg.end_threshold, None
+    if cfg.calibrate_episodes:
+        calibration = calibrate_end_threshold(net, worlds, episodes=cfg.calibrate_episodes, seed=cfg.seed + 4_241)
+        end_threshold = calibration.threshold
+    # final evaluation of the policy on fresh episodes in the training houses
     episodes = sample_episodes(worlds, cfg.final_eval_episodes, seed=cfg.seed + 7_919)
-    res, _ = run_episodes(worlds, episodes, NeuralPolicy(net, end_threshold=cfg.end_threshold), batch=128)
+    res, _ = run_episodes(worlds, episodes, NeuralPolicy(net, end_threshold=end_threshold), batch=128)
     final = summarize(res)
     wall = wall_before + time.perf_counter() - start
     card = {
@@ -400,7 +450,8 @@ def train(cfg: TrainConfig, *, worlds: Sequence[Any] | None = None, init_net: An
         "wall_time_s": round(wall, 1), "seed": cfg.seed, "parameters": count_parameters(net),
         "final_train_success": final["success"], "final_train_success_ci95": final["success_ci95"],
         "final_train_spl": final["spl"], "final_eval_episodes": final["episodes"],
-        "end_threshold": cfg.end_threshold,
+        "end_threshold": end_threshold, "end_weight": cfg.end_weight,
+        "end_threshold_calibration": calibration.card() if calibration else None,
         "torch_threads": threads, "cpus": os.cpu_count(), "config": asdict(cfg)}
     logger.log({"iteration": iteration, "frames": frames, "updates": updates, "wall_time": wall,
                 "eval/success": final["success"], "eval/spl": final["spl"]})
@@ -413,41 +464,57 @@ def train(cfg: TrainConfig, *, worlds: Sequence[Any] | None = None, init_net: An
     return TrainResult(net, card, logger.rows)
 
 
-@dataclass(frozen=True)
-class FinetuneConfig:
-    """How a trained policy keeps learning on new scenes (the closed loop's recipe, the same for every method)."""
+def finetune(net: Any, worlds: Sequence[Any], cfg: FinetuneConfig, seed: int) -> tuple[Any, dict[str, Any]]:
+    """Fine-tune a copy of ``net`` (a NavNet) on ``worlds`` (NavWorlds) as ``cfg`` says; returns (new net, card).
 
-    frames: int = 16_384
-    """Labelled frames of DAgger per call."""
-    num_envs: int = 64
-    """Parallel agents collecting frames."""
-    learning_rate: float = 1e-4
-    """Adam learning rate, annealed to zero over the call's frames."""
-    beta: float = 0.8
-    """Probability the expert acts while collecting (with lower beta the student's success fell, docs/agent.md)."""
-    rollout_steps: int = 32
-    """Steps per collection round (and length of the training chunks)."""
-    batch_chunks: int = 64
-    """Chunks per gradient step."""
-    updates_per_iter: int = 4
-    """Gradient steps per collection round."""
+    ``algo='dagger'``: DAgger from the current weights with a fresh Adam optimizer, expert-action
+    probability ``beta`` throughout, ``rollout_steps``-step blocks that are also the training
+    sequences, a dataset holding the whole run. ``algo='ppo'``: :func:`adaptenv.agents.ppo.train_ppo`
+    on the simulator's reward with PPOConfig's defaults for the rest (value warm-up at most half the
+    iterations). Nothing is written to disk.
+    """
+    if cfg.algo not in ("dagger", "ppo"):
+        raise ConfigError(f"FinetuneConfig.algo must be 'dagger' or 'ppo', got {cfg.algo!r}")
+    evals = cfg.final_eval_episodes or len(worlds)
+    if cfg.algo == "ppo":
+        from adaptenv.agents.ppo import train_ppo  # ppo.py imports this module
 
-    def train_config(self, *, seed: int, episodes: int) -> TrainConfig:
-        """The full TrainConfig this recipe stands for (nothing written, no evaluation during the run)."""
-        steps = self.rollout_steps
-        return TrainConfig(houses="(in memory)", frames=self.frames, output="", seed=seed, num_envs=self.num_envs,
-                           rollout_steps=steps, chunk_len=steps, batch_chunks=self.batch_chunks,
-                           updates_per_iter=self.updates_per_iter,
-                           buffer_frames=max(self.frames, steps * self.num_envs), beta_start=self.beta,
-                           beta_end=self.beta, eval_every=0, final_eval_episodes=episodes, progress=False,
-                           tensorboard=False, learning_rate=self.learning_rate, save_every=10**9)
-
-
-def finetune(net: NavNet, worlds: Sequence[NavWorld], cfg: FinetuneConfig, *, seed: int = 0
-             ) -> tuple[NavNet, dict[str, Any]]:
-    """Continue training ``net`` (left untouched) on ``worlds`` with ``cfg``; returns the new network and its card."""
-    result = train(cfg.train_config(seed=seed, episodes=len(worlds)), worlds=worlds, init_net=net)
+        iterations = -(-cfg.frames // (cfg.num_envs * cfg.rollout_steps))
+        pc = PPOConfig(houses="(in memory)", value_warmup_iters=min(PPOConfig.value_warmup_iters, iterations // 2), frames=cfg.frames, init="", output="", seed=seed, num_envs=cfg.num_envs,
+                       rollout_steps=cfg.rollout_steps, chunk_len=cfg.rollout_steps,
+                       learning_rate=cfg.learning_rate, end_threshold=cfg.end_threshold,
+                       calibrate_episodes=cfg.calibrate_episodes, eval_every=0, final_eval_episodes=evals,
+                       progress=False, tensorboard=False)
+        result = train_ppo(pc, worlds=worlds, init_net=net)
+        return result.net, result.card
+    steps = cfg.rollout_steps
+    tc = TrainConfig(houses="(in memory)", frames=cfg.frames, output="", seed=seed, num_envs=cfg.num_envs,
+                     rollout_steps=steps, chunk_len=steps, batch_chunks=cfg.batch_chunks,
+                     updates_per_iter=cfg.updates_per_iter, buffer_frames=max(cfg.frames, steps * cfg.num_envs),
+                     beta_start=cfg.beta, beta_end=cfg.beta, end_threshold=cfg.end_threshold,
+                     calibrate_episodes=cfg.calibrate_episodes, eval_every=0, final_eval_episodes=evals,
+                     progress=False, tensorboard=False, learning_rate=cfg.learning_rate, save_every=10**9)
+    result = train(tc, worlds=worlds, init_net=net)
     return result.net, result.card
+
+
+def finetune_policy(policy: Any, houses: Sequence[Any] | str, frames: int, *, seed: int = 0, **overrides: Any) -> Any:
+    """Continue training ``policy`` (a NeuralPolicy or checkpoint path) on ``houses``; returns a new policy.
+
+    ``houses`` may be House objects, NavWorlds or a ``--houses`` spec. DAgger keeps the expert in
+    control 80% of the time (beta 0.8 throughout: with lower beta the student's success fell, see
+    docs/agent.md); nothing is written unless ``output``/``run_dir`` is given in ``overrides`` (any
+    TrainConfig field).
+    """
+    from adaptenv.agents.checkpoint import load_checkpoint
+    from adaptenv.agents.houses import compile_houses, load_house_set
+
+    net = load_checkpoint(policy).net if isinstance(policy, (str, Path)) else getattr(policy, "net", policy)
+    worlds = load_house_set(houses).worlds if isinstance(houses, str) else compile_houses(list(houses))
+    settings = {"frames": frames, "seed": seed, "output": "", "houses": "(in memory)", "beta_start": 0.8,
+                "progress": False, "eval_every": 0, "final_eval_episodes": 64, "calibrate_episodes": 0, **overrides}
+    cfg = TrainConfig(**settings)
+    return train(cfg, worlds=worlds, init_net=net).policy()
 
 
 def _to_tensors(obs: dict[str, np.ndarray]) -> dict[str, torch.Tensor]:

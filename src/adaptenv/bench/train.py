@@ -5,7 +5,11 @@ Figures (median of repeated timings, houses of the ``pretrain-train`` preset, wa
 - labelled frames/s: BatchSim steps plus the expert's label for every agent (target >= 20,000/s);
 - DAgger collection frames/s: the same plus the policy's own forward pass (what ``train`` collects at);
 - gradient frames/s: cross-entropy steps on (chunk_len, batch_chunks) sequences (target >= 10,000/s);
-- inference steps/s of the policy at batch 256, and its parameter count.
+- inference steps/s of the policy at batch 256, and its parameter count;
+- end to end (``train`` itself: collection with the policy in the loop plus the gradient steps, default
+  TrainConfig, periodic evaluation off): frames/s with the learner thread (``--overlap``, the default)
+  and without it, timed alternately in this one process, and their ratio (target >= 10,000/s);
+- with ``--algo ppo``: PPO end to end (``adaptenv ppo`` with PPOConfig's defaults), frames/s.
 
 Each throughput is given per wall-clock second and per CPU-second of this process (all threads,
 ``time.process_time``), with the load average before and after: on a shared machine the wall
@@ -23,6 +27,7 @@ import numpy as np
 
 LABEL_TARGET = 20_000
 GRAD_TARGET = 10_000
+END_TO_END_TARGET = 10_000
 
 
 def wall_and_cpu(fn: Callable[[], object], repeats: int, warmup: int = 1) -> tuple[float, float]:
@@ -38,7 +43,63 @@ def wall_and_cpu(fn: Callable[[], object], repeats: int, warmup: int = 1) -> tup
     return statistics.median(walls), statistics.median(cpus)
 
 
-def run(*, as_json: bool = False, envs: int = 256, steps: int = 200, houses: str = "preset:pretrain-train") -> dict:
+def end_to_end(worlds: list, iterations: int, repeats: int) -> dict:
+    """``train`` frames/s with and without the learner thread, alternately (median of ``repeats`` each)."""
+    from adaptenv.agents.config import TrainConfig
+    from adaptenv.agents.train import train
+
+    block = TrainConfig().num_envs * TrainConfig().rollout_steps
+
+    def one(overlap: bool, n: int) -> float:
+        cfg = TrainConfig(frames=n * block, output="", run_dir="", eval_every=0, final_eval_episodes=1,
+                          calibrate_episodes=0, progress=False, tensorboard=False, overlap=overlap)
+        t = time.perf_counter()
+        train(cfg, worlds=worlds)
+        return n * block / (time.perf_counter() - t)
+
+    one(True, 1)  # warm the kernels and the per-(house, target) caches
+    fps: dict[bool, list[float]] = {False: [], True: []}
+    for _ in range(repeats):
+        for overlap in (False, True):
+            fps[overlap].append(one(overlap, iterations))
+    ratios = [b / a for a, b in zip(fps[False], fps[True], strict=True)]
+    return {"dagger_end_to_end_frames_per_s": statistics.median(fps[True]),
+            "dagger_end_to_end_serial_frames_per_s": statistics.median(fps[False]),
+            "dagger_overlap_speedup": statistics.median(ratios),
+            "end_to_end_target_met": bool(statistics.median(fps[True]) >= END_TO_END_TARGET)}
+
+
+def run_ppo(*, as_json: bool = False, iterations: int = 3, houses: str = "preset:pretrain-train") -> dict:
+    """PPO end to end (``train_ppo`` with PPOConfig's defaults, evaluation off): frames/s."""
+    from adaptenv.agents.config import PPOConfig
+    from adaptenv.agents.houses import load_house_set
+    from adaptenv.agents.network import configure_torch
+    from adaptenv.agents.ppo import train_ppo
+    from adaptenv.bench import emit
+
+    threads = configure_torch()
+    worlds = load_house_set(houses).worlds
+    block = PPOConfig().num_envs * PPOConfig().rollout_steps
+
+    def one(n: int) -> tuple[float, float]:
+        cfg = PPOConfig(frames=n * block, output="", run_dir="", eval_every=0, final_eval_episodes=0,
+                        calibrate_episodes=0, progress=False, tensorboard=False, value_warmup_iters=0)
+        w, c = time.perf_counter(), time.process_time()
+        train_ppo(cfg, worlds=worlds)
+        return n * block / (time.perf_counter() - w), n * block / (time.process_time() - c)
+
+    load_before = os.getloadavg()[0]
+    one(1)  # warm-up
+    wall, cpu = one(iterations)
+    figures = {"ppo_end_to_end_frames_per_s": wall, "ppo_end_to_end_frames_per_cpu_s": cpu,
+               "ppo_frames_timed": iterations * block, "houses": len(worlds), "torch_threads": threads,
+               "load_average_1min_before": load_before, "load_average_1min_after": os.getloadavg()[0]}
+    emit("PPO throughput", figures, as_json, notes=["collection + 4 epochs x 4 minibatches per 8,192-frame rollout"])
+    return figures
+
+
+def run(*, as_json: bool = False, envs: int = 256, steps: int = 200, houses: str = "preset:pretrain-train",
+        iterations: int = 3, repeats: int = 2) -> dict:
     """Measure and print the figures (table or JSON); returns them."""
     import torch
     import torch.nn.functional as F
@@ -134,8 +195,12 @@ def run(*, as_json: bool = False, envs: int = 256, steps: int = 200, houses: str
         "envs": envs, "houses": len(worlds), "torch_threads": threads,
         "label_target_met": bool(envs * steps / t_label >= LABEL_TARGET),
         "gradient_target_met": bool(L * N / t_grad >= GRAD_TARGET),
-        "load_average_1min_before": load_before, "load_average_1min_after": os.getloadavg()[0],
     }
+    if iterations > 0:
+        figures.update(end_to_end(worlds, iterations, repeats))
+    figures["load_average_1min_before"] = load_before
+    figures["load_average_1min_after"] = os.getloadavg()[0]
     emit("imitation-learning throughput", figures, as_json,
-         notes=[f"targets: labelled >= {LABEL_TARGET:,}/s, gradient >= {GRAD_TARGET:,}/s (2 cores)"])
+         notes=[f"targets: labelled >= {LABEL_TARGET:,}/s, gradient >= {GRAD_TARGET:,}/s, "
+                f"end to end >= {END_TO_END_TARGET:,}/s (2 cores)"])
     return figures

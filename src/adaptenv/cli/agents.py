@@ -17,13 +17,13 @@ _HOUSES_OPTION = typer.Option(..., "--houses", help="Folder of house JSON files,
 _OUT_OPTION = typer.Option(Path("runs/eval"), "-o", "--out", help="Output folder (one subfolder per house set).")
 
 
-def _train_command():
-    """Build ``adaptenv train`` from TrainConfig: one option per field, its docstring as the help."""
-    from adaptenv.agents.config import TrainConfig, field_docs
+def _config_params(cls: type) -> list[inspect.Parameter]:
+    """One typer option per field of the config dataclass ``cls``, its docstring as the help."""
+    from adaptenv.agents.config import field_docs
 
-    docs = field_docs(TrainConfig)
+    docs = field_docs(cls)
     params = []
-    for f in fields(TrainConfig):
+    for f in fields(cls):
         default = f.default if f.default is not MISSING else None
         flag = "--" + f.name.replace("_", "-")
         decls = [f"{flag}/--no-{f.name.replace('_', '-')}"] if f.type in ("bool", bool) else [flag]
@@ -31,6 +31,14 @@ def _train_command():
         kind = {"bool": bool, "int": int, "float": float, "str": str}.get(str(f.type), str)
         params.append(inspect.Parameter(f.name, inspect.Parameter.KEYWORD_ONLY, annotation=kind,
                                         default=typer.Option(default, *decls, help=docs.get(f.name, ""))))
+    return params
+
+
+def _train_command():
+    """Build ``adaptenv train`` from TrainConfig: one option per field, its docstring as the help."""
+    from adaptenv.agents.config import TrainConfig
+
+    params = _config_params(TrainConfig)
 
     def train(**kwargs) -> None:
         """Train a navigation policy by behaviour cloning + DAgger from the shortest-path expert."""
@@ -51,6 +59,29 @@ def _train_command():
 
     train.__signature__ = inspect.Signature(params)  # type: ignore[attr-defined]
     return train
+
+
+def _ppo_command():
+    """Build ``adaptenv ppo`` from PPOConfig: one option per field, its docstring as the help."""
+    from adaptenv.agents.config import PPOConfig
+
+    def ppo(**kwargs) -> None:
+        """Fine-tune a navigation policy by PPO on the simulator's SPOC-style reward (warm start: --init)."""
+        from rich.console import Console
+
+        from adaptenv.agents.ppo import train_ppo
+
+        cfg = PPOConfig(**kwargs)
+        result = train_ppo(cfg, command=config_command_line("ppo", cfg))
+        card = result.card
+        Console().print(
+            f"PPO on {card['n_houses']} houses ({card['houses']}): {card['frames']:,} frames in "
+            f"{card['wall_time_s']:.0f} s; end threshold {card['end_threshold']}; success on fresh training "
+            f"episodes {card['final_train_success']:.1%} (n={card['final_eval_episodes']})"
+            + (f"; wrote [bold]{cfg.output}[/]" if cfg.output else ""))
+
+    ppo.__signature__ = inspect.Signature(_config_params(PPOConfig))  # type: ignore[attr-defined]
+    return ppo
 
 
 def evaluate(
@@ -143,10 +174,13 @@ def failure_modes(report, house_set) -> dict[str, int]:
 
 def train_command_line(cfg) -> str:
     """The ``adaptenv train`` command reproducing ``cfg`` (options that differ from the defaults)."""
-    from adaptenv.agents.config import TrainConfig
+    return config_command_line("train", cfg)
 
-    default = TrainConfig()
-    args = ["adaptenv", "train"]
+
+def config_command_line(command: str, cfg) -> str:
+    """The ``adaptenv COMMAND`` line reproducing the config ``cfg`` (options that differ from the defaults)."""
+    default = type(cfg)()
+    args = ["adaptenv", command]
     for f in fields(cfg):
         value = getattr(cfg, f.name)
         if value == getattr(default, f.name) and f.name not in ("houses", "frames", "output", "seed"):
@@ -165,14 +199,24 @@ def _slug(spec: str) -> str:
 
 def bench_train(as_json: bool = JSON_OPTION,
                 envs: int = typer.Option(256, "--envs", help="Agents simulated at once."),
-                steps: int = typer.Option(200, "--steps", help="Steps timed per measurement.")) -> None:
-    """Training throughput: labelled frames/s, gradient frames/s, inference steps/s, parameter count."""
-    from adaptenv.bench.train import run
+                steps: int = typer.Option(200, "--steps", help="Steps timed per measurement."),
+                algo: str = typer.Option("dagger", "--algo", help="dagger (imitation figures and end to end) or ppo."),
+                iterations: int = typer.Option(3, "--iterations", min=0,
+                                               help="Training iterations timed end to end (0: skip that figure).")
+                ) -> None:
+    """Training throughput: labelled, gradient and end-to-end frames/s, inference steps/s, parameter count."""
+    from adaptenv.bench.train import run, run_ppo
 
-    run(as_json=as_json, envs=envs, steps=steps)
+    if algo == "ppo":
+        run_ppo(as_json=as_json, iterations=max(1, iterations))
+    elif algo == "dagger":
+        run(as_json=as_json, envs=envs, steps=steps, iterations=iterations)
+    else:
+        raise typer.BadParameter(f"expected dagger or ppo, got {algo!r}", param_hint="--algo")
 
 
 def register(app: typer.Typer, bench: typer.Typer) -> None:
     app.command("train")(_train_command())
+    app.command("ppo")(_ppo_command())
     app.command("evaluate")(evaluate)
     bench.command("train")(bench_train)

@@ -37,11 +37,12 @@ import numpy as np
 
 from adaptenv.adapt.llm.accounting import check_llm_section, same_run, scenes_usage
 from adaptenv.agents.checkpoint import load_checkpoint, save_checkpoint
+from adaptenv.agents.config import FinetuneConfig
 from adaptenv.agents.evaluate import EpisodeResult, mean_se
 from adaptenv.agents.houses import load_house_set
 from adaptenv.agents.network import NeuralPolicy
 from adaptenv.agents.registry import resolve_policy
-from adaptenv.agents.train import FinetuneConfig, finetune
+from adaptenv.agents.train import finetune
 from adaptenv.curriculum import buffer as lb
 from adaptenv.curriculum.executor import Executor, InProcessExecutor
 from adaptenv.curriculum.jobs import (
@@ -165,9 +166,10 @@ def evaluate_sets(weights: PolicyWeights, specs: dict[str, str], episodes: int, 
             for name in specs}
 
 
-def finetune_config(cfg: LoopConfig) -> FinetuneConfig:
+def finetune_config(cfg: LoopConfig, end_threshold: float) -> FinetuneConfig:
     """The loop's fine-tuning recipe (identical for every method): DAgger at beta 0.8, ``finetune_frames`` per iteration."""
-    return FinetuneConfig(frames=cfg.finetune_frames, num_envs=cfg.finetune_envs, learning_rate=cfg.finetune_lr)
+    return FinetuneConfig(frames=cfg.finetune_frames, num_envs=cfg.finetune_envs, learning_rate=cfg.finetune_lr,
+                          end_threshold=end_threshold)
 
 
 def run_loop(cfg: LoopConfig, run_dir: str | Path, *, resume: bool = False, executor: Executor | None = None,
@@ -237,7 +239,7 @@ def run_loop(cfg: LoopConfig, run_dir: str | Path, *, resume: bool = False, exec
 
         # 3. fine-tune pi on the chosen scenes with expert labels
         say(f"t={t}: fine-tuning on {len(train_names)} scenes ({cfg.finetune_frames} frames)")
-        net, card = finetune(pi_t.net, [store.world(x) for x in train_names], finetune_config(cfg),
+        net, card = finetune(pi_t.net, [store.world(x) for x in train_names], finetune_config(cfg, pi_t.end_threshold),
                              seed=it.seed(Stream.FINETUNE) % 2**31)
         state.env_steps += int(card["frames"])
         state.grad_updates += int(card["updates"])

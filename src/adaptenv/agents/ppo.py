@@ -1,0 +1,365 @@
+"""PPO fine-tuning of the navigation policy on the simulator's SPOC-style shaped reward.
+
+One readable file in CleanRL's manner (``ppo_atari_lstm.py``), configured by one dataclass
+(:class:`~adaptenv.agents.config.PPOConfig`, whose field docstrings are the ``adaptenv ppo --help``
+text and which is saved as ``config.json`` in the run folder). The reward is ``BatchSim``'s::
+
+    r = -0.01 + max(0, best - d) + 10 * success
+
+(``d`` the geodesic distance to the target's success region, ``best`` the smallest ``d`` so far).
+
+Each iteration:
+
+1. **Collect** ``rollout_steps`` steps of ``num_envs`` agents in a :class:`BatchSim` over the
+   training houses (a finished episode is replaced at once by a fresh one), storing observations,
+   episode-start flags, actions, log-probabilities, values, rewards, and the GRU memory at every
+   ``chunk_len``-th step. With ``stop_rule='threshold'`` the agent acts exactly as the saved
+   :class:`NeuralPolicy` does: ``end`` iff its probability >= ``end_threshold``, otherwise a motion
+   sampled from the softmax over the six motions; the stop is then a deterministic rule, so RL
+   trains the motions (searching) and the stop head keeps what imitation taught it (plus
+   ``bc_coef``'s labels; the saved threshold is re-calibrated on held-in episodes at the end, see
+   :mod:`adaptenv.agents.stop`). With ``stop_rule='sample'`` every action, ``end`` included, is
+   drawn from the full softmax.
+2. **Advantages** by GAE(``gamma``, ``gae_lambda``); a finished episode (``end`` or the step cap)
+   does not bootstrap (CleanRL's choice: truncation is treated as termination).
+3. **Learn**: ``update_epochs`` passes over the rollout in ``num_minibatches`` minibatches of
+   ``chunk_len``-step sequences (GRU memory at a sequence start: the stored one, reset where an
+   episode starts), with PPO's clipped surrogate, a value loss, an entropy bonus and, when
+   ``bc_coef`` > 0, cross-entropy to the shortest-path expert's labels of the visited states.
+   For the first ``value_warmup_iters`` iterations only the value head learns (it reads the
+   policy's memory and features, detached), so a random critic cannot move a warm-started policy.
+
+Warm start: ``init`` is a checkpoint written by ``adaptenv train`` (behaviour cloning + DAgger)
+or ``pretrained``. Outputs: the policy checkpoint at ``output`` (the network only; the value head
+is not needed to act) with its card, and in ``run_dir`` ``config.json``, ``metrics.csv`` and
+TensorBoard events.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import time
+from collections.abc import Sequence
+from dataclasses import asdict
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+import torch.nn.functional as F
+from torch import nn
+
+from adaptenv.agents.checkpoint import load_checkpoint, save_checkpoint
+from adaptenv.agents.config import PPOConfig
+from adaptenv.agents.evaluate import run_episodes, sample_episodes, summarize
+from adaptenv.agents.houses import load_house_set
+from adaptenv.agents.network import (
+    NavNet,
+    NetConfig,
+    NeuralPolicy,
+    choose_actions,
+    configure_torch,
+    count_parameters,
+    obs_to_tensors,
+)
+from adaptenv.agents.stop import calibrate_end_threshold
+from adaptenv.agents.train import RunLogger, TrainResult
+from adaptenv.errors import ConfigError
+from adaptenv.progress import ProgressBar
+from adaptenv.sim.expert import ShortestPathExpert
+from adaptenv.sim.spec import END, N_RAYS
+from adaptenv.sim.vector import BatchSim, EpisodeSampler
+
+__all__ = ["PPOConfig", "ActorCritic", "train_ppo", "check_ppo_config"]
+
+PPO_LOG_KEYS = ("iteration", "frames", "updates", "wall_time", "charts/learning_rate", "charts/SPS",
+                "charts/collect_fps", "charts/episodes", "charts/episodic_return", "charts/episode_success",
+                "charts/episode_length", "losses/value_loss", "losses/policy_loss", "losses/entropy",
+                "losses/bc_loss", "losses/approx_kl", "losses/clipfrac", "losses/explained_variance",
+                "eval/success", "eval/spl")
+
+
+def check_ppo_config(cfg: PPOConfig) -> None:
+    """Raise one ConfigError for the first inconsistent setting (naming the flag and the fix)."""
+    for name in ("frames", "num_envs", "rollout_steps", "chunk_len", "num_minibatches", "update_epochs",
+                 "max_episode_steps", "hidden", "feature_dim"):
+        if getattr(cfg, name) <= 0:
+            raise ConfigError(f"--{name.replace('_', '-')} must be positive, got {getattr(cfg, name)}")
+    if cfg.rollout_steps % cfg.chunk_len:
+        raise ConfigError(f"--rollout-steps ({cfg.rollout_steps}) must be a multiple of --chunk-len ({cfg.chunk_len})")
+    sequences = cfg.num_envs * (cfg.rollout_steps // cfg.chunk_len)
+    if sequences % cfg.num_minibatches:
+        raise ConfigError(f"--num-minibatches ({cfg.num_minibatches}) must divide the rollout's {sequences} "
+                          "sequences (num_envs * rollout_steps / chunk_len)")
+    if cfg.stop_rule not in ("threshold", "sample"):
+        raise ConfigError(f"--stop-rule must be 'threshold' or 'sample', got {cfg.stop_rule!r}")
+
+
+class ActorCritic(nn.Module):
+    """A :class:`NavNet` (the actor: its own head) plus a value head reading the same memory and features."""
+
+    def __init__(self, net: NavNet):
+        super().__init__()
+        self.net = net
+        c = net.config
+        self.value = nn.Sequential(nn.Linear(c.hidden + c.feature_dim, 128), nn.Tanh(), nn.Linear(128, 1))
+
+    def forward(self, obs: dict[str, torch.Tensor], done: torch.Tensor, h0: torch.Tensor, *,
+                detach_value: bool = False) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+        """Logits (T, B, A), values (T, B) and the final memory of a (T, B) sequence."""
+        z, h = self.net.core(obs, done, h0)
+        value = self.value(z.detach() if detach_value else z).squeeze(-1)
+        return self.net.head(z), value, h
+
+
+def log_prob_entropy(logits: torch.Tensor, actions: torch.Tensor, stop_rule: str
+                     ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+    """Log-probability of ``actions`` under the acting distribution, its entropy, and which actions were drawn from it.
+
+    ``threshold``: the distribution over the six motions (``end`` is a deterministic rule, masked out);
+    ``sample``: the full softmax.
+    """
+    if stop_rule == "threshold":
+        logits = logits.masked_fill(torch.arange(logits.shape[-1]) == END, float("-inf"))
+        drawn = actions != END
+    else:
+        drawn = torch.ones_like(actions, dtype=torch.bool)
+    logp = torch.log_softmax(logits, -1)
+    chosen = logp.gather(-1, actions.clamp(max=logits.shape[-1] - 1)[..., None]).squeeze(-1)
+    p = logp.exp()
+    entropy = -(p * torch.where(p > 0, logp, torch.zeros_like(logp))).sum(-1)
+    return torch.where(drawn, chosen, torch.zeros_like(chosen)), entropy, drawn
+
+
+def sample_actions(logits: torch.Tensor, u: np.ndarray, stop_rule: str, end_threshold: float) -> np.ndarray:
+    """Actions by the acting rule (see :func:`log_prob_entropy`) from uniforms ``u`` (B,)."""
+    if stop_rule == "threshold":
+        return choose_actions(logits, u, end_threshold)
+    cdf = np.cumsum(torch.softmax(logits.float(), -1).numpy(), -1)
+    return np.minimum((cdf < (u * cdf[:, -1])[:, None]).sum(-1), logits.shape[-1] - 1).astype(np.int64)
+
+
+def default_ppo_run_dir(cfg: PPOConfig) -> Path | None:
+    if cfg.run_dir:
+        return Path(cfg.run_dir)
+    return Path("runs/ppo") / Path(cfg.output).stem if cfg.output else None
+
+
+def _initial_net(cfg: PPOConfig, init_net: NavNet | None) -> NavNet:
+    """A copy of ``init_net``, else the ``init`` checkpoint, else fresh weights."""
+    if init_net is not None:
+        net = NavNet(init_net.config)
+        net.load_state_dict(init_net.state_dict())
+        return net
+    if cfg.init == "pretrained":
+        from adaptenv.agents.registry import pretrained_path
+
+        return load_checkpoint(pretrained_path()).net
+    if cfg.init:
+        return load_checkpoint(cfg.init).net
+    return NavNet(NetConfig(hidden=cfg.hidden, feature_dim=cfg.feature_dim))
+
+
+def train_ppo(cfg: PPOConfig, *, worlds: Sequence[Any] | None = None, init_net: NavNet | None = None,
+              command: str = "") -> TrainResult:
+    """Run PPO as configured; returns the trained network, its card and the logged rows."""
+    check_ppo_config(cfg)
+    threads = configure_torch(cfg.threads or None)
+    run_dir = default_ppo_run_dir(cfg)
+    if run_dir:
+        run_dir.mkdir(parents=True, exist_ok=True)
+        (run_dir / "config.json").write_text(json.dumps(asdict(cfg), indent=1) + "\n", encoding="utf-8")
+    torch.manual_seed(cfg.seed)
+    rng = np.random.default_rng(cfg.seed)
+    worlds = list(worlds) if worlds is not None else load_house_set(cfg.houses).worlds
+    net = _initial_net(cfg, init_net)
+    agent = ActorCritic(net)
+    optimizer = torch.optim.Adam(agent.parameters(), lr=cfg.learning_rate, eps=1e-5)
+    B, T, L = cfg.num_envs, cfg.rollout_steps, cfg.chunk_len
+    H = net.config.hidden
+    n_iterations = -(-cfg.frames // (B * T))
+
+    # storage of one rollout (CleanRL's buffers), numpy on the collection side
+    obs_buf = {"depth": np.zeros((T, B, N_RAYS), np.float32), "semantic": np.zeros((T, B, N_RAYS), np.int64),
+               "target": np.zeros((T, B), np.int64), "prev_action": np.zeros((T, B), np.int64),
+               "collided": np.zeros((T, B), np.int64)}
+    first_buf = np.zeros((T, B), np.bool_)
+    actions_buf = np.zeros((T, B), np.int64)
+    logprobs_buf = np.zeros((T, B), np.float32)
+    values_buf = np.zeros((T, B), np.float32)
+    rewards_buf = np.zeros((T, B), np.float32)
+    labels_buf = np.zeros((T, B), np.int64)
+    h0_buf = torch.zeros(T // L, B, H)
+
+    sampler = EpisodeSampler(worlds)
+    sim = BatchSim(worlds, max_steps=cfg.max_episode_steps)
+    expert = ShortestPathExpert() if cfg.bc_coef > 0 else None
+    obs, _ = sim.reset(*sampler.draw(rng, B))
+    first = np.ones(B, dtype=bool)
+    h = net.initial_state(B)
+    episode_return = np.zeros(B)
+    logger = RunLogger(run_dir, cfg.tensorboard, PPO_LOG_KEYS)
+    progress = ProgressBar("PPO" if cfg.progress else None, n_iterations * B * T, transient=False).start()
+    frames, updates = 0, 0
+    start = time.perf_counter()
+    for iteration in range(1, n_iterations + 1):
+        lr = cfg.learning_rate * ((1.0 - (iteration - 1) / n_iterations) if cfg.anneal_lr else 1.0)
+        for group in optimizer.param_groups:
+            group["lr"] = lr
+
+        # 1. collect a (T, B) rollout with the current policy
+        t0 = time.perf_counter()
+        finished_returns, finished_success, finished_length = [], [], []
+        agent.eval()
+        for t in range(T):
+            if t % L == 0:
+                h0_buf[t // L] = h
+            for k in obs_buf:
+                obs_buf[k][t] = obs[k]
+            first_buf[t] = first
+            if expert is not None:
+                labels_buf[t] = expert.act_batch(sim.worlds, sim.env, sim.target_types, sim.x, sim.z, sim.yaw)
+            with torch.no_grad():
+                seq = {k: v[None] for k, v in obs_to_tensors(obs).items()}
+                logits, value, h = agent(seq, torch.from_numpy(first)[None], h)
+                logits, value = logits[0], value[0]
+                action = sample_actions(logits, rng.random(B), cfg.stop_rule, cfg.end_threshold)
+                logprob, _, _ = log_prob_entropy(logits, torch.from_numpy(action), cfg.stop_rule)
+            actions_buf[t], logprobs_buf[t], values_buf[t] = action, logprob.numpy(), value.numpy()
+            obs, reward, terminated, truncated, info = sim.step(action)
+            rewards_buf[t] = reward
+            episode_return += reward
+            finished = np.flatnonzero(terminated | truncated)
+            first = np.zeros(B, dtype=bool)
+            if finished.size:
+                finished_returns += episode_return[finished].tolist()
+                finished_success += info["success"][finished].tolist()
+                finished_length += info["steps"][finished].tolist()
+                episode_return[finished] = 0.0
+                obs = sim.reset_at(finished, *sampler.draw(rng, finished.size))
+                first[finished] = True
+        frames += B * T
+        collect_time = time.perf_counter() - t0
+
+        # 2. advantages by GAE; a new episode at t+1 cuts the bootstrap
+        with torch.no_grad():
+            seq = {k: v[None] for k, v in obs_to_tensors(obs).items()}
+            _, next_value, _ = agent(seq, torch.from_numpy(first)[None], h)
+            next_value = next_value[0].numpy()
+        advantages = np.zeros((T, B), np.float32)
+        last_gae = np.zeros(B, np.float32)
+        for t in reversed(range(T)):
+            next_nonterminal = 1.0 - (first if t == T - 1 else first_buf[t + 1]).astype(np.float32)
+            next_values = next_value if t == T - 1 else values_buf[t + 1]
+            delta = rewards_buf[t] + cfg.gamma * next_values * next_nonterminal - values_buf[t]
+            last_gae = delta + cfg.gamma * cfg.gae_lambda * next_nonterminal * last_gae
+            advantages[t] = last_gae
+        returns = advantages + values_buf
+
+        # 3. learn: clipped surrogate + value + entropy (+ imitation), on chunk_len-step sequences
+        agent.train()
+        warmup = iteration <= cfg.value_warmup_iters
+        b_obs = {k: torch.from_numpy(v) for k, v in obs_buf.items()}
+        b_first, b_actions = torch.from_numpy(first_buf), torch.from_numpy(actions_buf)
+        b_logprobs, b_adv = torch.from_numpy(logprobs_buf), torch.from_numpy(advantages)
+        b_returns, b_labels = torch.from_numpy(returns), torch.from_numpy(labels_buf)
+        n_chunks = T // L
+        seq_ids = np.arange(n_chunks * B)  # sequence s = chunk s // B of env s % B
+        mb_size = seq_ids.size // cfg.num_minibatches
+        stats: dict[str, list[float]] = {k: [] for k in ("v", "pg", "ent", "bc", "kl", "clip")}
+        for _epoch in range(cfg.update_epochs):
+            rng.shuffle(seq_ids)
+            for lo in range(0, seq_ids.size, mb_size):
+                mb = seq_ids[lo: lo + mb_size]
+                chunk, env = mb // B, mb % B
+                tt = chunk[None, :] * L + np.arange(L)[:, None]  # (L, mb)
+                idx = (torch.from_numpy(tt), torch.from_numpy(env)[None, :])
+                mb_obs = {k: v[idx] for k, v in b_obs.items()}
+                logits, new_value, _ = agent(mb_obs, b_first[idx], h0_buf[chunk, env], detach_value=warmup)
+                new_logprob, entropy, drawn = log_prob_entropy(logits, b_actions[idx], cfg.stop_rule)
+                log_ratio = new_logprob - b_logprobs[idx]
+                ratio = log_ratio.exp()
+                w = drawn.float()
+                with torch.no_grad():
+                    approx_kl = (((ratio - 1) - log_ratio) * w).sum() / w.sum().clamp(min=1)
+                    clipfrac = (((ratio - 1.0).abs() > cfg.clip_coef).float() * w).sum() / w.sum().clamp(min=1)
+                adv = b_adv[idx]
+                adv = (adv - adv.mean()) / (adv.std() + 1e-8)
+                pg_loss = (torch.max(-adv * ratio, -adv * ratio.clamp(1 - cfg.clip_coef, 1 + cfg.clip_coef))
+                           * w).sum() / w.sum().clamp(min=1)
+                v_loss = 0.5 * ((new_value - b_returns[idx]) ** 2).mean()
+                ent = entropy.mean()
+                bc_loss = (F.cross_entropy(logits.reshape(-1, logits.shape[-1]), b_labels[idx].reshape(-1))
+                           if expert is not None else torch.zeros(()))
+                if warmup:
+                    loss = cfg.vf_coef * v_loss
+                else:
+                    loss = pg_loss - cfg.ent_coef * ent + cfg.vf_coef * v_loss + cfg.bc_coef * bc_loss
+                optimizer.zero_grad()
+                loss.backward()
+                nn.utils.clip_grad_norm_(agent.parameters(), cfg.max_grad_norm)
+                optimizer.step()
+                updates += 1
+                for key, val in (("v", v_loss), ("pg", pg_loss), ("ent", ent), ("bc", bc_loss), ("kl", approx_kl),
+                                 ("clip", clipfrac)):
+                    stats[key].append(float(val.detach()))
+            if cfg.target_kl and not warmup and stats["kl"][-1] > cfg.target_kl:
+                break
+        y_var = np.var(returns)
+        explained = float("nan") if y_var == 0 else float(1 - np.var(returns - values_buf) / y_var)
+
+        elapsed = time.perf_counter() - start
+        row: dict[str, Any] = {
+            "iteration": iteration, "frames": frames, "updates": updates, "wall_time": elapsed,
+            "charts/learning_rate": lr, "charts/SPS": frames / elapsed, "charts/collect_fps": B * T / collect_time,
+            "charts/episodes": len(finished_returns),
+            "charts/episodic_return": float(np.mean(finished_returns)) if finished_returns else "",
+            "charts/episode_success": float(np.mean(finished_success)) if finished_success else "",
+            "charts/episode_length": float(np.mean(finished_length)) if finished_length else "",
+            "losses/value_loss": float(np.mean(stats["v"])), "losses/policy_loss": float(np.mean(stats["pg"])),
+            "losses/entropy": float(np.mean(stats["ent"])), "losses/bc_loss": float(np.mean(stats["bc"])),
+            "losses/approx_kl": float(np.mean(stats["kl"])), "losses/clipfrac": float(np.mean(stats["clip"])),
+            "losses/explained_variance": explained}
+        if cfg.eval_every and iteration % cfg.eval_every == 0:
+            episodes = sample_episodes(worlds, cfg.eval_episodes, seed=cfg.seed * 100_003 + iteration)
+            res, _ = run_episodes(worlds, episodes, NeuralPolicy(net, end_threshold=cfg.end_threshold),
+                                  batch=min(cfg.eval_episodes, 128))
+            s = summarize(res)
+            row["eval/success"], row["eval/spl"] = s["success"], s["spl"]
+        logger.log(row)
+        if progress:
+            progress.update(frames,
+                            description=f"PPO return={row['charts/episodic_return'] or 0:.2f} "
+                                        f"success={row['charts/episode_success'] or 0:.2f}"
+                                        + (f" eval={row['eval/success']:.2f}" if "eval/success" in row else ""))
+    if progress:
+        progress.stop()
+
+    # the stop decision on fresh held-in episodes, then the final evaluation on the training houses
+    net.eval()
+    end_threshold, calibration = cfg.end_threshold, None
+    if cfg.calibrate_episodes:
+        calibration = calibrate_end_threshold(net, worlds, episodes=cfg.calibrate_episodes, seed=cfg.seed + 4_241)
+        end_threshold = calibration.threshold
+    final = {"success": float("nan"), "success_ci95": [float("nan")] * 2, "spl": float("nan"), "episodes": 0}
+    if cfg.final_eval_episodes:
+        res, _ = run_episodes(worlds, sample_episodes(worlds, cfg.final_eval_episodes, seed=cfg.seed + 7_919),
+                              NeuralPolicy(net, end_threshold=end_threshold), batch=128)
+        final = summarize(res)
+    wall = time.perf_counter() - start
+    card = {
+        "command": command, "algo": "ppo", "houses": cfg.houses, "n_houses": len(worlds), "frames": frames,
+        "updates": updates, "wall_time_s": round(wall, 1), "seed": cfg.seed, "init": cfg.init,
+        "parameters": count_parameters(net), "final_train_success": final["success"],
+        "final_train_success_ci95": final["success_ci95"], "final_train_spl": final["spl"],
+        "final_eval_episodes": final["episodes"], "end_threshold": end_threshold,
+        "end_threshold_calibration": calibration.card() if calibration else None,
+        "torch_threads": threads, "cpus": os.cpu_count(), "config": asdict(cfg)}
+    logger.log({"iteration": n_iterations, "frames": frames, "updates": updates, "wall_time": wall,
+                "eval/success": final["success"], "eval/spl": final["spl"]})
+    logger.close()
+    if cfg.output:
+        save_checkpoint(cfg.output, net, {k: v for k, v in card.items() if k != "config"})
+        Path(cfg.output).with_suffix(".json").write_text(json.dumps(card, indent=1) + "\n", encoding="utf-8")
+    return TrainResult(net, card, logger.rows)
