@@ -221,8 +221,8 @@ def train(cfg: TrainConfig, *, worlds: Sequence[Any] | None = None, init_net: An
         configure_torch,
         count_parameters,
     )
+    from adaptenv.agents.teachers import make_teacher
     from adaptenv.sim import task
-    from adaptenv.sim.expert import ShortestPathExpert
     from adaptenv.sim.spec import N_RAYS
     from adaptenv.sim.vector import BatchSim
 
@@ -282,8 +282,8 @@ def train(cfg: TrainConfig, *, worlds: Sequence[Any] | None = None, init_net: An
         envs = rng.integers(0, len(worlds), n)
         return [task.sample_episode(worlds[e], rng) for e in envs.tolist()], envs
 
-    expert = ShortestPathExpert()
     sim = BatchSim(worlds, max_steps=cfg.max_episode_steps)
+    teacher = make_teacher(cfg.teacher, sim, mix=cfg.teacher_mix, seed=cfg.seed)  # agents/teachers.py
     B, T, L = cfg.num_envs, cfg.rollout_steps, cfg.chunk_len
     eps, envs = new_episodes(B)
     obs, _ = sim.reset(eps, envs)
@@ -311,8 +311,7 @@ def train(cfg: TrainConfig, *, worlds: Sequence[Any] | None = None, init_net: An
                 for k in ("depth", "semantic", "target", "prev_action", "collided"):
                     block[k][t] = obs[k]
                 block["first"][t] = first
-                labels = np.asarray(expert.act_batch(sim.worlds, sim.env, sim.target_types, sim.x, sim.z, sim.yaw),
-                                    dtype=np.int64)
+                labels = teacher.label(obs, first)
                 block["label"][t] = labels
                 with torch.no_grad():
                     logits, h = net.step(_to_tensors(obs), torch.from_numpy(first), h)
