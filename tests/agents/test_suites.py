@@ -82,3 +82,21 @@ def test_suite_episodes_are_pinned(name):
     eps = sample_episodes(house_set.worlds, 20, 0)
     assert all(_geodesic(house_set.worlds[e], ep) >= spec.floor.min_geodesic - 0.05 for e, ep in eps)
     assert episodes_hash(eps) == PINNED[(name, spec.version)]
+
+
+def test_cli_evaluate_applies_a_start_distance_floor(tmp_path):
+    import json
+
+    from typer.testing import CliRunner
+
+    from adaptenv.cli import app
+
+    out = tmp_path / "eval"
+    res = CliRunner().invoke(app, ["evaluate", "--policy", "expert", "--houses", "preset:tiny", "--episodes", "4",
+                                   "--min-geodesic", "1.5", "-o", str(out)])
+    assert res.exit_code == 0, res.output
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["floor"] == "geodesic >= 1.5 m" and "--min-geodesic 1.5" in summary["command"]
+    rows = (out / "episodes.csv").read_text().splitlines()[1:]
+    optimal = [float(r.split(",")[11]) for r in rows]
+    assert len(optimal) == 4 and min(optimal) >= 1.5 - 0.05
