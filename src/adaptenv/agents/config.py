@@ -79,6 +79,10 @@ class TrainConfig:
     """Show a progress bar."""
     tensorboard: bool = True
     """Also log to TensorBoard when the tensorboard package is importable."""
+    teacher: str = "expert"
+    """Who labels DAgger's states: expert (shortest path), explorer (searches its own map) or mix."""
+    teacher_mix: float = 0.5
+    """With --teacher mix: probability that an episode is labelled by the explorer."""
 
 
 @dataclass

@@ -29,6 +29,7 @@ from typing import Any
 import numpy as np
 
 from adaptenv.agents.policy import Policy, PolicyContext, bind_policy, policy_name
+from adaptenv.agents.suites import EpisodeFloor, sample_floored
 from adaptenv.sim.spec import ACTIONS, MAX_STEPS
 
 Z95 = 1.959963984540054
@@ -64,12 +65,19 @@ class Recorded:
     moved: list[bool] = field(default_factory=list)
 
 
-def sample_episodes(worlds: Sequence[Any], n: int, seed: int, *, use_house_start: bool = False, start: int = 0
-                    ) -> list[tuple[int, Any]]:
+def sample_episodes(worlds: Sequence[Any], n: int, seed: int, *, use_house_start: bool = False, start: int = 0,
+                    floor: EpisodeFloor | None = None) -> list[tuple[int, Any]]:
     """Episodes ``start..n-1`` as (house index, Episode) pairs: house ``k % len(worlds)``, episode seed
-    derived from ``(seed, k)``, so any slice equals the same slice of the whole list."""
+    derived from ``(seed, k)``, so any slice equals the same slice of the whole list.
+
+    ``floor`` (default: the floor a ``suite:`` house set carries, see :mod:`adaptenv.agents.suites`)
+    keeps only starts far enough from the target.
+    """
     from adaptenv.sim import task
 
+    floor = floor if floor is not None else getattr(worlds, "floor", None)
+    if floor is not None and floor.active and not use_house_start:
+        return sample_floored(worlds, n, seed, floor, start=start)
     out = []
     for k in range(start, n):
         e = k % len(worlds)
@@ -269,17 +277,18 @@ def _evaluate_shard(args: tuple) -> tuple[list[EpisodeResult], dict[int, Recorde
 
 def evaluate(policy: Policy | str, house_set: Any, *, episodes: int = 200, seed: int = 0, batch: int = 64,
              workers: int = 1, max_steps: int = MAX_STEPS, with_expert: bool = True,
-             progress: Callable[[int], None] | None = None) -> EvalReport:
+             progress: Callable[[int], None] | None = None, floor: EpisodeFloor | None = None) -> EvalReport:
     """Evaluate ``policy`` (an object, or a ``--policy`` spec when using workers) on a HouseSet.
 
     With ``workers > 1`` the episodes are split in contiguous slices over a process pool (spawned,
-    one torch thread each); the policy must then be given as a spec string.
+    one torch thread each); the policy must then be given as a spec string. ``floor`` overrides the
+    start-distance floor of a ``suite:`` house set (see :func:`sample_episodes`).
     """
     from adaptenv.agents.policy import ExpertPolicy
     from adaptenv.agents.registry import resolve_policy
 
     worlds = house_set.worlds
-    eps = sample_episodes(worlds, episodes, seed)
+    eps = sample_episodes(worlds, episodes, seed, floor=floor)
     name = policy if isinstance(policy, str) else policy_name(policy)
     if workers > 1:
         import multiprocessing as mp
@@ -310,6 +319,9 @@ def evaluate(policy: Policy | str, house_set: Any, *, episodes: int = 200, seed:
     if with_expert:
         add_sel(results, expert)
     summary = summarize(results)
+    active = floor if floor is not None else getattr(worlds, "floor", None)
+    if active is not None and active.active:
+        summary["floor"] = active.label()
     if with_expert:
         summary["expert_success"] = summarize(expert)["success"]
     return EvalReport(name, house_set.spec, seed, summary, results, recordings)

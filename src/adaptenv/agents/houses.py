@@ -1,4 +1,9 @@
-"""Resolve a ``--houses`` value (a folder, a file, or ``preset:NAME``) into named compiled worlds."""
+"""Resolve a ``--houses`` value (a folder, a file, ``preset:NAME`` or ``suite:NAME``) into named compiled worlds.
+
+``suite:NAME`` (see :mod:`adaptenv.agents.suites`) loads the suite's houses and attaches its episode
+floor to ``HouseSet.worlds``, so :func:`adaptenv.agents.evaluate.sample_episodes` draws the suite's
+episodes from it.
+"""
 
 from __future__ import annotations
 
@@ -9,7 +14,8 @@ from typing import Any
 
 from adaptenv.errors import ConfigError
 
-HOUSES_HELP = "Houses: a folder of house JSON files, one house file, or preset:NAME (e.g. preset:pretrain-train)."
+HOUSES_HELP = ("Houses: a folder of house JSON files, one house file, preset:NAME (e.g. preset:pretrain-train) "
+               "or suite:NAME (e.g. suite:long-unseen).")
 
 
 @dataclass
@@ -30,6 +36,12 @@ def load_house_set(spec: str | Path) -> HouseSet:
     from adaptenv.scene.house import load_house
 
     text = str(spec)
+    if text.startswith("suite:"):
+        from adaptenv.agents.suites import SuiteWorlds, suite_spec
+
+        suite = suite_spec(text.partition(":")[2])
+        base = load_house_set(suite.houses)
+        return HouseSet(text, base.houses, SuiteWorlds(base.worlds, suite.floor))
     if text.startswith("preset:"):
         from adaptenv.scene.procedural import PRESETS, generate_preset
 

@@ -4,6 +4,8 @@ Accepted specs (every command taking ``--policy`` uses :func:`resolve_policy`):
 
 - ``pretrained``: the checkpoint shipped in the package (``adaptenv/agents/data/pretrained.pt``).
 - ``expert``: the shortest-path expert (privileged).
+- ``explorer``: frontier exploration on the agent's own map, then the shortest path to a sighted
+  target (knows its pose, not the target's location; :mod:`adaptenv.agents.explorer`).
 - ``random`` or ``random:SEED``: uniformly random actions.
 - a path to a checkpoint file (``*.pt``) written by ``adaptenv train``.
 - ``module:attribute`` or ``path/to/file.py:attribute``: user code. The attribute may be a policy
@@ -18,13 +20,14 @@ import sys
 from importlib import resources
 from pathlib import Path
 
+from adaptenv.agents.explorer import ExplorerPolicy
 from adaptenv.agents.policy import ExpertPolicy, Policy, RandomPolicy
 from adaptenv.errors import ConfigError
 
-BUILTINS = ("pretrained", "expert", "random")
-_HELP = ("expected pretrained, expert, random, a checkpoint path (.pt) or module:attribute "
+BUILTINS = ("pretrained", "expert", "explorer", "random")
+_HELP = ("expected pretrained, expert, explorer, random, a checkpoint path (.pt) or module:attribute "
          "(e.g. examples/my_policy.py:policy)")
-POLICY_HELP = "Policy: pretrained, expert, random, a checkpoint path (.pt), or module:attribute."
+POLICY_HELP = "Policy: pretrained, expert, explorer, random, a checkpoint path (.pt), or module:attribute."
 
 
 def pretrained_path() -> Path:
@@ -52,6 +55,8 @@ def resolve_policy(spec: str, *, seed: int = 0) -> Policy:
         return load_pretrained(seed=seed)
     if spec == "expert":
         return ExpertPolicy()
+    if spec == "explorer":
+        return ExplorerPolicy()
     if spec == "random" or spec.startswith("random:"):
         tail = spec.partition(":")[2]
         if tail and not tail.isdigit():

@@ -233,7 +233,7 @@ def train(cfg: TrainConfig, *, worlds: Sequence[Any] | None = None, init_net: An
         count_parameters,
     )
     from adaptenv.agents.stop import calibrate_end_threshold
-    from adaptenv.sim.expert import ShortestPathExpert
+    from adaptenv.agents.teachers import make_teacher
     from adaptenv.sim.spec import END, N_RAYS
     from adaptenv.sim.vector import BatchSim, EpisodeSampler
 
@@ -299,7 +299,7 @@ def train(cfg: TrainConfig, *, worlds: Sequence[Any] | None = None, init_net: An
         return sampler.draw(rng, n)
 
     def collect(beta: float) -> tuple[dict[str, np.ndarray], list[float], list[int], float]:
-        """One (T, B) block with the beta-mixture of expert and ``actor``: (block, successes, lengths, seconds)."""
+        """One (T, B) block with the beta-mixture of the teacher and ``actor``: (block, successes, lengths, seconds)."""
         nonlocal obs, h, first
         t0 = time.perf_counter()
         block = {"depth": np.empty((T, B, N_RAYS), np.float16), "semantic": np.empty((T, B, N_RAYS), np.uint8),
@@ -313,8 +313,7 @@ def train(cfg: TrainConfig, *, worlds: Sequence[Any] | None = None, init_net: An
             for k in ("depth", "semantic", "target", "prev_action", "collided"):
                 block[k][t] = obs[k]
             block["first"][t] = first
-            labels = np.asarray(expert.act_batch(sim.worlds, sim.env, sim.target_types, sim.x, sim.z, sim.yaw),
-                                dtype=np.int64)
+            labels = teacher.label(obs, first)
             block["label"][t] = labels
             with torch.no_grad():
                 logits, h = actor.step(_to_tensors(obs), torch.from_numpy(first), h)
@@ -355,10 +354,10 @@ def train(cfg: TrainConfig, *, worlds: Sequence[Any] | None = None, init_net: An
                 "losses/accuracy": float(np.mean(accs)),
                 "charts/train_fps": cfg.updates_per_iter * cfg.batch_chunks * L / (time.perf_counter() - t0)}
 
-    expert = ShortestPathExpert()
     sampler = EpisodeSampler(worlds)
     # with overlap the learner thread takes the second core, so the simulator kernel runs serially
     sim = BatchSim(worlds, max_steps=cfg.max_episode_steps, threads=1 if cfg.overlap else None)
+    teacher = make_teacher(cfg.teacher, sim, mix=cfg.teacher_mix, seed=cfg.seed)  # agents/teachers.py
     B, T, L = cfg.num_envs, cfg.rollout_steps, cfg.chunk_len
     eps, envs = new_episodes(B)
     obs, _ = sim.reset(eps, envs)

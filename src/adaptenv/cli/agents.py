@@ -12,7 +12,8 @@ import typer
 from adaptenv.cli._common import JSON_OPTION
 
 _SHORT = {"output": ["-o"], "seed": ["-s"]}
-_HOUSES_OPTION = typer.Option(..., "--houses", help="Folder of house JSON files, a house file, or preset:NAME; "
+_HOUSES_OPTION = typer.Option(..., "--houses", help="Folder of house JSON files, a house file, preset:NAME or "
+                              "suite:NAME; "
                               "repeat to compare sets (the first is the baseline of the drop).")
 _OUT_OPTION = typer.Option(Path("runs/eval"), "-o", "--out", help="Output folder (one subfolder per house set).")
 
@@ -86,13 +87,19 @@ def _ppo_command():
 
 def evaluate(
     policy: str = typer.Option("pretrained", "--policy", "-p",
-                               help="Policy: pretrained, expert, random, a checkpoint path (.pt), or module:attribute."),
+                               help="Policy: pretrained, expert, explorer, random, a checkpoint path (.pt), or module:attribute."),
     houses: list[str] = _HOUSES_OPTION,
     episodes: int = typer.Option(200, "--episodes", "-n", min=1, help="Episodes per house set."),
     seed: int = typer.Option(0, "--seed", "-s", help="Seed of the episodes (same seed, same results)."),
     workers: int = typer.Option(1, "--workers", "-w", min=1, help="Worker processes (episodes are split among them)."),
     batch: int = typer.Option(64, "--batch", min=1, help="Episodes simulated at once per process."),
     out: Path = _OUT_OPTION,
+    min_geodesic: float = typer.Option(0.0, "--min-geodesic", min=0.0,
+                                       help="Keep only starts at least this geodesic distance (m) from the target "
+                                            "(overrides a suite's floor; 0 keeps the suite's or none)."),
+    min_expert_steps: int = typer.Option(0, "--min-expert-steps", min=0,
+                                         help="Keep only starts the shortest-path expert needs at least this many "
+                                              "steps for (redraws per episode, paired across policies)."),
 ) -> None:
     """Evaluate a policy: success, SPL, SEL, collisions, length (mean +- s.e.), per-house CSV, failure maps."""
     import json
@@ -105,20 +112,25 @@ def evaluate(
     from adaptenv.agents.houses import load_house_set
     from adaptenv.agents.network import configure_torch
     from adaptenv.agents.registry import resolve_policy
+    from adaptenv.agents.suites import EpisodeFloor
     from adaptenv.progress import ProgressBar
 
     configure_torch()
     console = Console()
     command = shlex.join(["adaptenv", "evaluate", "--policy", policy, *[a for h in houses for a in ("--houses", h)],
                           "--episodes", str(episodes), "--seed", str(seed), "--workers", str(workers),
-                          "--batch", str(batch), "-o", str(out)])
+                          "--batch", str(batch), "-o", str(out)]
+                         + (["--min-geodesic", f"{min_geodesic:g}"] if min_geodesic > 0 else [])
+                         + (["--min-expert-steps", str(min_expert_steps)] if min_expert_steps > 0 else []))
+    floor = (EpisodeFloor(min_geodesic=min_geodesic, min_expert_steps=min_expert_steps)
+             if min_geodesic > 0 or min_expert_steps > 0 else None)
     resolved = resolve_policy(policy, seed=seed)  # fail early on a bad --policy
     summaries = []
     for spec in houses:
         house_set = load_house_set(spec)
         with ProgressBar(f"{policy} on {spec}", episodes) as bar:
             report = run_eval(policy if workers > 1 else resolved, house_set, episodes=episodes, seed=seed,
-                              batch=batch, workers=workers, progress=bar.update)
+                              batch=batch, workers=workers, floor=floor, progress=bar.update)
         report.policy = policy
         sub = out / _slug(spec) if len(houses) > 1 else out
         report.summary["failure_modes"] = failure_modes(report, house_set)

@@ -197,7 +197,7 @@ def _check_target(world: NavWorld, target_type: str) -> None:
 
 
 def sample_episode(world: NavWorld, rng: np.random.Generator | int, target_type: str | None = None,
-                   use_house_start: bool = False) -> Episode:
+                   use_house_start: bool = False, min_distance: float = 0.0) -> Episode:
     """Draw a solvable episode: a target type and a start from which its success region is reachable.
 
     The start is the centre of a navigable cell (clearance >= AGENT_RADIUS) drawn uniformly among
@@ -205,10 +205,10 @@ def sample_episode(world: NavWorld, rng: np.random.Generator | int, target_type:
     successful whatever the yaw), with yaw a multiple of 30 degrees. ``use_house_start`` takes the
     house's metadata pose instead (yaw rounded to the 6-degree lattice); that episode may be
     unsolvable, which :func:`adaptenv.sim.metrics.episode_metrics` reports as ``solvable=False``.
-    ``rng`` may be an int seed, which is then recorded in ``Episode.seed``.
+    ``rng`` may be an int seed, which is then recorded in ``Episode.seed``. ``min_distance`` > 0
+    restricts starts to cells at least that geodesic distance (m) from the success region, and the
+    target type to types that have such cells (AdaptenvError when no type has any).
     """
-    from adaptenv.sim.geodesic import distance_field
-
     seed = None
     if not isinstance(rng, np.random.Generator):
         seed = int(rng)
@@ -219,6 +219,11 @@ def sample_episode(world: NavWorld, rng: np.random.Generator | int, target_type:
             raise AdaptenvError(f"{world.name}: no ObjectNav target type is solvable in this house (none of "
                                 f"{', '.join(TARGET_TYPES)} can be seen from reachable floor); add a target "
                                 "object or open a door to it")
+        if min_distance > 0:
+            avail = [t for t in avail if len(start_cells(world, t, min_distance))]
+            if not avail:
+                raise AdaptenvError(f"{world.name}: no start is {min_distance:g} m or more from any target; "
+                                    "lower the start-distance floor or use larger houses")
         target_type = str(avail[int(rng.integers(len(avail)))])
     else:
         _check_target(world, target_type)
@@ -228,11 +233,7 @@ def sample_episode(world: NavWorld, rng: np.random.Generator | int, target_type:
                                 "sample a start instead or set one with House.set_agent_pose")
         x, z, yaw = world.start
         return Episode(target_type, (float(x), float(z), float(round(yaw / 6.0) * 6.0 % 360.0)), seed)
-    key = ("starts", target_type)
-    if key not in world.cache:
-        field = distance_field(world, target_type)
-        world.cache[key] = np.flatnonzero(np.isfinite(field) & (field > 0)).astype(np.int32)
-    cells = world.cache[key]
+    cells = start_cells(world, target_type, min_distance)
     rows, cols = np.divmod(cells, world.grid.shape[1])
     if len(rows) == 0:
         raise AdaptenvError(f"{world.name}: the {target_type} cannot be reached from any free floor; "
@@ -241,3 +242,14 @@ def sample_episode(world: NavWorld, rng: np.random.Generator | int, target_type:
     x, z = world.grid.cell_center(rows[k], cols[k])
     yaw = float(rng.integers(int(360 / ROTATE_LARGE)) * ROTATE_LARGE)
     return Episode(target_type, (float(x), float(z), yaw), seed)
+
+
+def start_cells(world: NavWorld, target_type: str, min_distance: float = 0.0) -> np.ndarray:
+    """Flat indices of the start cells of a type: finite geodesic distance, positive and >= ``min_distance``."""
+    from adaptenv.sim.geodesic import distance_field
+
+    key = ("starts", target_type) if min_distance <= 0 else ("starts", target_type, float(min_distance))
+    if key not in world.cache:
+        field = distance_field(world, target_type)
+        world.cache[key] = np.flatnonzero(np.isfinite(field) & (field > 0) & (field >= min_distance)).astype(np.int32)
+    return world.cache[key]

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass, replace
+from typing import Any
 
 from adaptenv.errors import ConfigError
 from adaptenv.scene.assets import AssetCatalog, load_catalog
@@ -28,11 +29,13 @@ class PresetSpec:
     """ProcTHOR asset split the furniture comes from."""
     description: str = ""
     """One line for ``adaptenv houses generate --help`` and the docs."""
+    overrides: tuple[tuple[str, Any], ...] = ()
+    """Further ``GenerationConfig`` fields as (name, value) pairs (e.g. denser furniture)."""
 
     def config(self, base: GenerationConfig | None = None) -> GenerationConfig:
-        """The generation config of this preset (room range and split applied to ``base``)."""
+        """The generation config of this preset (room range, split and overrides applied to ``base``)."""
         return replace(base or GenerationConfig(), n_rooms=None, room_types=None, room_range=self.room_range,
-                       split=self.split)
+                       split=self.split, **dict(self.overrides))
 
 
 PRESETS: dict[str, PresetSpec] = {
@@ -41,6 +44,14 @@ PRESETS: dict[str, PresetSpec] = {
                                       description="the pretrain-train houses with their furniture rearranged"),
     "pretrain-unseen": PresetSpec(50, 3000, description="new houses from the same distribution, never trained on"),
     "tiny": PresetSpec(3, 7, room_range=(1, 3), description="three small houses for tests and CI"),
+    # Held-out suite houses (agents/suites.py): root seeds no training preset or generator uses.
+    "suite-large": PresetSpec(30, 5101, room_range=(7, 10), description="7-10 room houses for the held-out suites"),
+    "suite-clutter": PresetSpec(30, 5201, room_range=(3, 6), overrides=(
+        ("furniture_density", 3.0), ("edge_margin", 0.3), ("middle_margin", 0.2), ("passage", 0.45)),
+        description="3-6 room houses with three times the filler furniture and tighter margins"),
+    "suite-doors": PresetSpec(30, 5301, room_range=(5, 8), overrides=(
+        ("open_kitchen_prob", 0.0), ("doorframe_prob", 0.0), ("extra_door_prob", 0.0)),
+        description="5-8 room houses where every connection is a door (no open walls, frames or loops)"),
 }
 
 

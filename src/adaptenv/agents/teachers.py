@@ -1,0 +1,103 @@
+"""Who labels DAgger's states: the shortest-path expert, the searching explorer, or a mix of the two.
+
+A teacher is asked for one label per agent at every collection step, with the observations the
+student sees and the ``first`` mask of new episodes (the explorer keeps a map per episode, so it
+must see every step). ``TrainConfig.teacher`` picks one:
+
+- ``expert``: :class:`~adaptenv.sim.expert.ShortestPathExpert` (knows where the target is);
+- ``explorer``: :class:`~adaptenv.agents.explorer.ExplorerPolicy` (searches; knows only its pose and
+  the map it has seen);
+- ``mix``: each episode is labelled by the explorer with probability ``teacher_mix`` (drawn at the
+  episode's start from the run's seed), by the expert otherwise.
+"""
+
+from __future__ import annotations
+
+from typing import Any, Literal, Protocol
+
+import numpy as np
+
+from adaptenv.agents.explorer import ExplorerPolicy
+from adaptenv.agents.policy import Observation, PolicyContext
+from adaptenv.errors import ConfigError
+from adaptenv.sim.expert import ShortestPathExpert
+
+TeacherKind = Literal["expert", "explorer", "mix"]
+TEACHERS = ("expert", "explorer", "mix")
+
+
+class Teacher(Protocol):
+    """Labels a batch of states (see the module docstring)."""
+
+    def label(self, obs: Observation, first: np.ndarray) -> np.ndarray:
+        """int64 (B,) actions for the simulator's current agents."""
+        ...
+
+
+class _SimTeacher:
+    """Shared part: keeps a PolicyContext pointing at a BatchSim's current arrays."""
+
+    def __init__(self, sim: Any):
+        self.sim = sim
+        self.ctx = PolicyContext.empty(sim.worlds, len(sim.x))
+
+    def _sync(self) -> PolicyContext:
+        sim, ctx = self.sim, self.ctx
+        ctx.worlds, ctx.env_idx, ctx.target_types = sim.worlds, sim.env, sim.target_types
+        ctx.x, ctx.z, ctx.yaw = sim.x, sim.z, sim.yaw
+        return ctx
+
+
+class ExpertTeacher(_SimTeacher):
+    """The shortest-path expert's action at every agent's pose."""
+
+    def __init__(self, sim: Any):
+        super().__init__(sim)
+        self.expert = ShortestPathExpert()
+
+    def label(self, obs: Observation, first: np.ndarray) -> np.ndarray:
+        ctx = self._sync()
+        return np.asarray(self.expert.act_batch(ctx.worlds, ctx.env_idx, ctx.target_types, ctx.x, ctx.z, ctx.yaw),
+                          dtype=np.int64)
+
+
+class ExplorerTeacher(_SimTeacher):
+    """The explorer's action (it updates its map from ``obs`` at every call)."""
+
+    def __init__(self, sim: Any):
+        super().__init__(sim)
+        self.explorer = ExplorerPolicy()
+        self.explorer.bind(self.ctx)
+
+    def label(self, obs: Observation, first: np.ndarray) -> np.ndarray:
+        self._sync()
+        actions, _ = self.explorer.act(obs, None, np.asarray(first, dtype=bool))
+        return actions
+
+
+class MixTeacher:
+    """Per episode, the explorer with probability ``p`` and the expert otherwise (both always run, so
+    the explorer's map stays current whichever labels an episode)."""
+
+    def __init__(self, sim: Any, p: float, seed: int):
+        self.expert, self.explorer = ExpertTeacher(sim), ExplorerTeacher(sim)
+        self.p = float(p)
+        self.rng = np.random.default_rng([seed, 7_207])
+        self.use_explorer = np.zeros(len(sim.x), dtype=bool)
+
+    def label(self, obs: Observation, first: np.ndarray) -> np.ndarray:
+        first = np.asarray(first, dtype=bool)
+        self.use_explorer[first] = self.rng.random(int(first.sum())) < self.p
+        a, b = self.expert.label(obs, first), self.explorer.label(obs, first)
+        return np.where(self.use_explorer, b, a)
+
+
+def make_teacher(kind: str, sim: Any, *, mix: float = 0.5, seed: int = 0) -> Teacher:
+    """The teacher named by ``--teacher`` for a BatchSim; ConfigError for an unknown name."""
+    if kind == "expert":
+        return ExpertTeacher(sim)
+    if kind == "explorer":
+        return ExplorerTeacher(sim)
+    if kind == "mix":
+        return MixTeacher(sim, mix, seed)
+    raise ConfigError(f"--teacher {kind!r}: unknown teacher; choose one of {', '.join(TEACHERS)}")

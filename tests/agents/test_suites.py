@@ -1,0 +1,102 @@
+"""Held-out suites: the floor holds, episodes are paired and sliceable, and each suite's episodes are pinned."""
+
+from __future__ import annotations
+
+import pytest
+
+from adaptenv.agents.evaluate import sample_episodes
+from adaptenv.agents.houses import load_house_set
+from adaptenv.agents.suites import SUITES, EpisodeFloor, SuiteWorlds, episodes_hash, expert_steps
+from adaptenv.errors import ConfigError
+from adaptenv.sim.geodesic import geodesic_distance
+
+#: First 20 episodes (seed 0) of every suite, by suite version. A changed hash means the suite's
+#: houses or episode rule changed: bump its version in agents/suites.py and record the new hash.
+PINNED = {
+    ("long-train", "1"): "7a63d7640bcdf961",
+    ("long-rearranged", "1"): "a0ca97ed2f14bd26",
+    ("long-unseen", "1"): "84c97ab067a68e51",
+    ("large", "1"): "a5d047de60b0e411",
+    ("far", "1"): "cd1ad2e696fc73ed",
+    ("clutter", "1"): "530d43e37d00724d",
+    ("doors", "1"): "bbdf09112176db82",
+}
+
+
+def _geodesic(world, ep) -> float:
+    return float(geodesic_distance(world, ep.target_type, ep.start[0], ep.start[1]))
+
+
+def test_geodesic_floor_holds_and_lengthens_episodes(tiny_set):
+    floor = EpisodeFloor(min_geodesic=1.5)
+    free = sample_episodes(tiny_set.worlds, 30, 0)
+    floored = sample_episodes(tiny_set.worlds, 30, 0, floor=floor)
+    d_free = [_geodesic(tiny_set.worlds[e], ep) for e, ep in free]
+    d_floored = [_geodesic(tiny_set.worlds[e], ep) for e, ep in floored]
+    assert min(d_floored) >= 1.5 - 0.05
+    assert min(d_free) < 1.5  # the floor did remove easy starts
+    assert sum(d_floored) > sum(d_free)
+
+
+def test_floored_episodes_are_paired_and_sliceable(tiny_set):
+    floor = EpisodeFloor(min_geodesic=1.5)
+    whole = sample_episodes(tiny_set.worlds, 12, 3, floor=floor)
+    assert sample_episodes(tiny_set.worlds, 12, 3, floor=floor, start=5) == whole[5:]
+    assert sample_episodes(tiny_set.worlds, 12, 3, floor=floor) == whole
+    assert sample_episodes(tiny_set.worlds, 12, 4, floor=floor) != whole
+
+
+def test_an_inactive_floor_keeps_the_old_episodes(tiny_set):
+    assert sample_episodes(tiny_set.worlds, 9, 0, floor=EpisodeFloor()) == sample_episodes(tiny_set.worlds, 9, 0)
+
+
+def test_worlds_carry_their_floor_into_sample_episodes(tiny_set):
+    floor = EpisodeFloor(min_geodesic=1.5)
+    carried = SuiteWorlds(tiny_set.worlds, floor)
+    assert sample_episodes(carried, 8, 0) == sample_episodes(tiny_set.worlds, 8, 0, floor=floor)
+
+
+def test_expert_step_floor_holds(tiny_set):
+    floor = EpisodeFloor(min_expert_steps=25)
+    eps = sample_episodes(tiny_set.worlds, 10, 0, floor=floor)
+    steps = expert_steps(tiny_set.worlds, eps)
+    assert all(s is not None and s >= 25 for s in steps)
+    assert eps == sample_episodes(tiny_set.worlds, 10, 0, floor=floor)
+
+
+def test_an_impossible_floor_is_a_config_error(tiny_set):
+    with pytest.raises(ConfigError, match="min-geodesic"):
+        sample_episodes(tiny_set.worlds, 2, 0, floor=EpisodeFloor(min_geodesic=500.0))
+
+
+def test_unknown_suite_names_the_known_ones():
+    with pytest.raises(ConfigError, match="suite:long-unseen"):
+        load_house_set("suite:nope")
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("name", sorted(SUITES))
+def test_suite_episodes_are_pinned(name):
+    spec = SUITES[name]
+    house_set = load_house_set(f"suite:{name}")
+    eps = sample_episodes(house_set.worlds, 20, 0)
+    assert all(_geodesic(house_set.worlds[e], ep) >= spec.floor.min_geodesic - 0.05 for e, ep in eps)
+    assert episodes_hash(eps) == PINNED[(name, spec.version)]
+
+
+def test_cli_evaluate_applies_a_start_distance_floor(tmp_path):
+    import json
+
+    from typer.testing import CliRunner
+
+    from adaptenv.cli import app
+
+    out = tmp_path / "eval"
+    res = CliRunner().invoke(app, ["evaluate", "--policy", "expert", "--houses", "preset:tiny", "--episodes", "4",
+                                   "--min-geodesic", "1.5", "-o", str(out)])
+    assert res.exit_code == 0, res.output
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["floor"] == "geodesic >= 1.5 m" and "--min-geodesic 1.5" in summary["command"]
+    rows = (out / "episodes.csv").read_text().splitlines()[1:]
+    optimal = [float(r.split(",")[11]) for r in rows]
+    assert len(optimal) == 4 and min(optimal) >= 1.5 - 0.05
