@@ -26,7 +26,14 @@ from typing import Literal
 import numpy as np
 from pydantic import BaseModel, Field
 
-from adaptenv.adapt.analysis import Analysis, Analyzer, BuiltinAnalyzer, FailureMode
+from adaptenv.adapt.analysis import (
+    Analysis,
+    Analyzer,
+    BuiltinAnalyzer,
+    FailureMode,
+    Outcome,
+    Suggestion,
+)
 from adaptenv.agents.evaluate import run_episodes
 from adaptenv.agents.policy import ExpertPolicy, Policy
 from adaptenv.agents.rollout import run_policy
@@ -212,6 +219,26 @@ def aggregate(house: str, episodes: list[Episode], trajs: list[Trajectory], expe
         analyses=[analyses[k] for k in order], concern_counts=dict(concerns))
 
 
+def generic_analysis(trajectory: Trajectory) -> Analysis:
+    """F's output without F: every built-in objective at equal priority, no concerns, no failure mode."""
+    kinds = ("narrow_passage", "occlude_target", "lengthen_route", "add_clutter")
+    m = trajectory.metrics
+    return Analysis(task=f"Find a {trajectory.target_type} (ObjectNav) in house {trajectory.house}.",
+                    outcome=Outcome(success=bool(m and m.success), summary="not analysed (G on regret alone)",
+                                    steps=len(trajectory.steps), spl=m.spl if m else None),
+                    suggestions=[Suggestion(id=f"s{k + 1}", kind=kind, description=f"generic objective {kind}",
+                                            priority=0.5) for k, kind in enumerate(kinds)], source="none")
+
+
+class NoAnalyzer:
+    """The ablation without F (``ours-nof``): :func:`generic_analysis` for every episode, so G sees regret only."""
+
+    name = "none"
+
+    def analyze(self, trajectory: Trajectory, world: NavWorld) -> Analysis:
+        return generic_analysis(trajectory)
+
+
 def diagnose_scene(world: NavWorld, episodes: list[Episode], policy: Policy, *, analyzer: Analyzer | None = None,
                    trajectories: list[Trajectory] | None = None, max_analysed: int = MAX_ANALYSED) -> Diagnosed:
     """Roll pi_t (and the expert) out on every episode, analyse the failed and worst ones, aggregate.
@@ -238,4 +265,5 @@ def diagnose_scene(world: NavWorld, episodes: list[Episode], policy: Policy, *, 
 
 
 __all__ = ["DOMINANT_SHARE", "MODE_FAMILIES", "MODE_FAMILY", "Diagnosed", "EpisodeDiagnosis", "ModeFamily",
-           "SceneDiagnosis", "aggregate", "diagnose_scene", "expert_successes", "hard_episodes", "other_room"]
+           "NoAnalyzer", "SceneDiagnosis", "aggregate", "diagnose_scene", "expert_successes", "generic_analysis",
+           "hard_episodes", "other_room"]

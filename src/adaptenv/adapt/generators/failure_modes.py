@@ -32,7 +32,7 @@ from collections.abc import Callable
 
 import numpy as np
 
-from adaptenv.adapt.analysis import Analysis, Outcome, Suggestion, analyze_trajectory
+from adaptenv.adapt.analysis import Analysis, analyze_trajectory
 from adaptenv.adapt.diagnosis import MODE_FAMILY, ModeFamily, SceneDiagnosis
 from adaptenv.adapt.generators import (
     GenerationContext,
@@ -180,14 +180,6 @@ def mode_plan(diagnosis: SceneDiagnosis | None, analysis: Analysis) -> list[str]
         return list(diagnosis.dominant)
     fam = MODE_FAMILY.get(analysis.outcome.failure_mode or "")
     return [fam] if fam else list(DEFAULT_PLAN)
-
-
-def generic_analysis(task: str, steps: int = 0) -> Analysis:
-    """F's output without F: every built-in objective with equal priority and no concerns (``ours-nof``)."""
-    kinds = ("narrow_passage", "occlude_target", "lengthen_route", "add_clutter")
-    return Analysis(task=task, outcome=Outcome(success=True, summary="not analysed (G on regret alone)", steps=steps),
-                    suggestions=[Suggestion(id=f"s{k + 1}", kind=kind, description=f"generic objective {kind}",
-                                            priority=0.5) for k, kind in enumerate(kinds)], source="none")
 
 
 # --------------------------------------------------------------------------- the generator
@@ -415,5 +407,5 @@ class FailureModeGenerator(BuiltinGenerator):
         return oid, aim - ctx.centers[ctx.index[oid]], "mirror"
 
 
-__all__ = ["DEFAULT_PLAN", "FailureModeGenerator", "distractor_pressure", "first_sight_fraction", "generic_analysis",
-           "hiddenness", "mode_plan", "mode_value", "room_symmetry"]
+__all__ = ["DEFAULT_PLAN", "FailureModeGenerator", "distractor_pressure", "first_sight_fraction", "hiddenness",
+           "mode_plan", "mode_value", "room_symmetry"]
