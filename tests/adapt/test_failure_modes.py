@@ -120,3 +120,15 @@ def test_mode_plan_falls_back_to_the_analysed_episode_then_the_default(scene):
     assert mode_plan(_diagnosis("looping", "stuck"), analysis) == ["looping", "stuck"]
     assert mode_plan(_diagnosis(), analysis) == list(DEFAULT_PLAN), "the expert's solved episode has no failure"
     assert make_generator("failure-modes").name == "failure-modes"
+
+
+def test_rollouts_in_several_worlds_match_one_world_at_a_time(scene):
+    from adaptenv.adapt.generators.failure_modes import run_in_worlds
+    from adaptenv.agents.rollout import checking_episodes, run_policy
+
+    house, world, ep, *_ = scene
+    res, after = _run(scene, "premature_end", steps=1)
+    eps = checking_episodes(ep, 2)
+    together = run_in_worlds([world, after], eps, ExpertPolicy())
+    alone = [run_policy(w, eps, ExpertPolicy()) for w in (world, after)]
+    assert [[t.model_dump() for t in ts] for ts in together] == [[t.model_dump() for t in ts] for ts in alone]
