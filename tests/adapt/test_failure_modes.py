@@ -132,3 +132,21 @@ def test_rollouts_in_several_worlds_match_one_world_at_a_time(scene):
     together = run_in_worlds([world, after], eps, ExpertPolicy())
     alone = [run_policy(w, eps, ExpertPolicy()) for w in (world, after)]
     assert [[t.model_dump() for t in ts] for ts in together] == [[t.model_dump() for t in ts] for ts in alone]
+
+
+def test_adapt_scene_with_episodes_diagnoses_before_and_after(scene):
+    from adaptenv.adapt.analysis import BuiltinAnalyzer
+    from adaptenv.adapt.diagnosis import hard_episodes
+    from adaptenv.adapt.step import adapt_scene
+
+    house, world, *_ = scene
+    stop = StepFunctionPolicy(lambda world, episode, x, z, yaw, collided, step: ACTIONS.index("end"))
+    eps = hard_episodes(world, np.random.default_rng(2), 2)
+    res = adapt_scene(house, eps[1], policy=stop, analyzer=BuiltinAnalyzer(),
+                      generator=make_generator("failure-modes", max_candidates=8), steps=1,
+                      rng=np.random.default_rng(0), episodes=eps)
+    assert res.valid and res.diagnosis.dominant == ["premature_end"] and res.diagnosis.regret > 0
+    assert res.episode == eps[res.diagnosis.worst] and res.before is not None
+    assert [e.target_type for e in res.diagnosis_after.episodes] == [e.target_type for e in eps]
+    [step] = res.generation.steps
+    assert step.failure_mode == "premature_end" and step.status == "applied" and step.produced_failure
