@@ -64,8 +64,8 @@ def test_every_method_runs_and_counts_its_budget(method, tiny_policy, tmp_path):
     if method in ("ours", "ours-randomscene", "ours-nof"):
         state = json.loads((tmp_path / method / STATE).read_text())["state"]
         assert set(scenes["rolled_out"]) <= set(state["buffer"]["level_ids"]), "adapted scenes come from the buffer"
-        children = [x for x in scenes["trained_on"] if "~t02" in x]
-        assert children and set(children) <= set(state["buffer"]["level_ids"]), "children are scored and buffered"
+        assert any("~t02" in x for x in scenes["trained_on"]), "fine-tuning uses this iteration's children"
+        assert any(p is not None for p in state["buffer"]["parent_ids"]), "children are scored into the buffer"
     if method.startswith("ours"):
         item = records[1].gallery[0]
         for rel in (item.before_png, item.after_png, item.analysis_json, item.edits_json):
