@@ -91,3 +91,14 @@ def test_adapt_with_llm_generator_against_a_local_server(house_file, tmp_path, m
     assert edits["generator"] == "llm" and edits["steps"][0]["edit"]["object_id"] == oid
     assert edits["usage"]["calls"] == 2
     assert runner.invoke(app, ["validate", str(tmp_path / "house.json")]).exit_code == 0
+
+
+def test_adapt_with_a_diagnosis_aims_g_at_failure_modes(house_file, tmp_path):
+    result = runner.invoke(app, ["adapt", str(house_file), "--policy", "expert", "--steps", "1", "--seed", "1",
+                                 "--diagnose", "2", "--generator", "failure-modes", "-o", str(tmp_path)])
+    assert result.exit_code == 0, result.output
+    assert "diagnosis before:" in result.output and "regret 0.00" in result.output
+    summary = json.loads((tmp_path / "summary.json").read_text())
+    assert len(summary["diagnosis"]["episodes"]) == len(summary["diagnosis_after"]["episodes"]) == 2
+    steps = json.loads((tmp_path / "edits.json").read_text())["steps"]
+    assert steps[0]["failure_mode"] == "search", "a solved scene gets the default plan, searches first"

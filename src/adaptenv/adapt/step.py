@@ -142,6 +142,8 @@ def summarize(result: AdaptResult, *, analyzer: str, seed: int | None = None) ->
         "realism_after": realism_score(result.house, result.original),
         "expert_solvable": bool(is_solvable(new_world, ep)), "expert_success_after": bool(expert.metrics.success),
         "valid": result.valid, "problems": result.problems, "usage": gen.usage,
+        **({"diagnosis": result.diagnosis.model_dump(mode="json"),
+            "diagnosis_after": result.diagnosis_after.model_dump(mode="json")} if result.diagnosis else {}),
     }
 
 
