@@ -78,7 +78,7 @@ def test_a_search_edit_lowers_the_targets_visibility_from_the_route(scene):
     vis_before = visibility_fraction(world, ep.target_type, pts_before)
     vis_after = visibility_fraction(after, ep.target_type, pts_after)
     assert hiddenness(after, route) > hiddenness(world, route)
-    assert vis_after <= vis_before, "hiding the target never makes it more visible from the route"
+    assert vis_after < vis_before, "the target is seen from fewer route points"
 
 
 def test_looping_edits_raise_symmetry_or_route_length(scene):
