@@ -219,3 +219,14 @@ def test_analyze_refuses_a_trajectory_from_another_house(house_file, adapted, tm
     message = str(result.exception)
     assert "trajectory_before.json" in message and "other.json" in message and "h'" in message
     assert "\n" not in message
+
+
+def test_adapt_with_a_diagnosis_aims_g_at_failure_modes(house_file, tmp_path):
+    result = runner.invoke(app, ["adapt", str(house_file), "--policy", "expert", "--steps", "1", "--seed", "1",
+                                 "--diagnose", "2", "--generator", "failure-modes", "-o", str(tmp_path)])
+    assert result.exit_code == 0, result.output
+    assert "diagnosis before:" in result.output and "regret 0.00" in result.output
+    summary = json.loads((tmp_path / "summary.json").read_text())
+    assert len(summary["diagnosis"]["episodes"]) == len(summary["diagnosis_after"]["episodes"]) == 2
+    steps = json.loads((tmp_path / "edits.json").read_text())["steps"]
+    assert steps[0]["failure_mode"] == "search", "a solved scene gets the default plan, searches first"

@@ -20,7 +20,7 @@ from adaptenv.errors import ConfigError
 def tiny_config(policy: Path, method: str, **kw) -> LoopConfig:
     base = dict(method=method, policy=str(policy), houses="preset:tiny", heldout={"tiny": "preset:tiny"},
                 iterations=2, scenes_per_iteration=2, edit_steps=1, finetune_frames=512, finetune_envs=16,
-                heldout_episodes=3, gallery=1, buffer_capacity=4)
+                heldout_episodes=3, gallery=1, buffer_capacity=4, diagnose_episodes=2)
     return LoopConfig(**{**base, **kw})
 
 
@@ -50,7 +50,7 @@ def test_every_method_runs_and_counts_its_budget(method, tiny_policy, tmp_path):
     # identical gradient updates and fine-tuning frames across methods; steps only grow
     assert records[2].grad_updates == 2 * records[1].grad_updates > 0
     assert records[1].env_steps > cfg.finetune_frames and records[2].env_steps > records[1].env_steps
-    if method in ("random", "ours", "accel"):
+    if method in ("random", "accel") or method.startswith("ours"):
         assert records[2].edits > 0
     else:
         assert records[2].edits == 0
@@ -61,7 +61,12 @@ def test_every_method_runs_and_counts_its_budget(method, tiny_policy, tmp_path):
         state = json.loads((tmp_path / method / STATE).read_text())["state"]
         buffered = set(state["buffer"]["level_ids"])
         assert set(scenes["trained_on"]) <= buffered, "robust PLR/ACCEL train on replayed buffer levels only"
-    if method == "ours":
+    if method in ("ours", "ours-randomscene", "ours-nof"):
+        state = json.loads((tmp_path / method / STATE).read_text())["state"]
+        assert set(scenes["rolled_out"]) <= set(state["buffer"]["level_ids"]), "adapted scenes come from the buffer"
+        assert any("~t02" in x for x in scenes["trained_on"]), "fine-tuning uses this iteration's children"
+        assert any(p is not None for p in state["buffer"]["parent_ids"]), "children are scored into the buffer"
+    if method.startswith("ours"):
         item = records[1].gallery[0]
         for rel in (item.before_png, item.after_png, item.analysis_json, item.edits_json):
             assert (tmp_path / method / rel).is_file()

@@ -21,9 +21,12 @@ def _rollout(success: bool, spl: float, expert: bool) -> Rollout:
 
 
 def test_every_method_is_registered_by_its_name():
-    assert set(M.METHODS) == {"none", "random", "dr", "plr", "accel", "ours", "ours-llm"}
+    assert set(M.METHODS) == {"none", "random", "dr", "plr", "accel", "ours", "ours-noselect", "ours-randomscene",
+                              "ours-nof", "ours-llm"}
     assert all(cls.name == name for name, cls in M.METHODS.items())
-    assert M.METHODS["ours"].generator == "builtin" and M.METHODS["ours-llm"].generator == "llm"
+    assert M.METHODS["ours"].generator == "failure-modes" and M.METHODS["ours-nof"].generator == "regret-only"
+    assert M.METHODS["ours-noselect"].generator == "builtin" and M.METHODS["ours-llm"].generator == "llm"
+    assert M.METHODS["ours-randomscene"].uniform and not M.METHODS["ours"].uniform
 
 
 def test_regret_uses_the_experts_measured_success():
@@ -40,6 +43,30 @@ def test_streams_are_named_and_independent():
     assert len(set(draws.values())) == len(M.Stream)
     assert it.rng(M.Stream.REPLAY).random() == draws[M.Stream.REPLAY]
     assert it.seed(M.Stream.FRESH_HOUSES, 0) != it.seed(M.Stream.FRESH_HOUSES, 1)
+
+
+def _buffer_iteration(scores: list[float], t: int = 1) -> M.Iteration:
+    from adaptenv.curriculum import buffer as lb
+
+    cfg = LoopConfig(seed=0, scenes_per_iteration=2)
+    bcfg = lb.LevelBufferConfig(capacity=16, min_fill=0.0, replay_prob=1.0).check()
+    buf = lb.empty_state()
+    for k, s in enumerate(scores):
+        buf = lb.insert(buf, bcfg, f"s{k}", s, 0)
+    return M.Iteration(t=t, cfg=cfg, state=None, store=None, buffer=buf, buffer_cfg=bcfg, weights=None,
+                       executor=None, run_dir=None)
+
+
+def test_ours_picks_high_regret_scenes_and_randomscene_picks_uniformly():
+    scores = [0.0] * 8 + [1.0, 0.75]
+    high, uniform = 0, 0
+    for t in range(1, 201):
+        it = _buffer_iteration(scores, t)
+        picked = M.Ours()._pick(it, 2, M.Stream.REPLAY)
+        assert len(set(picked)) == 2, "distinct scenes"
+        high += sum(p in ("s8", "s9") for p in picked)
+        uniform += sum(p in ("s8", "s9") for p in M.OursRandomScene()._pick(it, 2, M.Stream.REPLAY))
+    assert high > 0.45 * 400 and uniform < 0.3 * 400 and high > 2 * uniform  # uniform expects 20%
 
 
 class TrainOnRolled(M.Method):

@@ -24,6 +24,7 @@ from typing import Any
 import numpy as np
 
 from adaptenv.adapt.analysis import Analysis, Analyzer
+from adaptenv.adapt.diagnosis import SceneDiagnosis, diagnose_scene
 from adaptenv.adapt.generators import GenerationContext, GenerationResult, Generator
 from adaptenv.adapt.llm.accounting import scene_usage
 from adaptenv.adapt.llm.usage import Prices
@@ -60,6 +61,10 @@ class AdaptResult:
     """Final validation of the whole edited house (empty when valid)."""
     world: NavWorld | None = None
     """The compiled edited house (reused by callers that roll out again)."""
+    diagnosis: SceneDiagnosis | None = None
+    """F's multi-episode diagnosis of the original house (when ``adapt_scene`` was given ``episodes``)."""
+    diagnosis_after: SceneDiagnosis | None = None
+    """The same episodes diagnosed again in the edited house (its regret scores the child)."""
 
     @property
     def valid(self) -> bool:
@@ -76,7 +81,8 @@ class AdaptResult:
 
 def adapt_scene(house: House, episode: Episode, *, policy: Policy, analyzer: Analyzer, generator: Generator,
                 steps: int, rng: np.random.Generator, before: Trajectory | None = None, name: str = "house",
-                rollout_episodes: int = 3, render: bool = False, render_dir: Path | None = None) -> AdaptResult:
+                rollout_episodes: int = 3, render: bool = False, render_dir: Path | None = None,
+                episodes: list[Episode] | None = None) -> AdaptResult:
     """Adapt ``house`` to ``policy`` on ``episode``: rollout -> F -> G (with pi_t) -> final validation -> rollout.
 
     Args:
@@ -90,22 +96,35 @@ def adapt_scene(house: House, episode: Episode, *, policy: Policy, analyzer: Ana
         before: pi_t's trajectory on ``episode`` in ``house`` when the caller already has it.
         rollout_episodes: episodes (same start and target, spread headings) per check of a candidate edit.
         render: re-render after every edit (the LLM generator always does); ``render_dir`` keeps them.
+        episodes: several episodes for F's multi-episode diagnosis
+            (:func:`~adaptenv.adapt.diagnosis.diagnose_scene`); the worst of them then replaces
+            ``episode`` and ``before``, G sees the diagnosis, and the edited house is diagnosed again.
     """
     policy = as_policy(policy)
     world = compile_world(house, name)
-    if before is None:
-        before = rollout(world, episode, policy)
-    analysis = analyzer.analyze(before, world)
+    diagnosed = None
+    if episodes:
+        diagnosed = diagnose_scene(world, list(episodes), policy, analyzer=analyzer)
+        episode, before, analysis = diagnosed.worst_episode, diagnosed.worst_trajectory, diagnosed.analysis
+    else:
+        if before is None:
+            before = rollout(world, episode, policy)
+        analysis = analyzer.analyze(before, world)
     context = GenerationContext(episode=episode, trajectory=before, policy=policy,
-                                rollout_episodes=rollout_episodes, render=render, out_dir=render_dir)
+                                rollout_episodes=rollout_episodes, render=render, out_dir=render_dir,
+                                diagnosis=diagnosed.diagnosis if diagnosed else None)
     generation = generator.generate(house, analysis, steps=steps, context=context, rng=rng)
     new = generation.house
     problems = [str(p) for p in validate_scene(new, episode_targets=[episode.target_type], start=episode.start[:2],
                                                original=house)]
     problems += [p.message for p in validate_house(new)]
     new_world = compile_world(new, name)
-    after = rollout(new_world, episode, policy)
-    return AdaptResult(new, house, episode, analysis, generation, before, after, problems, new_world)
+    if diagnosed is None:
+        after = rollout(new_world, episode, policy)
+        return AdaptResult(new, house, episode, analysis, generation, before, after, problems, new_world)
+    again = diagnose_scene(new_world, diagnosed.episodes, policy)  # built-in F: the regret needs no model call
+    return AdaptResult(new, house, episode, analysis, generation, before, again.trajectories[diagnosed.diagnosis.worst],
+                       problems, new_world, diagnosed.diagnosis, again.diagnosis)
 
 
 def summarize(result: AdaptResult, *, analyzer: Analyzer, seed: int | None = None) -> dict[str, Any]:
@@ -128,6 +147,8 @@ def summarize(result: AdaptResult, *, analyzer: Analyzer, seed: int | None = Non
         "valid": result.valid, "problems": result.problems, "stopped": gen.stopped,
         "usage": scene_usage(result.analysis, gen).to_dict(gen.prices or _backend_prices(analyzer), calls=False),
         "llm": gen.llm or _backend_info(analyzer),
+        **({"diagnosis": result.diagnosis.model_dump(mode="json"),
+            "diagnosis_after": result.diagnosis_after.model_dump(mode="json")} if result.diagnosis else {}),
     }
 
 

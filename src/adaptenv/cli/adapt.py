@@ -139,11 +139,14 @@ def adapt(
     seed: int = typer.Option(0, "--seed", help="Seed of the episode draw and the generator."),
     target: str | None = typer.Option(None, "--target", metavar="TYPE", help="Target object type (e.g. Fridge)."),
     as_json: bool = typer.Option(False, "--json", help="Print the summary as JSON."),
+    diagnose: int = typer.Option(0, "--diagnose", min=0, max=50, help="Diagnose this many hard episodes (F over "
+                                 "several episodes; G aims at their failure modes; --target is then ignored)."),
 ) -> None:
     """One closed-loop step: roll out the policy, analyze (F), edit the house (G), validate, write OUT."""
     from rich.console import Console
 
     from adaptenv.adapt.analysis import BuiltinAnalyzer, LLMAnalyzer
+    from adaptenv.adapt.diagnosis import hard_episodes
     from adaptenv.adapt.generators import GENERATORS, make_generator
     from adaptenv.adapt.objectives import MEANING, harder_or_easier
     from adaptenv.adapt.step import adapt_scene, summarize, write_outputs
@@ -179,10 +182,11 @@ def adapt(
     f = LLMAnalyzer(backend) if analyzer == "llm" else BuiltinAnalyzer()
     world = compile_world(h, house.stem)
     episode = draw_episode(world, np.random.default_rng([seed, 1]), target)
+    episodes = hard_episodes(world, np.random.default_rng([seed, 2]), diagnose) if diagnose else None
     with ProgressBar(f"adapting {house.name}: rollout, F, G ({steps} edits), validation, rollout again"):
         result = adapt_scene(h, episode, policy=resolve_policy(policy, seed=seed), analyzer=f, generator=gen,
                              steps=steps, rng=np.random.default_rng(seed), name=house.stem, render=True,
-                             render_dir=out / "steps")
+                             render_dir=out / "steps", episodes=episodes)
     s = summarize(result, analyzer=f, seed=seed)
     write_outputs(result, s, out)
     if as_json:
@@ -204,6 +208,9 @@ def adapt(
                           f"{harder_or_easier(k, ob[k], oa[k])}")
         console.print(f"agent: success {ab['success']} -> {aa['success']}, SPL {ab['spl']:.3f} -> {aa['spl']:.3f}, "
                       f"steps {ab['steps']} -> {aa['steps']} (lower success or SPL: the scene got harder)")
+        if result.diagnosis is not None:
+            console.print(f"diagnosis before: {result.diagnosis.summary()}", highlight=False)
+            console.print(f"diagnosis after:  {result.diagnosis_after.summary()}", highlight=False)
         console.print(f"realism: {_fmt(s['realism_before'])} -> {_fmt(s['realism_after'])}; expert solvable: "
                       f"{s['expert_solvable']}, expert success: {s['expert_success_after']}; valid: {s['valid']}")
         for p in s["problems"]:

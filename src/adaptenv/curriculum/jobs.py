@@ -16,6 +16,7 @@ from typing import TYPE_CHECKING, Any, Literal
 import numpy as np
 
 from adaptenv.adapt.analysis import Analysis, Analyzer, BuiltinAnalyzer, LLMAnalyzer
+from adaptenv.adapt.diagnosis import NoAnalyzer, hard_episodes
 from adaptenv.adapt.generators import Generator, make_generator
 from adaptenv.adapt.generators.random_perturbation import random_single_edits
 from adaptenv.adapt.llm.accounting import scene_usage
@@ -124,7 +125,7 @@ def run_rollout(job: RolloutJob) -> Rollout:
     return Rollout(episode, result, traj, expert[0].success)
 
 
-GeneratorKind = Literal["random", "builtin", "llm"]
+GeneratorKind = Literal["random", "builtin", "llm", "failure-modes", "regret-only"]
 
 
 @dataclass(frozen=True)
@@ -143,6 +144,10 @@ class GenerateJob:
     rollout: Rollout | None = None
     """pi_t's episode in the parent (what F analyses); required for ``builtin`` and ``llm``."""
     llm: dict[str, Any] = field(default_factory=dict)
+    diagnose_episodes: int = 0
+    """When > 0: F diagnoses this many hard episodes of the parent (no ``rollout`` needed) and the
+    child is diagnosed again on them (``failure-modes``: G aims at the failure families;
+    ``regret-only``: G gets generic objectives, no F analysis)."""
 
 
 @dataclass
@@ -165,6 +170,14 @@ class Generated:
     """LLM usage of F and G for this scene (empty for the built-ins; None for random edits)."""
     stopped: str = ""
     """Why G ended early (LLM unavailable, budget used up), else empty."""
+    regret_before: float | None = None
+    """Regret of pi_t in the parent over the diagnosis episodes (diagnosing jobs)."""
+    regret_after: float | None = None
+    """Regret of pi_t in the child over the same episodes."""
+    rollout_steps: int = 0
+    """pi_t's steps in the diagnosis episodes, parent and child (G's own checks not included)."""
+    before: Trajectory | None = None
+    """The episode F analysed in the parent (the worst one of a diagnosis)."""
 
 
 def run_generate(job: GenerateJob) -> Generated:
@@ -174,6 +187,8 @@ def run_generate(job: GenerateJob) -> Generated:
         child, log = random_single_edits(job.house, job.edit_steps, rng)
         moved = [e.object_id for e in log.edits if e.accepted and e.changed]
         return Generated(child, log.model_dump(mode="json"), len(moved), moved=moved)
+    if job.diagnose_episodes > 0:
+        return _run_diagnosed(job, rng)
     if job.rollout is None or job.weights is None:
         raise ValueError(f"GenerateJob {job.name}: kind {job.kind!r} needs the policy weights and its rollout")
     analyzer, generator = make_fg(job.kind, job.llm)
@@ -189,6 +204,29 @@ def run_generate(job: GenerateJob) -> Generated:
                      moved=[e.object_id for e in gen.applied], usage=usage, stopped=gen.stopped)
 
 
+def _run_diagnosed(job: GenerateJob, rng: np.random.Generator) -> Generated:
+    """Diagnose the parent on hard episodes, adapt it (G per the job's kind), diagnose the child on the same episodes."""
+    if job.weights is None:
+        raise ValueError(f"GenerateJob {job.name}: kind {job.kind!r} needs the policy weights")
+    episodes = hard_episodes(compile_world(job.house, job.name), rng, job.diagnose_episodes)
+    analyzer, generator = make_fg(job.kind, job.llm)
+    res = adapt_scene(job.house, episodes[0], policy=job.weights.policy(), analyzer=analyzer, generator=generator,
+                      steps=job.edit_steps, rng=rng, name=job.name, episodes=episodes)
+    log = res.generation.to_json_dict()
+    log["diagnosis"] = res.diagnosis.model_dump(mode="json")
+    log["diagnosis_after"] = res.diagnosis_after.model_dump(mode="json")
+    steps = sum(e.steps for e in res.diagnosis.episodes) + sum(e.steps for e in res.diagnosis_after.episodes)
+    common = dict(regret_before=res.diagnosis.regret, rollout_steps=steps, before=res.before,
+                  usage=scene_usage(res.analysis, res.generation), stopped=res.generation.stopped)
+    if not res.valid:
+        log["final_validation"] = res.problems
+        return Generated(job.house, log, 0, res.analysis, res.before, valid=False,
+                         regret_after=res.diagnosis.regret, **common)
+    return Generated(res.house, log, res.edits_applied, res.analysis, res.after,
+                     moved=[e.object_id for e in res.generation.applied], regret_after=res.diagnosis_after.regret,
+                     **common)
+
+
 def make_fg(kind: GeneratorKind, llm: dict[str, Any]) -> tuple[Analyzer, Generator]:
     """Analyzer F and generator G: built-in, or LLM-backed (one backend shared by F and G)."""
     if kind == "llm":
@@ -196,4 +234,8 @@ def make_fg(kind: GeneratorKind, llm: dict[str, Any]) -> tuple[Analyzer, Generat
 
         backend = make_backend(LLMConfig(**llm))
         return LLMAnalyzer(backend), make_generator("llm", backend=backend)
+    if kind == "failure-modes":
+        return BuiltinAnalyzer(), make_generator("failure-modes")
+    if kind == "regret-only":
+        return NoAnalyzer(), make_generator("builtin")
     return BuiltinAnalyzer(), make_generator("builtin")

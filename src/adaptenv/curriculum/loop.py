@@ -11,8 +11,11 @@ methods lives in their strategy classes (:mod:`adaptenv.curriculum.methods`):
   measured success), gradient steps are taken on levels replayed from a prioritized buffer.
 - ``accel``: ACCEL; replayed high-regret levels get ``edit_steps`` random edits each, the children
   are scored and inserted; gradient steps on replayed levels only.
-- ``ours``: the paper's adaptation step (:func:`~adaptenv.adapt.step.adapt_scene`): built-in F,
-  then built-in G checking its edits against pi_t, verification and final validation.
+- ``ours``: regret-based scene selection (a level buffer, as PLR/ACCEL) plus the paper's adaptation
+  step (:func:`~adaptenv.adapt.step.adapt_scene`) with F's diagnosis over ``diagnose_episodes``
+  hard episodes and G aimed at the dominant failure modes; ablations ``ours-noselect`` (the plain
+  step, one episode, round robin), ``ours-randomscene`` (uniform scene choice), ``ours-nof``
+  (G on regret alone, no F analysis).
 - ``ours-llm``: the same with LLM F and G (needs an LLM config).
 
 Per iteration every method rolls out the same number of analysis/scoring episodes and spends the
@@ -74,7 +77,7 @@ class LoopConfig:
     """Settings of one closed-loop run (one method, one seed); saved as run.json."""
 
     method: str = "ours"
-    """One of none, random, dr, plr, accel, ours, ours-llm."""
+    """One of none, random, dr, plr, accel, ours, ours-noselect, ours-randomscene, ours-nof, ours-llm."""
     policy: str = "pretrained"
     """Starting policy pi_0: pretrained or a checkpoint path (it must be a neural policy to fine-tune)."""
     houses: str = "preset:pretrain-train"
@@ -107,7 +110,9 @@ class LoopConfig:
     """LLMConfig fields for ours-llm (provider, model, base_url, api, cache_dir, prompts, price_in, price_out,
     max_tokens, max_cost, ...; docs/llm.md). Never an API key: name its variable in api_key_env."""
     buffer_capacity: int = 64
-    """Level buffer size (plr, accel)."""
+    """Level buffer size (plr, accel, ours)."""
+    diagnose_episodes: int = 4
+    """Hard episodes F diagnoses per adapted scene (ours, ours-randomscene, ours-nof)."""
 
     def check(self) -> LoopConfig:
         """Return self or raise one ConfigError naming the field and the fix."""
@@ -116,8 +121,9 @@ class LoopConfig:
         for name in ("iterations", "scenes_per_iteration", "finetune_frames", "heldout_episodes", "finetune_envs"):
             if getattr(self, name) < 1:
                 raise ConfigError(f"loop config: {name} must be at least 1, got {getattr(self, name)}")
-        if self.edit_steps < 0 or not 0.0 <= self.replay_fraction < 1.0:
-            raise ConfigError("loop config: edit_steps must be >= 0 and replay_fraction in [0, 1)")
+        if self.edit_steps < 0 or self.diagnose_episodes < 1 or not 0.0 <= self.replay_fraction < 1.0:
+            raise ConfigError("loop config: edit_steps must be >= 0, diagnose_episodes >= 1 and replay_fraction "
+                              "in [0, 1)")
         if self.method == "ours-llm" and not self.llm:
             raise ConfigError("loop config: method ours-llm needs an llm section (provider, model, base_url); "
                               "see docs/llm.md")

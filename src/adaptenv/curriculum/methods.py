@@ -182,15 +182,16 @@ class RandomEdits(EditingMethod):
     tag = "r"
 
 
-class Ours(EditingMethod):
-    """``ours``: the paper's adaptation step, built-in F and G with pi_t (:func:`~adaptenv.adapt.step.adapt_scene`)."""
+class OursNoSelect(EditingMethod):
+    """``ours-noselect``: the plain adaptation step (one episode for F, built-in G with pi_t) on the
+    rolled-out scenes in round robin, no regret-based selection (the earlier ``ours``)."""
 
-    name = "ours"
+    name = "ours-noselect"
     generator = "builtin"
     tag = "a"
 
 
-class OursLLM(Ours):
+class OursLLM(OursNoSelect):
     """``ours-llm``: the same step with LLM-backed F and G (needs the config's ``llm`` section)."""
 
     name = "ours-llm"
@@ -251,6 +252,85 @@ class ACCEL(PLR):
         return children
 
 
+class Ours(Method):
+    """``ours``: regret-based selection (as PLR/ACCEL) plus F's multi-episode diagnosis and G aimed at its failure modes.
+
+    A level buffer holds scenes scored by the regret their diagnosis measured (expert success
+    minus pi_t's over ``diagnose_episodes`` hard episodes). Each iteration ``scenes_per_iteration``
+    buffer scenes are picked (rank and staleness; the first iteration scores the training scenes
+    once and picks among them), each is diagnosed and adapted (:class:`GenerateJob` with
+    ``diagnose_episodes``), the parent's score becomes its measured regret, and the child goes in
+    scored by pi_t's regret on it. Fine-tuning uses the children plus high-regret buffer levels
+    (``replay_fraction`` of the mix).
+    """
+
+    name = "ours"
+    generator: ClassVar[GeneratorKind] = "failure-modes"
+    tag: ClassVar[str] = "f"
+    uniform: ClassVar[bool] = False
+    """Pick scenes uniformly from the buffer instead of by regret (``ours-randomscene``)."""
+
+    def scenes_to_roll_out(self, it: Iteration) -> list[str]:
+        if it.buffer.size == 0:
+            return list(it.state.pool)  # seed the buffer: one scored episode per training scene
+        it.replayed = self._pick(it, it.cfg.scenes_per_iteration, Stream.REPLAY)
+        return list(it.replayed)
+
+    def update_buffer(self, it: Iteration, rolled: list[str], rollouts: list[Rollout]) -> None:
+        for name, ro in zip(rolled, rollouts, strict=True):
+            if it.buffer.index(name) is None:
+                it.buffer = lb.insert(it.buffer, it.buffer_cfg, name, regret(ro), it.t)
+
+    def make_scenes(self, it: Iteration, rolled: list[str], rollouts: list[Rollout]) -> list[str]:
+        parents = it.replayed or self._pick(it, it.cfg.scenes_per_iteration, Stream.REPLAY)
+        jobs = [GenerateJob(self.generator, it.store.house(p), p, it.cfg.edit_steps,
+                            (it.cfg.seed, it.t, Stream.GENERATE + k), weights=it.weights,
+                            diagnose_episodes=it.cfg.diagnose_episodes)
+                for k, p in enumerate(parents)]
+        children = []
+        for k, (job, made) in enumerate(zip(jobs, it.executor.map(run_generate, jobs, desc="diagnosis and generation"),
+                                            strict=True)):
+            it.state.edits += made.edits
+            it.state.env_steps += made.rollout_steps
+            it.buffer = lb.insert(it.buffer, it.buffer_cfg, job.name, made.regret_before, it.t)
+            if not made.valid or made.edits == 0:
+                continue
+            child = it.store.put(f"{job.name.split('~')[0]}~t{it.t:02d}{self.tag}{k:02d}", made.house)
+            it.buffer = lb.insert(it.buffer, it.buffer_cfg, child, made.regret_after, it.t, parent_id=job.name)
+            children.append(child)
+            if len(it.gallery) < it.cfg.gallery:
+                it.gallery.append(gallery_item(it.run_dir, it.t, child, job.house, made, made.before))
+        return children
+
+    def train_on(self, it: Iteration, rolled: list[str], new: list[str]) -> list[str]:
+        n_replay = int(round(max(len(new), 1) * it.cfg.replay_fraction / (1.0 - it.cfg.replay_fraction)))
+        replay = self._pick(it, n_replay, Stream.ARCHIVE_MIX) if n_replay else []
+        it.state.archive = it.state.archive + [x for x in new if x not in it.state.archive]
+        return list(dict.fromkeys(new + replay)) or list(it.state.pool)
+
+    def _pick(self, it: Iteration, k: int, stream: Stream) -> list[str]:
+        """``k`` distinct buffer scenes: by rank and staleness of their regret, or uniformly."""
+        n = it.buffer.size
+        p = None if self.uniform else lb.replay_distribution(it.buffer, it.buffer_cfg, it.t)
+        idx = it.rng(stream).choice(n, size=min(k, n), replace=False, p=p)
+        return [it.buffer.level_ids[i] for i in sorted(idx.tolist())]
+
+
+class OursRandomScene(Ours):
+    """``ours-randomscene``: F's diagnosis and the failure-mode G on scenes picked uniformly from the buffer."""
+
+    name = "ours-randomscene"
+    uniform = True
+
+
+class OursNoF(Ours):
+    """``ours-nof``: regret-based selection, G with generic objectives and no F analysis (G on regret alone)."""
+
+    name = "ours-nof"
+    generator = "regret-only"
+    tag = "n"
+
+
 def regret(ro: Rollout) -> float:
     """A level's score: the expert's measured success on pi_t's episode minus pi_t's (0 where the expert fails too)."""
     return lb.regret_score(float(ro.result.success), ro.result.spl, float(ro.expert_success))
@@ -268,4 +348,4 @@ def fresh_houses(it: Iteration, k: int) -> list[str]:
 
 #: Every method by name; add a method with one class and one line here.
 METHODS: dict[str, type[Method]] = {m.name: m for m in (NoNewScenes, RandomEdits, DomainRandomization, PLR, ACCEL,
-                                                        Ours, OursLLM)}
+                                                        Ours, OursNoSelect, OursRandomScene, OursNoF, OursLLM)}

@@ -38,6 +38,7 @@ if TYPE_CHECKING:
     from PIL import Image
 
     from adaptenv.adapt.analysis import Analysis
+    from adaptenv.adapt.diagnosis import SceneDiagnosis
     from adaptenv.agents.policy import Policy
     from adaptenv.scene.house import House
     from adaptenv.sim.task import Episode
@@ -47,7 +48,7 @@ StepStatus = Literal["applied", "rejected", "skipped", "no-op"]
 """``applied``: the step's edit is in the house. ``rejected``: validation refused it. ``skipped``: no
 edit was made (no usable answer, or the step was aborted and its edit undone). ``no-op``: placement
 accepted a move that changed neither position nor heading (never counted as applied or verified)."""
-GENERATORS = ("builtin", "llm", "random")
+GENERATORS = ("builtin", "llm", "random", "failure-modes")
 
 
 class StepRecord(BaseModel):
@@ -80,6 +81,10 @@ class StepRecord(BaseModel):
     """Mean SPL of the policy on the checking episodes before/after the edit (when checked)."""
     render: str | None = None
     """File of the render after this step, when written."""
+    failure_mode: str | None = None
+    """The failure family the step aimed at (``failure-modes`` generator), e.g. ``search``."""
+    produced_failure: bool | None = None
+    """Whether pi_t's rollout on the chosen edit failed with that family (None: not checked)."""
 
 
 @dataclass
@@ -98,6 +103,8 @@ class GenerationContext:
     render_size: int = 768
     out_dir: Path | None = None
     """When set, renders are written here as ``step-XX.png``."""
+    diagnosis: SceneDiagnosis | None = None
+    """F's multi-episode diagnosis of the scene, when there is one (the ``failure-modes`` G aims at its families)."""
 
 
 @dataclass
@@ -188,6 +195,10 @@ def make_generator(name: str = "builtin", **kw: Any) -> Generator:
         from adaptenv.adapt.generators.random_perturbation import RandomPerturbation
 
         return RandomPerturbation(**kw)
+    if name == "failure-modes":
+        from adaptenv.adapt.generators.failure_modes import FailureModeGenerator
+
+        return FailureModeGenerator(**kw)
     raise ConfigError(f"unknown generator {name!r}; use one of {', '.join(GENERATORS)}")
 
 
