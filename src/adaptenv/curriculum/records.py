@@ -7,6 +7,7 @@ The loop writes, the report reads; both go through these models, so the layout l
       iterations.jsonl              one IterationRecord per finished iteration (append-only)
       iterations.csv                the same figures, flat, for spreadsheets
       iter_0001/
+        heldout/<set>/houses.csv    pi_{t+1}'s held-out results per house
         gallery/<scene>/            before.png, after.png, analysis.json, edits.json (adapted scenes),
                                     and when recorded both houses and both trajectories
         scenes/<scene>.json         training scenes e_{t+1} produced this iteration
@@ -33,6 +34,9 @@ RUN_INFO = "run.json"
 ITERATIONS = "iterations.jsonl"
 ITERATIONS_CSV = "iterations.csv"
 STATE = "state.json"
+HELDOUT_DIR = "heldout"
+"""``iter_XXXX/heldout/<set>/``: per-house results of that iteration's held-out evaluation, in the
+layout ``adaptenv evaluate`` writes (houses.csv; failures.png when failed episodes were recorded)."""
 
 
 def iteration_dir(run_dir: Path, t: int) -> Path:

@@ -17,7 +17,14 @@ from typing import Any, Literal
 
 from pydantic import ValidationError
 
-from adaptenv.curriculum.records import ITERATIONS, RUN_INFO, GalleryItem, IterationRecord, RunInfo
+from adaptenv.curriculum.records import (
+    HELDOUT_DIR,
+    ITERATIONS,
+    RUN_INFO,
+    GalleryItem,
+    IterationRecord,
+    RunInfo,
+)
 from adaptenv.errors import AdaptenvError
 
 SUMMARY = "summary.json"
@@ -314,11 +321,6 @@ def house_sets(run: RunData) -> list[HouseSetFiles]:
         files = sorted(path.glob("*.json")) if path is not None and path.is_dir() else [path] if path else []
         out.append(HouseSetFiles(name, spec, files, "" if files else f"{spec} was not found from here"))
     return out
-
-
-HELDOUT_DIR = "heldout"
-"""``iter_XXXX/heldout/<set>/``: per-house results of that iteration's held-out evaluation, in the
-layout ``adaptenv evaluate`` writes (houses.csv, failures.png, failed/episode_*.json)."""
 
 
 @dataclass
