@@ -3,12 +3,17 @@
 from __future__ import annotations
 
 import json
+import logging
 import os
 from pathlib import Path
 
 import typer
 
+from adaptenv.agents.houses import SkippedHouse
 from adaptenv.cli._common import JSON_OPTION
+from adaptenv.errors import AdaptenvError
+
+log = logging.getLogger(__name__)
 
 HOUSE_ARGUMENT = typer.Argument(..., metavar="HOUSE.json", help="House JSON file (ProcTHOR format).",
                                 show_default=False)
@@ -58,8 +63,13 @@ def analyze(
     typer.echo(result.model_dump_json(indent=1) if as_json else result.to_text())
 
 
+ADAPT_HOUSE_ARGUMENT = typer.Argument(..., metavar="HOUSE", show_default=False,
+                                      help="House JSON file (ProcTHOR format), or a folder of them (each adapted "
+                                           "into OUT/NAME/; houses that cannot be used are skipped).")
+
+
 def adapt(
-    house: Path = HOUSE_ARGUMENT,
+    house: Path = ADAPT_HOUSE_ARGUMENT,
     out: Path = OUT_OPTION,
     policy: str = typer.Option("expert", "--policy", help="pretrained, expert, random, a checkpoint (.pt), "
                                "or module:attribute."),
@@ -72,53 +82,98 @@ def adapt(
     seed: int = typer.Option(0, "--seed", help="Seed of the episode draw and the generator."),
     target: str | None = typer.Option(None, "--target", metavar="TYPE", help="Target object type (e.g. Fridge)."),
     as_json: bool = typer.Option(False, "--json", help="Print the summary as JSON."),
+    strict: bool = typer.Option(False, "--strict", help="With a folder: fail on the first house that cannot be "
+                                "used instead of skipping it with a warning."),
 ) -> None:
     """One closed-loop step: roll out the policy, analyze (F), edit the house (G), validate, write OUT."""
-    from rich.console import Console
-
     from adaptenv.adapt.analysis import BuiltinAnalyzer, LLMAnalyzer
     from adaptenv.adapt.generators import GENERATORS, make_generator
     from adaptenv.adapt.pipeline import adapt_house, resolve_policy_spec
-    from adaptenv.cli._common import existing_file
     from adaptenv.errors import ConfigError
-    from adaptenv.scene.house import load_house
 
     if generator not in GENERATORS:
         raise ConfigError(f"--generator {generator!r}: unknown generator; use one of {', '.join(GENERATORS)}")
     if analyzer not in ("builtin", "llm"):
         raise ConfigError(f"--analyzer {analyzer!r}: unknown analyzer; use builtin or llm")
-    h = load_house(existing_file(house, "house file"))
+    houses = _adapt_inputs(house, strict)
     backend = None
     if "llm" in (generator, analyzer):
         backend = llm_backend(model, base_url, llm_cache, f"--{'generator' if generator == 'llm' else 'analyzer'} llm")
     gen = make_generator(generator, backend=backend) if generator == "llm" else make_generator(generator)
     f = LLMAnalyzer(backend) if analyzer == "llm" else BuiltinAnalyzer()
-    result = adapt_house(h, policy=resolve_policy_spec(policy, seed=seed), analyzer=f, generator=gen, steps=steps,
-                         seed=seed, target_type=target, out_dir=out, name=house.stem)
-    s = result.summary
-    if as_json:
-        typer.echo(json.dumps(s, indent=1, default=str))
-    else:
-        console = Console()
-        ob, oa = s["objective_before"], s["objective_after"]
-        ab, aa = s["agent_before"], s["agent_after"]
-        ep = s["episode"]
-        console.print(f"episode: find a {ep['target_type']} from ({ep['start'][0]:.2f}, {ep['start'][1]:.2f}); "
-                      f"policy {s['policy']}, analyzer {s['analyzer']}, generator {s['generator']}")
-        console.print(f"edits applied: {s['edits_applied']} of {s['steps_requested']} "
-                      f"({s['edits_verified']} verified)")
-        for k in ob:
-            console.print(f"  {k:15s} {_fmt(ob[k])} -> {_fmt(oa[k])}")
-        console.print(f"agent: success {ab['success']} -> {aa['success']}, SPL {ab['spl']:.3f} -> {aa['spl']:.3f}")
-        console.print(f"realism: {_fmt(s['realism_before'])} -> {_fmt(s['realism_after'])}; expert solvable: "
-                      f"{s['expert_solvable']}, expert success: {s['expert_success_after']}; valid: {s['valid']}")
-        for p in s["problems"]:
-            console.print(f"  [red]problem:[/] {p}", highlight=False)
-        if s.get("usage"):
-            console.print(f"tokens: {s['usage']}")
-        console.print(f"wrote {out}/ (house.json, before.png, after.png, analysis.json, edits.json, summary.json)")
-    if not s["valid"]:
+    pol = resolve_policy_spec(policy, seed=seed)
+    summaries, skipped = [], list(houses.skipped)
+    for name, h in zip(houses.names, houses.houses, strict=True):
+        folder = out / name if house.is_dir() else out
+        try:
+            result = adapt_house(h, policy=pol, analyzer=f, generator=gen, steps=steps, seed=seed,
+                                 target_type=target, out_dir=folder, name=name)
+        except AdaptenvError as exc:
+            if not house.is_dir() or strict:
+                raise
+            log.warning("skipping house %s: %s", name, exc)
+            skipped.append(SkippedHouse(name, str(exc)))
+            continue
+        summaries.append(result.summary)
+        if as_json and not house.is_dir():
+            typer.echo(json.dumps(result.summary, indent=1, default=str))
+        elif not as_json:
+            _print_adapt_summary(result.summary, folder)
+    if house.is_dir():
+        _finish_folder(house, out, summaries, skipped, as_json)
+    elif not summaries[0]["valid"]:
         raise typer.Exit(1)
+
+
+def _adapt_inputs(house: Path, strict: bool):
+    """The houses to adapt: one file (errors stay errors) or a folder (unusable houses skipped)."""
+    from adaptenv.agents.houses import HouseSet, load_house_set
+    from adaptenv.cli._common import existing_file
+    from adaptenv.scene.house import load_house
+
+    if house.is_dir():
+        return load_house_set(house, strict=strict)
+    return HouseSet(str(house), [load_house(existing_file(house, "house file"))], [], [])
+
+
+def _finish_folder(house: Path, out: Path, summaries: list[dict], skipped: list, as_json: bool) -> None:
+    """Summary of a folder run; exit 1 unless at least one house was adapted into a valid house."""
+    valid = sum(bool(s["valid"]) for s in summaries)
+    doc = {"houses": str(house), "adapted": len(summaries), "valid": valid, "skipped": len(skipped),
+           "skipped_houses": {h.name: h.reason for h in skipped}}
+    out.mkdir(parents=True, exist_ok=True)
+    (out / "summary.json").write_text(json.dumps(doc, indent=1) + "\n", encoding="utf-8")
+    if as_json:
+        typer.echo(json.dumps({**doc, "summaries": summaries}, indent=1, default=str))
+    else:
+        typer.echo(f"{house}: adapted {len(summaries)} house(s) ({valid} valid), skipped {len(skipped)}; "
+                   f"wrote {out}/summary.json")
+    if valid == 0:
+        raise typer.Exit(1)
+
+
+def _print_adapt_summary(s: dict, out: Path) -> None:
+    """The human-readable summary of one adapted house."""
+    from rich.console import Console
+
+    console = Console()
+    ob, oa = s["objective_before"], s["objective_after"]
+    ab, aa = s["agent_before"], s["agent_after"]
+    ep = s["episode"]
+    console.print(f"episode: find a {ep['target_type']} from ({ep['start'][0]:.2f}, {ep['start'][1]:.2f}); "
+                  f"policy {s['policy']}, analyzer {s['analyzer']}, generator {s['generator']}")
+    console.print(f"edits applied: {s['edits_applied']} of {s['steps_requested']} "
+                  f"({s['edits_verified']} verified)")
+    for k in ob:
+        console.print(f"  {k:15s} {_fmt(ob[k])} -> {_fmt(oa[k])}")
+    console.print(f"agent: success {ab['success']} -> {aa['success']}, SPL {ab['spl']:.3f} -> {aa['spl']:.3f}")
+    console.print(f"realism: {_fmt(s['realism_before'])} -> {_fmt(s['realism_after'])}; expert solvable: "
+                  f"{s['expert_solvable']}, expert success: {s['expert_success_after']}; valid: {s['valid']}")
+    for p in s["problems"]:
+        console.print(f"  [red]problem:[/] {p}", highlight=False)
+    if s.get("usage"):
+        console.print(f"tokens: {s['usage']}")
+    console.print(f"wrote {out}/ (house.json, before.png, after.png, analysis.json, edits.json, summary.json)")
 
 
 def _fmt(x) -> str:

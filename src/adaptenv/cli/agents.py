@@ -62,6 +62,8 @@ def evaluate(
     workers: int = typer.Option(1, "--workers", "-w", min=1, help="Worker processes (episodes are split among them)."),
     batch: int = typer.Option(64, "--batch", min=1, help="Episodes simulated at once per process."),
     out: Path = _OUT_OPTION,
+    strict: bool = typer.Option(False, "--strict", help="Fail on the first house that cannot be used instead of "
+                                "skipping it with a warning."),
 ) -> None:
     """Evaluate a policy: success, SPL, SEL, collisions, length (mean +- s.e.), per-house CSV, failure maps."""
     import json
@@ -80,11 +82,11 @@ def evaluate(
     console = Console()
     command = shlex.join(["adaptenv", "evaluate", "--policy", policy, *[a for h in houses for a in ("--houses", h)],
                           "--episodes", str(episodes), "--seed", str(seed), "--workers", str(workers),
-                          "--batch", str(batch), "-o", str(out)])
+                          "--batch", str(batch), "-o", str(out), *(["--strict"] if strict else [])])
     resolved = resolve_policy(policy, seed=seed)  # fail early on a bad --policy
     summaries = []
     for spec in houses:
-        house_set = load_house_set(spec)
+        house_set = load_house_set(spec, strict=strict)
         with Progress(console=console, transient=True) as bar:
             task = bar.add_task(f"{policy} on {spec}", total=episodes)
             report = run_eval(policy if workers > 1 else resolved, house_set, episodes=episodes, seed=seed,
@@ -104,6 +106,11 @@ def evaluate(
                       f"{s['sel']:.3f} +- {s['sel_se']:.3f}", f"{s['collisions']:.1f} +- {s['collisions_se']:.1f}",
                       f"{s['steps']:.0f} +- {s['steps_se']:.0f}")
     console.print(table)
+    for spec, s, _ in summaries:
+        if s["skipped_houses"]:
+            console.print(f"skipped {len(s['skipped_houses'])} house(s) of {spec} that cannot be used "
+                          f"({', '.join(list(s['skipped_houses'])[:5])}{', ...' if len(s['skipped_houses']) > 5 else ''}); "
+                          "see summary.json for the reasons", highlight=False)
     for spec, s, _ in summaries:
         if s["failure_modes"]:
             console.print(f"failures on {spec} (built-in analysis F): "

@@ -170,20 +170,43 @@ def is_success(world: NavWorld, x: float, z: float, yaw: float, target_type: str
 # --------------------------------------------------------------------------- episodes
 
 def available_targets(world: NavWorld) -> list[str]:
-    """Target types whose success region touches the largest navigable component."""
+    """Target types an episode exists for: the success region touches the largest navigable
+    component and does not cover all of it (some start lies outside the region)."""
     from adaptenv.sim.geodesic import success_region
 
     key = ("available_targets",)
     if key not in world.cache:
         comp, n = world.grid.components(AGENT_RADIUS)
         if n == 0:
-            world.cache[key] = []
+            world.cache[key], world.cache[("trivial_targets",)] = [], []
             return []
         largest = int(np.argmax(np.bincount(comp.ravel())[1:])) + 1
+        floor = comp == largest
         present = set(world.object_types)
-        world.cache[key] = [t for t in TARGET_TYPES
-                            if t in present and bool((success_region(world, t) & (comp == largest)).any())]
+        avail, trivial = [], []
+        for t in TARGET_TYPES:
+            if t not in present:
+                continue
+            inside = success_region(world, t) & floor
+            if not inside.any():
+                continue
+            (avail if int(inside.sum()) < int(floor.sum()) else trivial).append(t)
+        world.cache[key], world.cache[("trivial_targets",)] = avail, trivial
     return list(world.cache[key])
+
+
+def trivial_targets(world: NavWorld) -> list[str]:
+    """Target types visible from every cell of the largest navigable component: no episode can
+    start away from them, so the house is trivial for these types."""
+    available_targets(world)
+    return list(world.cache[("trivial_targets",)])
+
+
+def _others(world: NavWorld, target_type: str) -> str:
+    """The other target types an episode exists for, as a phrase for an error message."""
+    others = [t for t in available_targets(world) if t != target_type]
+    return f"choose another target ({', '.join(others)})" if others else \
+        "no other target type has episodes in this house either"
 
 
 def _check_target(world: NavWorld, target_type: str) -> None:
@@ -216,6 +239,11 @@ def sample_episode(world: NavWorld, rng: np.random.Generator | int, target_type:
     if target_type is None:
         avail = available_targets(world)
         if not avail:
+            trivial = trivial_targets(world)
+            if trivial:
+                raise AdaptenvError(f"{world.name}: no episode exists in this house: every reachable cell already "
+                                    f"sees the {', '.join(trivial)}, and no other ObjectNav target type is "
+                                    "solvable; use a larger house or add another target object")
             raise AdaptenvError(f"{world.name}: no ObjectNav target type is solvable in this house (none of "
                                 f"{', '.join(TARGET_TYPES)} can be seen from reachable floor); add a target "
                                 "object or open a door to it")
@@ -235,8 +263,12 @@ def sample_episode(world: NavWorld, rng: np.random.Generator | int, target_type:
     cells = world.cache[key]
     rows, cols = np.divmod(cells, world.grid.shape[1])
     if len(rows) == 0:
-        raise AdaptenvError(f"{world.name}: the {target_type} cannot be reached from any free floor; "
-                            f"choose another target ({', '.join(available_targets(world)) or 'none available'})")
+        if (distance_field(world, target_type) == 0).any():  # a region exists but covers every reachable cell
+            raise AdaptenvError(f"{world.name}: the {target_type} is visible from every reachable cell, so no "
+                                f"episode can start away from it (the house is trivial for {target_type}); "
+                                + _others(world, target_type))
+        raise AdaptenvError(f"{world.name}: the {target_type} cannot be seen from any reachable floor; "
+                            + _others(world, target_type))
     k = int(rng.integers(len(rows)))
     x, z = world.grid.cell_center(rows[k], cols[k])
     yaw = float(rng.integers(int(360 / ROTATE_LARGE)) * ROTATE_LARGE)
