@@ -139,7 +139,7 @@ class NavRaster:
         self.count = ndimage.binary_dilation(static, self.disc).astype(np.int16)
         self.ids = [f.object_id for f in geometry.floor_objects]
         self.types = [f.object_type for f in geometry.floor_objects]
-        self.objects = [self.inflate(f.corners) for f in geometry.floor_objects]
+        self.objects = [self.inflate(f.outline) for f in geometry.floor_objects]
         for inf in self.objects:
             self._add(inf, 1)
         self.room = occ.room

@@ -95,15 +95,15 @@ def adapt(
         raise ConfigError(f"--generator {generator!r}: unknown generator; use one of {', '.join(GENERATORS)}")
     if analyzer not in ("builtin", "llm"):
         raise ConfigError(f"--analyzer {analyzer!r}: unknown analyzer; use builtin or llm")
-    houses = _adapt_inputs(house, strict)
+    names, houses, skipped = _adapt_inputs(house, strict)
     backend = None
     if "llm" in (generator, analyzer):
         backend = llm_backend(model, base_url, llm_cache, f"--{'generator' if generator == 'llm' else 'analyzer'} llm")
     gen = make_generator(generator, backend=backend) if generator == "llm" else make_generator(generator)
     f = LLMAnalyzer(backend) if analyzer == "llm" else BuiltinAnalyzer()
     pol = resolve_policy_spec(policy, seed=seed)
-    summaries, skipped = [], list(houses.skipped)
-    for name, h in zip(houses.names, houses.houses, strict=True):
+    summaries = []
+    for name, h in zip(names, houses, strict=True):
         folder = out / name if house.is_dir() else out
         try:
             result = adapt_house(h, policy=pol, analyzer=f, generator=gen, steps=steps, seed=seed,
@@ -125,15 +125,16 @@ def adapt(
         raise typer.Exit(1)
 
 
-def _adapt_inputs(house: Path, strict: bool):
-    """The houses to adapt: one file (errors stay errors) or a folder (unusable houses skipped)."""
-    from adaptenv.agents.houses import HouseSet, load_house_set
+def _adapt_inputs(house: Path, strict: bool) -> tuple[list[str], list, list[SkippedHouse]]:
+    """(names, houses, skipped): one file (its errors stay errors) or a folder (unusable houses skipped)."""
+    from adaptenv.agents.houses import load_house_set
     from adaptenv.cli._common import existing_file
     from adaptenv.scene.house import load_house
 
     if house.is_dir():
-        return load_house_set(house, strict=strict)
-    return HouseSet(str(house), [load_house(existing_file(house, "house file"))], [], [])
+        hs = load_house_set(house, strict=strict)
+        return hs.names, hs.houses, list(hs.skipped)
+    return [house.stem], [load_house(existing_file(house, "house file"))], []
 
 
 def _finish_folder(house: Path, out: Path, summaries: list[dict], skipped: list, as_json: bool) -> None:
