@@ -12,7 +12,10 @@
   could reach from the start in ``original`` no longer can (navigable = clearance >= radius on
   the :mod:`adaptenv.scene.occupancy` raster, 4-connected);
 - ``target_unreachable``: a target type's success region (``sim.geodesic``) is no longer
-  reachable from the start (the start's geodesic distance is infinite).
+  reachable from the start (the start's geodesic distance is infinite);
+- ``doorway_approach``: furniture covers more of a doorway's approach zone than
+  :data:`~adaptenv.adapt.doorways.MAX_APPROACH_COVER` of its width, and more than in ``original``
+  (:mod:`adaptenv.adapt.doorways`; ProcTHOR keeps these clearances free when it furnishes a house).
 
 Without ``original`` the house is compared with itself: every room, passable doorway and target
 type present must be reachable, and only the ProcTHOR pattern of seats tucked under tables (or
@@ -35,6 +38,7 @@ import shapely
 from PIL import Image, ImageDraw
 from scipy import ndimage
 
+from adaptenv.adapt.doorways import approach_zones, blocked_approaches, covered_width
 from adaptenv.adapt.edits import Edit, EditLog
 from adaptenv.adapt.placement import (
     DEFAULT_STEP,
@@ -61,7 +65,7 @@ TABLE_TYPES = frozenset({"DiningTable", "Desk", "CoffeeTable", "SideTable"})
 APPROACH_CELLS = 2
 
 ProblemKind = Literal["invalid", "outside_room", "crosses_wall", "overlap", "overlap_grew", "start_blocked", "no_start",
-                      "room_unreachable", "doorway_blocked", "target_unreachable"]
+                      "room_unreachable", "doorway_blocked", "target_unreachable", "doorway_approach"]
 
 
 @dataclass(frozen=True)
@@ -312,6 +316,16 @@ def _containment_problems(geometry: SceneGeometry, moved: set[str] | None) -> li
     return out
 
 
+def _approach_problems(geometry: SceneGeometry, orig_geometry: SceneGeometry) -> list[ValidationProblem]:
+    """Doorway approach zones covered past the limit and more than in the original scene."""
+    before = {z.door_id: covered_width(z, [f.polygon for f in orig_geometry.floor_objects])
+              for z in approach_zones(orig_geometry)}
+    polys = {f.object_id: f.polygon for f in geometry.floor_objects}
+    return [ValidationProblem("doorway_approach", f"{', '.join(ids)} cover {cover:.2f} of the {width:.2f} m in front "
+                              f"of doorway {d}; keep at least half of a doorway's approach clear", (d, *ids))
+            for d, cover, width, ids in blocked_approaches(approach_zones(geometry), polys, before)]
+
+
 def validate_scene(house: House, *, episode_targets: list[str] | None = None, start: Start | None = None,
                    original: House | None = None, catalog: AssetCatalog | None = None) -> list[ValidationProblem]:
     """Every physical-plausibility and task-feasibility problem of a (possibly edited) house.
@@ -336,6 +350,8 @@ def validate_scene(house: House, *, episode_targets: list[str] | None = None, st
         before = {f.object_id: (f.center, f.yaw) for f in orig_geometry.floor_objects}
         moved = {f.object_id for f in geometry.floor_objects if before.get(f.object_id) != (f.center, f.yaw)}
     problems += _containment_problems(geometry, moved)
+    if orig_geometry is not None:
+        problems += _approach_problems(geometry, orig_geometry)
 
     types = {f.object_id: f.object_type for f in geometry.floor_objects}
     base = _overlaps(orig_geometry) if orig_geometry is not None else None
@@ -414,6 +430,10 @@ class EditValidator:
         need = scene_reachability(base_house, start=self.start, targets=episode_targets, geometry=base_geometry)
         self.need_rooms = need.rooms
         self.need_doors = need.doors & set(self.doors)
+        self.approach = approach_zones(self.geometry)
+        base = SceneGeometry.from_house(original, self.catalog) if original is not None else self.geometry
+        self.approach_before = {z.door_id: covered_width(z, [shapely.Polygon(f.corners) for f in base.floor_objects])
+                                for z in approach_zones(base)}
         self.need_targets = need.targets if episode_targets is None else set(episode_targets) & need.targets
         self.tall = np.array([f.occludes for f in self.geometry.floor_objects], dtype=bool)
         self.of_type: dict[str, list[int]] = {}
@@ -490,7 +510,20 @@ class EditValidator:
             if not any((flat[ring] == comp).any() for ring in rings):
                 problems.append(ValidationProblem("target_unreachable", f"no {t} could be reached from the start",
                                                   (t,)))
-        return problems
+        return problems + self._approach_check(moved, corners)
+
+    def _approach_check(self, moved: int, corners: np.ndarray) -> list[ValidationProblem]:
+        """Doorway approach zones the moved object (at ``corners``) would cover past the limit."""
+        lo, hi = corners.min(axis=0), corners.max(axis=0)
+        zones = [z for z in self.approach if shapely.intersects(z.zone, shapely.box(lo[0], lo[1], hi[0], hi[1]))]
+        if not zones:
+            return []
+        polys = {oid: shapely.Polygon(corners if k == moved else self.ctx.objects.verts[k])
+                 for k, oid in enumerate(self.ctx.ids)}
+        return [ValidationProblem("doorway_approach", f"{', '.join(ids)} would cover {cover:.2f} of the {width:.2f} m "
+                                  f"in front of doorway {d}", (d, *ids))
+                for d, cover, width, ids in blocked_approaches(zones, polys, self.approach_before)
+                if self.ctx.ids[moved] in ids]
 
     def _affects(self, i: int, target_type: str) -> bool:
         """Whether moving object i can change where ``target_type`` is visible from (tall, or a target itself)."""
