@@ -72,3 +72,9 @@ def test_cli_adapt_folder_skips(mixed_folder, tmp_path):
     assert (out / "a_good" / "house.json").is_file()
     res = CliRunner().invoke(app, ["adapt", str(mixed_folder), "-o", str(tmp_path / "a2"), "--strict"])
     assert res.exit_code != 0 and isinstance(res.exception, ConfigError)
+
+
+def test_cli_rollout_on_one_unusable_house_keeps_its_error(mixed_folder, tmp_path):
+    res = CliRunner().invoke(app, ["rollout", str(mixed_folder / "c_trivial.json"), "-o", str(tmp_path / "t.json")])
+    assert res.exit_code != 0
+    assert "no episode exists" in str(res.exception) and "GarbageCan" in str(res.exception)
