@@ -78,3 +78,14 @@ def test_cli_rollout_on_one_unusable_house_keeps_its_error(mixed_folder, tmp_pat
     res = CliRunner().invoke(app, ["rollout", str(mixed_folder / "c_trivial.json"), "-o", str(tmp_path / "t.json")])
     assert res.exit_code != 0
     assert "no episode exists" in str(res.exception) and "GarbageCan" in str(res.exception)
+
+
+def test_loop_and_experiment_check_house_sets_up_front(mixed_folder, tmp_path):
+    from adaptenv.cli.curriculum import check_house_sets
+
+    said = []
+    assert check_house_sets([str(mixed_folder), str(mixed_folder)], False, said.append) == {str(mixed_folder): 3}
+    assert len(said) == 1 and "skipping 3 house(s)" in said[0] and "b_no_target" in said[0]
+    res = CliRunner().invoke(app, ["loop", "--houses", str(mixed_folder), "-o", str(tmp_path / "run"), "--strict"])
+    assert res.exit_code != 0 and isinstance(res.exception, ConfigError)
+    assert not (tmp_path / "run").exists()
