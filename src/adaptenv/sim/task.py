@@ -171,8 +171,8 @@ def is_success(world: NavWorld, x: float, z: float, yaw: float, target_type: str
 
 def available_targets(world: NavWorld) -> list[str]:
     """Target types an episode exists for: the success region touches the largest navigable
-    component and does not cover all of it (some start lies outside the region)."""
-    from adaptenv.sim.geodesic import success_region
+    component and does not cover all of its enterable cells (some start lies outside the region)."""
+    from adaptenv.sim.geodesic import enterable, success_region
 
     key = ("available_targets",)
     if key not in world.cache:
@@ -181,7 +181,7 @@ def available_targets(world: NavWorld) -> list[str]:
             world.cache[key], world.cache[("trivial_targets",)] = [], []
             return []
         largest = int(np.argmax(np.bincount(comp.ravel())[1:])) + 1
-        floor = comp == largest
+        floor = (comp == largest) & enterable(world)  # where starts are drawn
         present = set(world.object_types)
         avail, trivial = [], []
         for t in TARGET_TYPES:
@@ -196,8 +196,8 @@ def available_targets(world: NavWorld) -> list[str]:
 
 
 def trivial_targets(world: NavWorld) -> list[str]:
-    """Target types visible from every cell of the largest navigable component: no episode can
-    start away from them, so the house is trivial for these types."""
+    """Target types visible from every enterable cell of the largest navigable component: no episode
+    can start away from them, so the house is trivial for these types."""
     available_targets(world)
     return list(world.cache[("trivial_targets",)])
 
@@ -223,14 +223,14 @@ def sample_episode(world: NavWorld, rng: np.random.Generator | int, target_type:
                    use_house_start: bool = False) -> Episode:
     """Draw a solvable episode: a target type and a start from which its success region is reachable.
 
-    The start is the centre of a navigable cell (clearance >= AGENT_RADIUS) drawn uniformly among
+    The start is the centre of an enterable cell (:func:`adaptenv.sim.geodesic.enterable`) drawn uniformly among
     those with a finite, positive geodesic distance to the success region (so not already
     successful whatever the yaw), with yaw a multiple of 30 degrees. ``use_house_start`` takes the
     house's metadata pose instead (yaw rounded to the 6-degree lattice); that episode may be
     unsolvable, which :func:`adaptenv.sim.metrics.episode_metrics` reports as ``solvable=False``.
     ``rng`` may be an int seed, which is then recorded in ``Episode.seed``.
     """
-    from adaptenv.sim.geodesic import distance_field
+    from adaptenv.sim.geodesic import distance_field, enterable
 
     seed = None
     if not isinstance(rng, np.random.Generator):
@@ -259,7 +259,7 @@ def sample_episode(world: NavWorld, rng: np.random.Generator | int, target_type:
     key = ("starts", target_type)
     if key not in world.cache:
         field = distance_field(world, target_type)
-        world.cache[key] = np.flatnonzero(np.isfinite(field) & (field > 0)).astype(np.int32)
+        world.cache[key] = np.flatnonzero(np.isfinite(field) & (field > 0) & enterable(world)).astype(np.int32)
     cells = world.cache[key]
     rows, cols = np.divmod(cells, world.grid.shape[1])
     if len(rows) == 0:
