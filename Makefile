@@ -31,6 +31,7 @@ demo: $(STAMP)
 test: $(DEV_STAMP)
 	$(BIN)/ruff check src tests tools
 	$(BIN)/pytest -n 2 -q
+	$(BIN)/python tools/check_houses.py preset:tiny tests/data --episodes 10 --check
 
 bench: $(STAMP)
 	for b in sim expert houses render edits adapt train executor; do $(BIN)/adaptenv bench $$b || exit 1; done

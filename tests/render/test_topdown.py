@@ -250,3 +250,19 @@ def test_cli_broken_trajectory_is_one_line_without_traceback(real_house_path, tm
     err = proc.stderr.strip()
     assert err.startswith("error:") and str(bad) in err.replace("\n", "")
     assert "Traceback" not in proc.stdout + proc.stderr
+
+
+@pytest.mark.parametrize(("asset_id", "leaves"), [("Doorframe_Double_5", 0), ("Doorway_10", 1), ("Doorway_Double_1", 2)])
+def test_doors_are_drawn_with_their_leaves(asset_id, leaves):
+    """A doorframe has no leaf, a door one from its first jamb, a double door one from each jamb."""
+    from tests.sim import helpers as H
+
+    h = H.two_rooms(1.2)
+    h.doors[0].assetId = asset_id
+    assert td.door_leaves(asset_id) == leaves
+    r = render_map(h, size=600)
+    # The door spans z 1.4..2.6 on the wall x = 4; leaves swing into room 0 (x < 4), 0.25 m from each jamb.
+    at_first = near_pixels(r.image, r.transform.to_px(3.75, 1.4), 2)
+    at_second = near_pixels(r.image, r.transform.to_px(3.75, 2.6), 2)
+    assert (td.DOOR in at_first) == (leaves >= 1)
+    assert (td.DOOR in at_second) == (leaves == 2)

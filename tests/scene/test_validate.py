@@ -112,7 +112,8 @@ def test_unknown_asset_id(tmp_path, doc, where):
     else:
         target, path = doc[where[0]][where[1]], f"{where[0]}[{where[1]}].assetId"
     target["assetId"] = "Sofa_999_NoSuch"
-    _one_problem(tmp_path, doc, path, "'Sofa_999_NoSuch'", "not a ProcTHOR asset")
+    fix = "not a ProcTHOR asset" if where[0] in ("doors", "windows") else "pass --assets FILE"
+    _one_problem(tmp_path, doc, path, "'Sofa_999_NoSuch'", fix)
 
 
 def test_room_id_and_type(tmp_path, doc):

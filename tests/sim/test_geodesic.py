@@ -8,6 +8,7 @@ from scipy import ndimage
 
 from adaptenv.sim.geodesic import (
     distance_field,
+    enterable,
     field_at,
     geodesic_distance,
     is_solvable,
@@ -68,12 +69,13 @@ def test_sealed_room_is_unreachable():
 
 
 def test_region_matches_visibility_at_cell_centres(real_house):
-    """Reference loop: a cell is in the region iff the target is visible from its centre in some direction."""
+    """Reference loop: an enterable cell is in the region iff the target is visible from its centre in some
+    direction."""
     w = compile_world(real_house)
     rng = np.random.default_rng(0)
     for target in ("Bed", "Fridge", "GarbageCan"):
         region = success_region(w, target)
-        nav = navigable(w)
+        nav = enterable(w)
         # Cells near the region boundary are the interesting ones; add random navigable cells.
         edge = region ^ ndimage.binary_dilation(region, iterations=3)
         cand = np.flatnonzero(edge & nav)
@@ -110,3 +112,41 @@ def test_real_house_fields_are_finite_on_the_main_floor(real_house, target):
     comp, _ = w.grid.components(0.2)
     largest = np.argmax(np.bincount(comp.ravel())[1:]) + 1
     assert np.isfinite(distance_field(w, target)[comp == largest]).all()
+
+
+def test_success_region_is_enterable_and_drops_only_slivers(real_house):
+    w = compile_world(real_house)
+    for t in ("Toilet", "Sofa", "Bed"):
+        region = success_region(w, t)
+        assert not (region & ~enterable(w)).any()
+    assert enterable(w).sum() > 0.97 * navigable(w).sum() and not (enterable(w) & ~navigable(w)).any()
+
+
+def _gap_house(gap: float, can_z: float = 5.5, depth: float = 6.0):
+    """A room cut at z = 3 by four tall desks (1.39 x 0.69 m) with one ``gap`` (m) between them and a garbage
+    can behind them at ``can_z`` (seen only from behind the desks); the room is ``depth`` m deep."""
+    d = 1.39
+    width = 4 * d + gap
+    objs = [H.Obj(H.TALL_FURNITURE, x, 3.0) for x in (d / 2, 1.5 * d, 2.5 * d + gap, 3.5 * d + gap)]
+    return H.make_house([(0.0, 0.0, width, depth)], objects=[*objs, H.Obj(H.LOW_TARGET, width / 2, can_z)]), width
+
+
+def test_a_one_cell_strip_is_navigable_but_not_enterable():
+    """A 0.5 m gap between tall desks leaves a strip of floor one cell wide where the disc fits: the
+    agent may pass along it but cannot stop in it, so no success region lies there."""
+    h, width = _gap_house(0.5)
+    w = compile_world(h)
+    gap = w.grid.to_cell(width / 2, 3.0)
+    assert navigable(w)[gap] and not enterable(w)[gap]
+    assert not success_region(w, "GarbageCan")[gap]
+
+
+@pytest.mark.parametrize("gap", [0.5, 0.6])
+def test_corridors_the_disc_fits_stay_passable_and_the_expert_gets_through(gap):
+    from adaptenv.sim.rollout import expert_policy, run_episode
+
+    h, width = _gap_house(gap)
+    w = compile_world(h)
+    ep = Episode("GarbageCan", (width / 2 - 1.5, 1.0, 0.0))
+    assert is_solvable(w, ep)
+    assert run_episode(w, ep, expert_policy(), max_steps=600).metrics.success

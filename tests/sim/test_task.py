@@ -14,6 +14,7 @@ from adaptenv.sim.task import (
     is_success,
     sample_episode,
     sample_points,
+    trivial_targets,
     visible_instances,
 )
 from adaptenv.sim.world import compile_world
@@ -113,3 +114,29 @@ def test_sample_episode_errors():
     empty = compile_world(H.one_room(), "empty")
     with pytest.raises(AdaptenvError, match="no ObjectNav target type is solvable"):
         sample_episode(empty, 0)
+
+
+def _trivial_garbage_can_house():
+    """A 2 x 3.6 m room: the garbage can in the middle is seen from every cell; the fridge at the end is not."""
+    return H.one_room((2.0, 3.6), objects=[H.Obj(H.LOW_TARGET, 1.0, 1.8), H.Obj(H.TALL_TARGET, 1.0, 3.2, 180.0)])
+
+
+def test_sampler_skips_a_target_seen_from_everywhere():
+    w = compile_world(_trivial_garbage_can_house(), "trivial")
+    assert trivial_targets(w) == ["GarbageCan"]
+    assert available_targets(w) == ["Fridge"]
+    assert {sample_episode(w, s).target_type for s in range(8)} == {"Fridge"}
+    with pytest.raises(AdaptenvError, match="trivial for GarbageCan") as err:
+        sample_episode(w, 0, target_type="GarbageCan")
+    msg = str(err.value)
+    assert "choose another target (Fridge)" in msg and "(GarbageCan" not in msg
+
+
+def test_sampler_reports_a_house_trivial_for_its_only_target():
+    w = compile_world(H.one_room((2.0, 3.6), objects=[H.Obj(H.LOW_TARGET, 1.0, 1.8)]), "one")
+    assert available_targets(w) == [] and trivial_targets(w) == ["GarbageCan"]
+    with pytest.raises(AdaptenvError, match="no episode exists") as err:
+        sample_episode(w, 0)
+    assert "cannot be reached" not in str(err.value)
+    with pytest.raises(AdaptenvError, match="no other target type") as err:
+        sample_episode(w, 0, target_type="GarbageCan")

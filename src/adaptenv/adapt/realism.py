@@ -13,8 +13,9 @@ Built from the ProcTHOR placement annotations (``AssetCatalog.type_info``) and t
   a chair carried out of its dining room still counts against its table; distances mapped
   linearly from 1 at
   :data:`GROUP_NEAR` to 0 at :data:`GROUP_FAR`; facing = cosine of the angle);
-- ``door_zones``: the :data:`DOOR_ZONE` m deep zone on both sides of every passable doorway is
-  free of floor furniture (a door scores 0 once a quarter of its zone is covered);
+- ``door_zones``: the approach zone (:data:`DOOR_ZONE` m deep on both sides) of every passable
+  doorway is free of floor furniture: 1 when free, 0 once furniture there covers
+  :data:`~adaptenv.adapt.doorways.MAX_APPROACH_COVER` of the door's width (see :mod:`adaptenv.adapt.doorways`);
 - ``angles``: objects of wall-anchored types keep a yaw within :data:`ANGLE_TOLERANCE` of a multiple of 90.
 
 ``total`` is the weighted mean of the terms that apply (weights in :data:`WEIGHTS`). Generators
@@ -28,6 +29,12 @@ from dataclasses import dataclass, field
 import numpy as np
 import shapely
 
+from adaptenv.adapt.doorways import (
+    APPROACH_DEPTH,
+    MAX_APPROACH_COVER,
+    approach_zones,
+    covered_width,
+)
 from adaptenv.scene.assets import AssetCatalog, load_catalog
 from adaptenv.scene.geometry import Footprint, SceneGeometry, heading
 from adaptenv.scene.graph import build_scene_graph
@@ -40,7 +47,7 @@ LOUNGE = frozenset({"Sofa", "ArmChair"})
 #: Group distances (m) between footprints: full score up to GROUP_NEAR, none from GROUP_FAR.
 GROUP_NEAR, GROUP_FAR = 0.3, 1.3
 #: Depth (m) of the zone in front of (and behind) a doorway that furniture should leave free.
-DOOR_ZONE = 0.5
+DOOR_ZONE = APPROACH_DEPTH
 #: Degrees a wall-anchored object's yaw may deviate from a multiple of 90.
 ANGLE_TOLERANCE = 3.0
 #: Edge-annotated types that ProcTHOR data shows standing free or turned (tables, small or round things).
@@ -193,17 +200,14 @@ def _group_scores(geometry: SceneGeometry, pairs: list[tuple[str, str, list[str]
 
 
 def _door_scores(geometry: SceneGeometry, floor: list[Footprint], offenders: list[str]) -> list[float]:
-    """Per passable doorway: 1 when its zone is free, 0 once a quarter of it is covered by furniture."""
+    """Per passable doorway: 1 when its approach zone is free, falling linearly to 0 when furniture covers
+    :data:`~adaptenv.adapt.doorways.MAX_APPROACH_COVER` of the door's width there (what validation rejects)."""
     polys = [f.polygon for f in floor]
-    furniture = shapely.union_all(polys) if polys else shapely.Polygon()
     scores = []
-    for d in geometry.doors:
-        if not d.passable:
-            continue
-        zone = shapely.LineString([d.p0, d.p1]).buffer(DOOR_ZONE, cap_style="flat")
-        covered = zone.intersection(furniture).area / max(zone.area, 1e-9)
-        score = float(np.clip(1.0 - covered / 0.25, 0.0, 1.0))
+    for z in approach_zones(geometry, DOOR_ZONE):
+        share = covered_width(z, polys) / z.width
+        score = float(np.clip(1.0 - share / MAX_APPROACH_COVER, 0.0, 1.0))
         scores.append(score)
         if score < 1.0:
-            offenders.append(d.id)
+            offenders.append(z.door_id)
     return scores

@@ -12,7 +12,10 @@
   could reach from the start in ``original`` no longer can (navigable = clearance >= radius on
   the :mod:`adaptenv.scene.occupancy` raster, 4-connected);
 - ``target_unreachable``: a target type's success region (``sim.geodesic``) is no longer
-  reachable from the start (the start's geodesic distance is infinite).
+  reachable from the start (the start's geodesic distance is infinite);
+- ``doorway_approach``: furniture covers more of a doorway's approach zone than
+  :data:`~adaptenv.adapt.doorways.MAX_APPROACH_COVER` of its width, and more than in ``original``
+  (:mod:`adaptenv.adapt.doorways`; ProcTHOR keeps these clearances free when it furnishes a house).
 
 Without ``original`` the house is compared with itself: every room, passable doorway and target
 type present must be reachable, and only the ProcTHOR pattern of seats tucked under tables (or
@@ -40,6 +43,7 @@ import shapely
 from PIL import Image, ImageDraw
 from scipy import ndimage
 
+from adaptenv.adapt.doorways import approach_zones, blocked_approaches, covered_width
 from adaptenv.adapt.edits import Edit, EditLog
 from adaptenv.adapt.placement import (
     DEFAULT_STEP,
@@ -75,7 +79,7 @@ AREA_EPS = 1e-4
 CONTAIN_TOLERANCE = 0.01
 
 ProblemKind = Literal["invalid", "outside_room", "crosses_wall", "overlap", "overlap_grew", "start_blocked", "no_start",
-                      "room_unreachable", "doorway_blocked", "target_unreachable"]
+                      "room_unreachable", "doorway_blocked", "target_unreachable", "doorway_approach"]
 
 
 @dataclass(frozen=True)
@@ -153,7 +157,7 @@ class NavRaster:
         self.count = ndimage.binary_dilation(static, self.disc).astype(np.int16)
         self.ids = [f.object_id for f in geometry.floor_objects]
         self.types = [f.object_type for f in geometry.floor_objects]
-        self.objects = [self.inflate(f.corners) for f in geometry.floor_objects]
+        self.objects = [self.inflate(f.outline) for f in geometry.floor_objects]
         for inf in self.objects:
             self._add(inf, 1)
         self.room = occ.room
@@ -428,6 +432,16 @@ def _containment_problems(geometry: SceneGeometry, moved: set[str] | None) -> li
     return out
 
 
+def _approach_problems(geometry: SceneGeometry, orig_geometry: SceneGeometry) -> list[ValidationProblem]:
+    """Doorway approach zones covered past the limit and more than in the original scene."""
+    before = {z.door_id: covered_width(z, [f.polygon for f in orig_geometry.floor_objects])
+              for z in approach_zones(orig_geometry)}
+    polys = {f.object_id: f.polygon for f in geometry.floor_objects}
+    return [ValidationProblem("doorway_approach", f"{', '.join(ids)} cover {cover:.2f} of the {width:.2f} m in front "
+                              f"of doorway {d}; keep at least half of a doorway's approach clear", (d, *ids))
+            for d, cover, width, ids in blocked_approaches(approach_zones(geometry), polys, before)]
+
+
 def validate_scene(house: House, *, episode_targets: list[str] | None = None, start: Start | None = None,
                    original: House | None = None, catalog: AssetCatalog | None = None) -> list[ValidationProblem]:
     """Every physical-plausibility and task-feasibility problem of a (possibly edited) house.
@@ -452,6 +466,8 @@ def validate_scene(house: House, *, episode_targets: list[str] | None = None, st
         before = {f.object_id: (f.center, f.yaw) for f in orig_geometry.floor_objects}
         moved = {f.object_id for f in geometry.floor_objects if before.get(f.object_id) != (f.center, f.yaw)}
     problems += _containment_problems(geometry, moved)
+    if orig_geometry is not None:
+        problems += _approach_problems(geometry, orig_geometry)
 
     types = {f.object_id: f.object_type for f in geometry.floor_objects}
     base = _overlaps(orig_geometry) if orig_geometry is not None else None
@@ -574,6 +590,10 @@ class EditValidator:
         need = scene_reachability(base_house, start=self.start, targets=episode_targets, geometry=base_geometry)
         self.need_rooms = need.rooms
         self.need_doors = need.doors & set(self.doors)
+        self.approach = approach_zones(self.geometry)
+        base = SceneGeometry.from_house(original, self.catalog) if original is not None else self.geometry
+        self.approach_before = {z.door_id: covered_width(z, [shapely.Polygon(f.corners) for f in base.floor_objects])
+                                for z in approach_zones(base)}
         self.need_targets = need.targets if episode_targets is None else set(episode_targets) & need.targets
         self.tall = np.array([f.occludes for f in self.geometry.floor_objects], dtype=bool)
         self.of_type: dict[str, list[int]] = {}
@@ -662,6 +682,19 @@ class EditValidator:
                 problems.append(ValidationProblem("doorway_blocked", f"the doorway {d} would be blocked", (d,)))
         unproven = [t for t in sorted(self.need_targets) if not self._proven(t, flat, comp, moved, changed)]
         return problems, unproven, flat == comp
+
+    def _approach_check(self, moved: int, corners: np.ndarray) -> list[ValidationProblem]:
+        """Doorway approach zones the moved object (at ``corners``) would cover past the limit."""
+        lo, hi = corners.min(axis=0), corners.max(axis=0)
+        zones = [z for z in self.approach if shapely.intersects(z.zone, shapely.box(lo[0], lo[1], hi[0], hi[1]))]
+        if not zones:
+            return []
+        polys = {oid: shapely.Polygon(corners if k == moved else self.ctx.objects.verts[k])
+                 for k, oid in enumerate(self.ctx.ids)}
+        return [ValidationProblem("doorway_approach", f"{', '.join(ids)} would cover {cover:.2f} of the {width:.2f} m "
+                                  f"in front of doorway {d}", (d, *ids))
+                for d, cover, width, ids in blocked_approaches(zones, polys, self.approach_before)
+                if self.ctx.ids[moved] in ids]
 
     def _proven(self, t: str, flat: np.ndarray, comp: int, moved: int, changed: np.ndarray | None) -> bool:
         """Whether t's cached success region, still valid after the move, has a cell in the start's component.
@@ -763,6 +796,7 @@ class EditValidator:
                          for t in unproven if found[t] < 0]
         else:
             found = {}
+        problems += self._approach_check(i, corners)
         return Proposal(**request, problems=tuple(problems), center=center, corners=corners, inflated=inf,
                         drawn=drawn, labels=win, exact_targets=frozenset(unproven),
                         witnesses=tuple((t, c) for t, c in found.items() if c >= 0))

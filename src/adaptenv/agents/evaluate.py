@@ -331,6 +331,7 @@ def evaluate(policy: Policy | str, house_set: Any, *, episodes: int = 200, seed:
         summary["floor"] = active.label()
     if with_expert:
         summary["expert_success"] = summarize(expert)["success"]
+    summary["skipped_houses"] = {h.name: h.reason for h in getattr(house_set, "skipped", [])}
     return EvalReport(name, house_set.spec, seed, summary, results, recordings)
 
 

@@ -3,36 +3,111 @@
 ``suite:NAME`` (see :mod:`adaptenv.agents.suites`) loads the suite's houses and attaches its episode
 floor to ``HouseSet.worlds``, so :func:`adaptenv.agents.evaluate.sample_episodes` draws the suite's
 episodes from it.
+
+This is the one place that decides whether a house can be used for ObjectNav episodes: a house
+that does not load, validate or compile, or in which no target type has an episode (no target, or
+every target visible from everywhere), is skipped with one warning line naming it and the reason,
+and listed in ``HouseSet.skipped``; ``strict=True`` (``--strict``) turns the first such house into
+an error instead. ``evaluate``, ``train``, ``loop`` and ``experiment`` all load houses here.
 """
 
 from __future__ import annotations
 
+import logging
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from adaptenv.errors import ConfigError
+from adaptenv.errors import AdaptenvError, ConfigError
+
+log = logging.getLogger(__name__)
 
 HOUSES_HELP = ("Houses: a folder of house JSON files, one house file, preset:NAME (e.g. preset:pretrain-train) "
                "or suite:NAME (e.g. suite:long-unseen).")
+STRICT_HELP = "Fail on the first house that cannot be used instead of skipping it with a warning."
+
+
+@dataclass(frozen=True)
+class SkippedHouse:
+    """A house left out of a set: its name (file stem or preset name) and why, as one sentence."""
+
+    name: str
+    reason: str
 
 
 @dataclass
 class HouseSet:
-    """Houses and their compiled worlds, aligned, with the spec they came from."""
+    """Houses and their compiled worlds, aligned, with the spec they came from and the houses skipped."""
 
     spec: str
     houses: list[Any]
     worlds: list[Any]
+    skipped: list[SkippedHouse] = field(default_factory=list)
 
     @property
     def names(self) -> list[str]:
         return [w.name for w in self.worlds]
 
 
-def load_house_set(spec: str | Path) -> HouseSet:
-    """Load and compile the houses named by ``spec`` (see module docstring), in a stable order."""
+def unusable_reason(world: Any) -> str | None:
+    """Why no ObjectNav episode can be drawn in a compiled house, or None when one can."""
+    from adaptenv.sim.spec import TARGET_TYPES
+    from adaptenv.sim.task import available_targets, trivial_targets
+
+    if available_targets(world):
+        return None
+    trivial = trivial_targets(world)
+    if trivial:
+        return (f"every reachable cell already sees the {', '.join(trivial)} and no other target type is "
+                "solvable, so no episode can start away from a target")
+    present = sorted(set(world.object_types) & set(TARGET_TYPES))
+    if not present:
+        return f"the house has no ObjectNav target object (none of {', '.join(TARGET_TYPES)})"
+    return f"no target object ({', '.join(present)}) can be seen from the reachable floor"
+
+
+def usable_houses(houses: Sequence[Any], names: Sequence[str], *, strict: bool = False, spec: str = "houses"
+                  ) -> tuple[list[Any], list[Any], list[SkippedHouse]]:
+    """Compile houses and keep those with at least one episode: (houses, worlds, skipped).
+
+    An entry of ``houses`` may be an exception (a load error), which is skipped with its message.
+    Each skip logs one warning line; ``strict`` raises ConfigError on the first one instead.
+    """
+    from adaptenv.sim.world import NavWorld, compile_world
+
+    kept_h, kept_w, skipped = [], [], []
+    for house, name in zip(houses, names, strict=True):
+        reason, world = None, None
+        if isinstance(house, BaseException):
+            reason = str(house)
+        else:
+            try:
+                world = house if isinstance(house, NavWorld) else compile_world(house, name)
+                reason = unusable_reason(world)
+            except AdaptenvError as exc:
+                reason = str(exc)
+        if reason is None:
+            kept_h.append(house)
+            kept_w.append(world)
+            continue
+        if strict:
+            raise ConfigError(f"--houses {spec}: house {name} cannot be used: {reason} "
+                              "(drop --strict to skip such houses with a warning)")
+        log.warning("skipping house %s: %s", name, reason)
+        skipped.append(SkippedHouse(name, reason))
+    if not kept_w:
+        first = f"; the first, {skipped[0].name}: {skipped[0].reason}" if skipped else ""
+        raise ConfigError(f"--houses {spec}: none of the {len(skipped)} houses can be used for ObjectNav "
+                          f"episodes{first}")
+    return kept_h, kept_w, skipped
+
+
+def load_house_set(spec: str | Path, *, strict: bool = False) -> HouseSet:
+    """Load and compile the houses named by ``spec`` (see module docstring), in a stable order.
+
+    Houses that cannot be used are skipped (``HouseSet.skipped``) unless ``strict``.
+    """
     from adaptenv.scene.house import load_house
 
     text = str(spec)
@@ -40,8 +115,8 @@ def load_house_set(spec: str | Path) -> HouseSet:
         from adaptenv.agents.suites import SuiteWorlds, suite_spec
 
         suite = suite_spec(text.partition(":")[2])
-        base = load_house_set(suite.houses)
-        return HouseSet(text, base.houses, SuiteWorlds(base.worlds, suite.floor))
+        base = load_house_set(suite.houses, strict=strict)
+        return HouseSet(text, base.houses, SuiteWorlds(base.worlds, suite.floor), base.skipped)
     if text.startswith("preset:"):
         from adaptenv.scene.procedural import PRESETS, generate_preset
 
@@ -63,9 +138,18 @@ def load_house_set(spec: str | Path) -> HouseSet:
         else:
             raise ConfigError(f"--houses {text!r}: no such folder or file; pass a folder of house JSON "
                               "files or preset:NAME")
-        houses = [load_house(f) for f in files]
+        houses = [_try_load(load_house, f) for f in files]
         names = [f.stem for f in files]
-    return HouseSet(text, houses, compile_houses(houses, names))
+    houses, worlds, skipped = usable_houses(houses, names, strict=strict, spec=text)
+    return HouseSet(text, houses, worlds, skipped)
+
+
+def _try_load(load, path: Path) -> Any:
+    """The loaded house, or the AdaptenvError that loading raised (skipped later, with its message)."""
+    try:
+        return load(path)
+    except AdaptenvError as exc:
+        return exc
 
 
 def compile_houses(houses: Sequence[Any], names: Sequence[str] | None = None) -> list[Any]:

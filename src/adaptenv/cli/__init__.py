@@ -11,6 +11,7 @@ from __future__ import annotations
 import importlib
 import pkgutil
 import sys
+from pathlib import Path
 
 import typer
 from rich.console import Console
@@ -34,6 +35,18 @@ bench = typer.Typer(help="Benchmarks: each prints a table, or one JSON object wi
 app.add_typer(bench, name="bench")
 
 err_console = Console(stderr=True)
+
+
+@app.callback()
+def _options(assets: list[Path] = typer.Option(
+        None, "--assets", metavar="FILE", help="A JSON table of your own assets (asset id -> object type, bounding "
+        "box, optional footprint) that extends the ProcTHOR catalog for every command; repeatable. Give it "
+        "before the command: adaptenv --assets my_assets.json evaluate ...")) -> None:
+    """Closed-loop, adaptive environment generation for embodied navigation agents."""
+    if assets:
+        from adaptenv.scene.assets import use_assets
+
+        use_assets(*assets)
 
 
 def _register_all() -> None:

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import logging
 import os
 from pathlib import Path
 
@@ -10,8 +11,13 @@ import numpy as np
 import typer
 
 from adaptenv.cli._common import JSON_OPTION
-from adaptenv.errors import ConfigError
+from adaptenv.errors import AdaptenvError, ConfigError
 
+log = logging.getLogger(__name__)
+
+ADAPT_HOUSE_ARGUMENT = typer.Argument(..., metavar="HOUSE", show_default=False,
+                                      help="House JSON file (ProcTHOR format), or a folder of them (each adapted "
+                                           "into OUT/NAME/; houses that cannot be used are skipped).")
 HOUSE_ARGUMENT = typer.Argument(..., metavar="HOUSE.json", help="House JSON file (ProcTHOR format).",
                                 show_default=False)
 TRAJ_ARGUMENT = typer.Argument(..., metavar="TRAJ.json", help="Trajectory JSON (from `adaptenv rollout -o`).",
@@ -117,7 +123,7 @@ def analyze(
 
 
 def adapt(
-    house: Path = HOUSE_ARGUMENT,
+    house: Path = ADAPT_HOUSE_ARGUMENT,
     out: Path = OUT_OPTION,
     policy: str = typer.Option("expert", "--policy", help="pretrained, expert, random, a checkpoint (.pt), "
                                "or module:attribute."),
@@ -141,29 +147,27 @@ def adapt(
     as_json: bool = typer.Option(False, "--json", help="Print the summary as JSON."),
     diagnose: int = typer.Option(0, "--diagnose", min=0, max=50, help="Diagnose this many hard episodes (F over "
                                  "several episodes; G aims at their failure modes; --target is then ignored)."),
+    strict: bool = typer.Option(False, "--strict", help="With a folder: fail on the first house that cannot be "
+                                "used instead of skipping it with a warning."),
 ) -> None:
-    """One closed-loop step: roll out the policy, analyze (F), edit the house (G), validate, write OUT."""
+    """One closed-loop step: roll out the policy, analyze (F), edit the house (G), validate, write OUT.
+
+    HOUSE may be a folder: each usable house is adapted into OUT/NAME/ and OUT/summary.json counts
+    the adapted, valid and skipped houses (exit 0 when at least one valid house was made).
+    """
     from rich.console import Console
 
     from adaptenv.adapt.analysis import BuiltinAnalyzer, LLMAnalyzer
-    from adaptenv.adapt.diagnosis import hard_episodes
     from adaptenv.adapt.generators import GENERATORS, make_generator
-    from adaptenv.adapt.objectives import MEANING, harder_or_easier
-    from adaptenv.adapt.step import adapt_scene, summarize, write_outputs
+    from adaptenv.agents.houses import SkippedHouse
     from adaptenv.agents.network import configure_torch
     from adaptenv.agents.registry import resolve_policy
-    from adaptenv.agents.rollout import draw_episode
-    from adaptenv.cli._common import existing_file
-    from adaptenv.progress import ProgressBar
-    from adaptenv.scene.grid import NormalizedGrid
-    from adaptenv.scene.house import load_house
-    from adaptenv.sim.world import compile_world
 
     if generator not in GENERATORS:
         raise ConfigError(f"--generator {generator!r}: unknown generator; use one of {', '.join(GENERATORS)}")
     if analyzer not in ("builtin", "llm"):
         raise ConfigError(f"--analyzer {analyzer!r}: unknown analyzer; use builtin or llm")
-    h = load_house(existing_file(house, "house file"))
+    names, houses, skipped = _adapt_inputs(house, strict)
     configure_torch()  # one torch thread: G's rollout checks are many tiny batches
     console = Console()
     backend = None
@@ -180,50 +184,115 @@ def adapt(
     if generator == "llm" and not as_json:
         gen.progress = lambda text: console.print(f"[dim]{text}[/]", highlight=False)
     f = LLMAnalyzer(backend) if analyzer == "llm" else BuiltinAnalyzer()
-    world = compile_world(h, house.stem)
+    pol = resolve_policy(policy, seed=seed)
+    summaries = []
+    for name, h in zip(names, houses, strict=True):
+        folder = out / name if house.is_dir() else out
+        try:
+            s = _adapt_one(h, name, folder, pol, f, gen, steps=steps, seed=seed, target=target, diagnose=diagnose)
+        except AdaptenvError as exc:
+            if not house.is_dir() or strict:
+                raise
+            log.warning("skipping house %s: %s", name, exc)
+            skipped.append(SkippedHouse(name, str(exc)))
+            continue
+        summaries.append(s)
+        if as_json and not house.is_dir():
+            typer.echo(json.dumps(s, indent=1, default=str))
+        elif not as_json:
+            _print_adapt_summary(console, s, h, folder)
+    if house.is_dir():
+        _finish_folder(house, out, summaries, skipped, as_json)
+    elif not summaries[0]["valid"]:
+        raise typer.Exit(1)
+
+
+def _adapt_one(h, name: str, out: Path, policy, analyzer, generator, *, steps: int, seed: int, target: str | None,
+               diagnose: int) -> dict:
+    """Adapt one house into ``out`` with :func:`~adaptenv.adapt.step.adapt_scene`; returns its summary."""
+    from adaptenv.adapt.diagnosis import hard_episodes
+    from adaptenv.adapt.step import adapt_scene, summarize, write_outputs
+    from adaptenv.agents.rollout import draw_episode
+    from adaptenv.progress import ProgressBar
+    from adaptenv.sim.world import compile_world
+
+    world = compile_world(h, name)
     episode = draw_episode(world, np.random.default_rng([seed, 1]), target)
     episodes = hard_episodes(world, np.random.default_rng([seed, 2]), diagnose) if diagnose else None
-    with ProgressBar(f"adapting {house.name}: rollout, F, G ({steps} edits), validation, rollout again"):
-        result = adapt_scene(h, episode, policy=resolve_policy(policy, seed=seed), analyzer=f, generator=gen,
-                             steps=steps, rng=np.random.default_rng(seed), name=house.stem, render=True,
-                             render_dir=out / "steps", episodes=episodes)
-    s = summarize(result, analyzer=f, seed=seed)
+    with ProgressBar(f"adapting {name}: rollout, F, G ({steps} edits), validation, rollout again"):
+        result = adapt_scene(h, episode, policy=policy, analyzer=analyzer, generator=generator, steps=steps,
+                             rng=np.random.default_rng(seed), name=name, render=True, render_dir=out / "steps",
+                             episodes=episodes)
+    s = summarize(result, analyzer=analyzer, seed=seed)
     write_outputs(result, s, out)
+    return s
+
+
+def _adapt_inputs(house: Path, strict: bool) -> tuple[list[str], list, list]:
+    """(names, houses, skipped): one file (its errors stay errors) or a folder (unusable houses skipped)."""
+    from adaptenv.agents.houses import load_house_set
+    from adaptenv.cli._common import existing_file
+    from adaptenv.scene.house import load_house
+
+    if house.is_dir():
+        hs = load_house_set(house, strict=strict)
+        return hs.names, hs.houses, list(hs.skipped)
+    return [house.stem], [load_house(existing_file(house, "house file"))], []
+
+
+def _finish_folder(house: Path, out: Path, summaries: list[dict], skipped: list, as_json: bool) -> None:
+    """Summary of a folder run; exit 1 unless at least one house was adapted into a valid house."""
+    valid = sum(bool(s["valid"]) for s in summaries)
+    doc = {"houses": str(house), "adapted": len(summaries), "valid": valid, "skipped": len(skipped),
+           "skipped_houses": {h.name: h.reason for h in skipped}}
+    out.mkdir(parents=True, exist_ok=True)
+    (out / "summary.json").write_text(json.dumps(doc, indent=1) + "\n", encoding="utf-8")
     if as_json:
-        typer.echo(json.dumps(s, indent=1, default=str))
+        typer.echo(json.dumps({**doc, "summaries": summaries}, indent=1, default=str))
     else:
-        ob, oa = s["objective_before"], s["objective_after"]
-        ab, aa = s["agent_before"], s["agent_after"]
-        ep = s["episode"]
-        gx, gy = NormalizedGrid.for_house(h).point(ep["start"][0], ep["start"][1])
-        console.print(f"episode: find a {ep['target_type']} from ({ep['start'][0]:.2f}, {ep['start'][1]:.2f}) m, "
-                      f"grid ({gx:.0f}, {gy:.0f}) of 0..100; policy {s['policy']}, analyzer {s['analyzer']}, "
-                      f"generator {s['generator']}")
-        console.print(f"edits applied: {s['edits_applied']} of {s['steps_requested']} "
-                      f"({s['edits_verified']} verified); moves are in grid units (0..100 across the house)")
-        console.print("objectives along the episode's route (before -> after):")
-        for k in ob:
-            what, unit = MEANING.get(k, (k, ""))
-            console.print(f"  {k:15s} {_fmt(ob[k])} -> {_fmt(oa[k])} {unit:8s} {what}: "
-                          f"{harder_or_easier(k, ob[k], oa[k])}")
-        console.print(f"agent: success {ab['success']} -> {aa['success']}, SPL {ab['spl']:.3f} -> {aa['spl']:.3f}, "
-                      f"steps {ab['steps']} -> {aa['steps']} (lower success or SPL: the scene got harder)")
-        if result.diagnosis is not None:
-            console.print(f"diagnosis before: {result.diagnosis.summary()}", highlight=False)
-            console.print(f"diagnosis after:  {result.diagnosis_after.summary()}", highlight=False)
-        console.print(f"realism: {_fmt(s['realism_before'])} -> {_fmt(s['realism_after'])}; expert solvable: "
-                      f"{s['expert_solvable']}, expert success: {s['expert_success_after']}; valid: {s['valid']}")
-        for p in s["problems"]:
-            console.print(f"  [red]problem:[/] {p}", highlight=False)
-        if s.get("stopped"):
-            console.print(f"[yellow]G stopped early:[/] {s['stopped']}", highlight=False)
-        if s.get("llm"):
-            for role, u in s["usage"]["by_role"].items():
-                console.print(f"tokens {role:6s} {_usage_text(u)}", highlight=False)
-            console.print(f"tokens total  {_usage_text(s['usage'])}", highlight=False)
-        console.print(f"wrote {out}/ (house.json, before.png, after.png, analysis.json, edits.json, summary.json)")
-    if not s["valid"]:
+        typer.echo(f"{house}: adapted {len(summaries)} house(s) ({valid} valid), skipped {len(skipped)}; "
+                   f"wrote {out}/summary.json")
+    if valid == 0:
         raise typer.Exit(1)
+
+
+def _print_adapt_summary(console, s: dict, h, out: Path) -> None:
+    """The human-readable summary of one adapted house (units stated; which way is harder)."""
+    from adaptenv.adapt.diagnosis import SceneDiagnosis
+    from adaptenv.adapt.objectives import MEANING, harder_or_easier
+    from adaptenv.scene.grid import NormalizedGrid
+
+    ob, oa = s["objective_before"], s["objective_after"]
+    ab, aa = s["agent_before"], s["agent_after"]
+    ep = s["episode"]
+    gx, gy = NormalizedGrid.for_house(h).point(ep["start"][0], ep["start"][1])
+    console.print(f"episode: find a {ep['target_type']} from ({ep['start'][0]:.2f}, {ep['start'][1]:.2f}) m, "
+                  f"grid ({gx:.0f}, {gy:.0f}) of 0..100; policy {s['policy']}, analyzer {s['analyzer']}, "
+                  f"generator {s['generator']}")
+    console.print(f"edits applied: {s['edits_applied']} of {s['steps_requested']} "
+                  f"({s['edits_verified']} verified); moves are in grid units (0..100 across the house)")
+    console.print("objectives along the episode's route (before -> after):")
+    for k in ob:
+        what, unit = MEANING.get(k, (k, ""))
+        console.print(f"  {k:15s} {_fmt(ob[k])} -> {_fmt(oa[k])} {unit:8s} {what}: "
+                      f"{harder_or_easier(k, ob[k], oa[k])}")
+    console.print(f"agent: success {ab['success']} -> {aa['success']}, SPL {ab['spl']:.3f} -> {aa['spl']:.3f}, "
+                  f"steps {ab['steps']} -> {aa['steps']} (lower success or SPL: the scene got harder)")
+    if s.get("diagnosis"):
+        before, after = (SceneDiagnosis.model_validate(s[k]) for k in ("diagnosis", "diagnosis_after"))
+        console.print(f"diagnosis before: {before.summary()}", highlight=False)
+        console.print(f"diagnosis after:  {after.summary()}", highlight=False)
+    console.print(f"realism: {_fmt(s['realism_before'])} -> {_fmt(s['realism_after'])}; expert solvable: "
+                  f"{s['expert_solvable']}, expert success: {s['expert_success_after']}; valid: {s['valid']}")
+    for p in s["problems"]:
+        console.print(f"  [red]problem:[/] {p}", highlight=False)
+    if s.get("stopped"):
+        console.print(f"[yellow]G stopped early:[/] {s['stopped']}", highlight=False)
+    if s.get("llm"):
+        for role, u in s["usage"]["by_role"].items():
+            console.print(f"tokens {role:6s} {_usage_text(u)}", highlight=False)
+        console.print(f"tokens total  {_usage_text(s['usage'])}", highlight=False)
+    console.print(f"wrote {out}/ (house.json, before.png, after.png, analysis.json, edits.json, summary.json)")
 
 
 def _fmt(x) -> str:

@@ -100,6 +100,8 @@ def evaluate(
     min_expert_steps: int = typer.Option(0, "--min-expert-steps", min=0,
                                          help="Keep only starts the shortest-path expert needs at least this many "
                                               "steps for (redraws per episode, paired across policies)."),
+    strict: bool = typer.Option(False, "--strict", help="Fail on the first house that cannot be used instead of "
+                                "skipping it with a warning."),
 ) -> None:
     """Evaluate a policy: success, SPL, SEL, collisions, length (mean +- s.e.), per-house CSV, failure maps."""
     import json
@@ -119,7 +121,7 @@ def evaluate(
     console = Console()
     command = shlex.join(["adaptenv", "evaluate", "--policy", policy, *[a for h in houses for a in ("--houses", h)],
                           "--episodes", str(episodes), "--seed", str(seed), "--workers", str(workers),
-                          "--batch", str(batch), "-o", str(out)]
+                          "--batch", str(batch), "-o", str(out), *(["--strict"] if strict else [])]
                          + (["--min-geodesic", f"{min_geodesic:g}"] if min_geodesic > 0 else [])
                          + (["--min-expert-steps", str(min_expert_steps)] if min_expert_steps > 0 else []))
     floor = (EpisodeFloor(min_geodesic=min_geodesic, min_expert_steps=min_expert_steps)
@@ -127,7 +129,7 @@ def evaluate(
     resolved = resolve_policy(policy, seed=seed)  # fail early on a bad --policy
     summaries = []
     for spec in houses:
-        house_set = load_house_set(spec)
+        house_set = load_house_set(spec, strict=strict)
         with ProgressBar(f"{policy} on {spec}", episodes) as bar:
             report = run_eval(policy if workers > 1 else resolved, house_set, episodes=episodes, seed=seed,
                               batch=batch, workers=workers, floor=floor, progress=bar.update)
@@ -145,6 +147,11 @@ def evaluate(
                       f"{s['sel']:.3f} +- {s['sel_se']:.3f}", f"{s['collisions']:.1f} +- {s['collisions_se']:.1f}",
                       f"{s['steps']:.0f} +- {s['steps_se']:.0f}")
     console.print(table)
+    for spec, s, _ in summaries:
+        if s["skipped_houses"]:
+            console.print(f"skipped {len(s['skipped_houses'])} house(s) of {spec} that cannot be used "
+                          f"({', '.join(list(s['skipped_houses'])[:5])}{', ...' if len(s['skipped_houses']) > 5 else ''}); "
+                          "see summary.json for the reasons", highlight=False)
     for spec, s, _ in summaries:
         if s["failure_modes"]:
             console.print(f"failures on {spec} (built-in analysis F): "

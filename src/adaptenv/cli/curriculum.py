@@ -49,6 +49,25 @@ def loop_llm_section(config_file: Path | None, **flags: object) -> dict[str, obj
     return llm
 
 
+STRICT_OPTION = typer.Option(False, "--strict", help="Fail on the first house that cannot be used instead of "
+                             "skipping it with a warning.")
+
+
+def check_house_sets(specs: list[str], strict: bool, say) -> dict[str, int]:
+    """Load each house set once up front: with ``strict`` the first unusable house is an error; otherwise
+    say how many houses each set skips (the loop skips the same ones). Returns skipped counts by spec."""
+    from adaptenv.agents.houses import load_house_set
+
+    counts = {}
+    for spec in dict.fromkeys(specs):
+        skipped = load_house_set(spec, strict=strict).skipped
+        counts[spec] = len(skipped)
+        if skipped:
+            say(f"{spec}: skipping {len(skipped)} house(s) that cannot be used: "
+                + ", ".join(f"{h.name} ({h.reason})" for h in skipped[:3]) + (", ..." if len(skipped) > 3 else ""))
+    return counts
+
+
 def loop(
     policy: str = typer.Option("pretrained", "--policy", help="Starting policy: pretrained or a checkpoint path."),
     houses: str = typer.Option("preset:pretrain-train", "--houses", help="Training scenes: a folder or preset:NAME."),
@@ -81,6 +100,7 @@ def loop(
     executor: str = EXECUTOR_OPTION,
     workers: int = WORKERS_OPTION,
     address: str = ADDRESS_OPTION,
+    strict: bool = STRICT_OPTION,
 ) -> None:
     """Run the closed loop: evaluate, analyze (F), generate (G), fine-tune, measure held-out success.
 
@@ -100,6 +120,7 @@ def loop(
                      scenes_per_iteration=scenes, edit_steps=edit_steps, finetune_frames=finetune_frames,
                      finetune_lr=finetune_lr,
                      heldout_episodes=heldout_episodes, llm=llm, **({"heldout": h} if (h := _heldout(heldout)) else {}))
+    check_house_sets([cfg.houses, *cfg.heldout.values()], strict, console.print)
     with ExecutorOptions(executor, workers, address).make() as ex:
         records = run_loop(cfg, out, resume=resume, executor=ex, progress=lambda text: console.print(f"[dim]{text}[/]"),
                            command=" ".join(["adaptenv"] + sys.argv[1:]))
@@ -125,6 +146,7 @@ def experiment(
     address: str = ADDRESS_OPTION,
     final_episodes: int = typer.Option(0, "--final-episodes", min=0, help="Then evaluate pi_0 and each run's "
                                        "last policy on this many held-out episodes per set (summary_final.md)."),
+    strict: bool = STRICT_OPTION,
 ) -> None:
     """Run methods x seeds (resuming finished runs), then write CSVs, the summary table and plots.
 
@@ -138,6 +160,8 @@ def experiment(
     console = Console()
     cfg = ExperimentConfig.load(config)
     out = out or Path("runs") / config.stem
+    ref = cfg.loop_config(cfg.reference, cfg.seeds[0])
+    check_house_sets([ref.houses, *ref.heldout.values()], strict, console.print)
     ex = None if executor == "inprocess" else make_executor(executor, workers, address)
     def say(text: str) -> None:
         console.print(f"[dim]{text}[/]")

@@ -332,8 +332,16 @@ def _draw_walls(draw: ImageDraw.ImageDraw, t: MapTransform, pieces: list, empty:
                 draw.rectangle([p[0] - half, p[1] - half, p[0] + half - 1, p[1] + half - 1], fill=WALL)
 
 
+def door_leaves(asset_id: str) -> int:
+    """Leaves a door asset has: 0 for a doorframe (an open frame), 2 for a double door, else 1."""
+    if asset_id.startswith("Doorframe"):
+        return 0
+    return 2 if "Double" in asset_id else 1
+
+
 def _draw_doors(draw: ImageDraw.ImageDraw, geometry: SceneGeometry, t: MapTransform, wall_w: int) -> None:
-    """Open doors as a gap with a door leaf and its swing arc; closed doors as a red bar."""
+    """Open doors as a gap with their leaves and swing arcs (none for a doorframe, one from each jamb for a
+    double door); closed doors as a red bar."""
     for d in geometry.doors:
         p0, p1 = np.array(d.p0), np.array(d.p1)
         width = float(np.linalg.norm(p1 - p0))
@@ -348,10 +356,13 @@ def _draw_doors(draw: ImageDraw.ImageDraw, geometry: SceneGeometry, t: MapTransf
         room = geometry.rooms.get(d.rooms[0])
         if room is not None and float(np.dot(np.array(room.centroid.coords[0]) - p0, n)) < 0:
             n = -n
-        leaf = p0 + n * width * 0.9
-        arc = [p0 + width * 0.9 * (math.cos(a) * u + math.sin(a) * n) for a in np.linspace(0, math.pi / 2, 10)]
-        draw.line(_pts(t, arc), fill=DOOR, width=1)
-        draw.line(_pts(t, [p0, leaf]), fill=DOOR, width=max(2, wall_w // 2))
+        leaves = door_leaves(d.asset_id)
+        hinges = [(p0, u), (p1, -u)][:leaves]
+        leaf_len = width * 0.9 / max(leaves, 1)
+        for hinge, along in hinges:
+            arc = [hinge + leaf_len * (math.cos(a) * along + math.sin(a) * n) for a in np.linspace(0, math.pi / 2, 10)]
+            draw.line(_pts(t, arc), fill=DOOR, width=1)
+            draw.line(_pts(t, [hinge, hinge + n * leaf_len]), fill=DOOR, width=max(2, wall_w // 2))
         for p in (p0, p1):  # jambs
             a, b = _pts(t, [p - n * 0.08, p + n * 0.08])
             draw.line([a, b], fill=DOOR, width=2)
@@ -373,7 +384,7 @@ def _draw_furniture(draw: ImageDraw.ImageDraw, floor: list[Footprint], t: MapTra
         width = 1
         if fp.object_id in highlight:
             fill, edge, width = highlight[fp.object_id], (0, 0, 0), 3
-        draw.polygon(corners, fill=fill, outline=edge, width=width)
+        draw.polygon(_pts(t, fp.outline), fill=fill, outline=edge, width=width)  # true shape (L/C counters)
         # Front edge: corners 2 (front-right) and 3 (front-left).
         fr, fl = corners[2], corners[3]
         mid = ((fr[0] + fl[0]) / 2, (fr[1] + fl[1]) / 2)

@@ -1,18 +1,30 @@
 """The asset catalog (derived from the ProcTHOR databases) and the one place that says what an object is.
 
 ``load_catalog()`` reads ``scene/data/assets.json`` (built by ``tools/build_asset_catalog.py``;
-ProcTHOR data, Apache-2.0, see ``scene/data/NOTICE``). :func:`object_role` and :func:`is_movable`
-decide, for every consumer, whether an object is floor furniture, wall decor, structure or a
-small object resting on something.
+ProcTHOR data, Apache-2.0, see ``scene/data/NOTICE``), extended by any user asset tables given
+with :func:`use_assets` (the CLI's ``--assets FILE``) or the ``ADAPTENV_ASSETS`` environment
+variable (files separated by ``os.pathsep``; worker processes inherit it). :func:`object_role`
+and :func:`is_movable` decide, for every consumer, whether an object is floor furniture, wall
+decor, structure or a small object resting on something.
+
+A user asset table is a JSON object ``{"assets": {ASSET_ID: {"type": T, "size": [x, y, z],
+"footprint": [[x, z], ...]}}}``: the ProcTHOR object type, the full bounding box (m, local axes,
+z = depth/front) and, optionally, the floor outline in local (x, z) about the box centre for
+objects that are not boxes. ``objectType`` and ``boundingBox: {x, y, z}`` (ProcTHOR's own keys)
+are accepted too.
 """
 
 from __future__ import annotations
 
 import json
-from dataclasses import dataclass, field
+import os
+from dataclasses import dataclass, field, replace
 from functools import lru_cache
 from importlib import resources
-from typing import Literal
+from pathlib import Path
+from typing import Any, Literal
+
+from adaptenv.errors import ConfigError
 
 ROOM_TYPES = ("Kitchen", "LivingRoom", "Bedroom", "Bathroom")
 _ROOM_KEY = {"Kitchen": "inKitchens", "LivingRoom": "inLivingRooms", "Bedroom": "inBedrooms",
@@ -44,6 +56,8 @@ class AssetInfo:
     secondary: tuple[str, ...] = ()
     split: str | None = None
     open_size: tuple[float, float, float] | None = None
+    footprint: tuple[tuple[float, float], ...] | None = None
+    """Floor outline (local x, z about the box centre) of an asset that is not a box; None for a box."""
 
 
 @dataclass(frozen=True)
@@ -98,7 +112,7 @@ class AssetCatalog:
         try:
             return self.assets[asset_id]
         except KeyError:
-            raise KeyError(f"unknown ProcTHOR assetId {asset_id!r}") from None
+            raise KeyError(f"unknown assetId {asset_id!r} (not in the ProcTHOR catalog nor in an --assets table)") from None
 
     def type_info(self, object_type: str) -> TypeInfo:
         """Placement annotations of a type (all-false defaults for types without annotations)."""
@@ -121,13 +135,118 @@ class AssetCatalog:
         return frozenset(n for names in self.materials.values() for n in names)
 
 
+#: Environment variable listing user asset tables (``os.pathsep``-separated) that extend the catalog.
+ASSETS_ENV = "ADAPTENV_ASSETS"
+#: Depth (m) of one arm of an L- or C-shaped counter: every straight ProcTHOR counter
+#: (``Countertop_I_*``) is 0.611 m (2 ft) deep, and ``Countertop_L_4x4`` is 2 x 0.611 m square.
+COUNTER_ARM_DEPTH = 0.611
+
+
+def counter_footprint(asset_id: str, size: tuple[float, float, float]) -> tuple[tuple[float, float], ...] | None:
+    """Local floor outline of ProcTHOR's L- and C-shaped counters (None for every other asset).
+
+    An L (``Countertop_L_*``) is an arm along its back (local -z) plus an arm along its local +x
+    side, each :data:`COUNTER_ARM_DEPTH` deep, leaving the front-left (-x, +z) square open: that is
+    where no child object stands on the L counter of ``tests/data/procthor-10k-train-1.json``, and
+    it faces the room when the counter's back and +x side touch the walls of a corner, as they do
+    there. A C (``Countertop_C_*``) adds the mirror arm along -x and opens to its front (+z).
+    """
+    hx, hz = size[0] / 2.0, size[2] / 2.0
+    d = min(COUNTER_ARM_DEPTH, size[0], size[2])
+    if asset_id.startswith("Countertop_L_"):
+        return ((-hx, -hz), (hx, -hz), (hx, hz), (hx - d, hz), (hx - d, -hz + d), (-hx, -hz + d))
+    if asset_id.startswith("Countertop_C_") and size[0] > 2 * d:
+        return ((-hx, -hz), (hx, -hz), (hx, hz), (hx - d, hz), (hx - d, -hz + d), (-hx + d, -hz + d),
+                (-hx + d, hz), (-hx, hz))
+    return None
+
+
+def load_catalog(*tables: str | Path) -> AssetCatalog:
+    """The shipped ProcTHOR catalog extended by the user tables in ``$ADAPTENV_ASSETS`` and ``tables``
+    (cached per set of tables; the result is immutable).
+
+    Passing ``tables`` here only builds that catalog (give it to ``load_house(..., catalog=)``,
+    ``SceneGeometry.from_house``, ...); :func:`use_assets` makes every adaptenv function use them.
+    """
+    env = [p for p in os.environ.get(ASSETS_ENV, "").split(os.pathsep) if p]
+    return _catalog_with(tuple(env + [str(Path(t).resolve()) for t in tables]))
+
+
+def use_assets(*paths: str | Path) -> AssetCatalog:
+    """Extend the catalog every adaptenv function uses with user asset tables (this process and the
+    worker processes it starts); returns the extended catalog. Raises ConfigError on a bad table."""
+    current = [p for p in os.environ.get(ASSETS_ENV, "").split(os.pathsep) if p]
+    for p in paths:
+        read_asset_table(p)  # fail now, with the file named, rather than in a worker
+        if str(Path(p).resolve()) not in current:
+            current.append(str(Path(p).resolve()))
+    os.environ[ASSETS_ENV] = os.pathsep.join(current)
+    return load_catalog()
+
+
+@lru_cache(maxsize=8)
+def _catalog_with(tables: tuple[str, ...]) -> AssetCatalog:
+    base = _shipped_catalog()
+    extra: dict[str, AssetInfo] = {}
+    for path in tables:
+        extra.update(read_asset_table(path, known_types=frozenset(base.types)))
+    return replace(base, assets={**base.assets, **extra}) if extra else base
+
+
+def read_asset_table(path: str | Path, known_types: frozenset[str] | None = None) -> dict[str, AssetInfo]:
+    """Parse a user asset table (see the module docstring); ConfigError names the file, asset and field."""
+    p = Path(path)
+    try:
+        doc = json.loads(p.read_text(encoding="utf-8"))
+    except FileNotFoundError:
+        raise ConfigError(f"--assets {p}: no such file; pass a JSON asset table (see docs/scene.md)") from None
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
+        raise ConfigError(f"--assets {p}: cannot read it as JSON ({exc}); fix the file") from None
+    table = doc.get("assets", doc) if isinstance(doc, dict) else None
+    if not isinstance(table, dict) or not table:
+        raise ConfigError(f"--assets {p}: expected a JSON object {{\"assets\": {{ASSET_ID: {{\"type\": ..., "
+                          "\"size\": [x, y, z]}}}}}} with at least one asset")
+    known = known_types if known_types is not None else frozenset(_shipped_catalog().types)
+    return {str(aid): _user_asset(p, str(aid), entry, known) for aid, entry in table.items()}
+
+
+def _user_asset(path: Path, asset_id: str, entry: Any, known: frozenset[str]) -> AssetInfo:
+    """One row of a user asset table as an AssetInfo."""
+    where = f"--assets {path}: asset {asset_id!r}"
+    if not isinstance(entry, dict):
+        raise ConfigError(f"{where} is not an object; give it \"type\" and \"size\"")
+    object_type = entry.get("type", entry.get("objectType"))
+    if object_type not in known:
+        raise ConfigError(f"{where} has type {object_type!r}, not a ProcTHOR object type (the type decides its "
+                          f"semantic class); use one of the catalog's types, e.g. Sofa, Chair, Bed, Fridge")
+    size = entry.get("size", entry.get("boundingBox"))
+    if isinstance(size, dict):
+        size = [size.get(k) for k in "xyz"]
+    try:
+        size = tuple(float(v) for v in size)
+    except (TypeError, ValueError):
+        size = ()
+    if len(size) != 3 or min(size) <= 0:
+        raise ConfigError(f"{where} needs \"size\": [x, y, z], three positive extents in meters")
+    outline = entry.get("footprint")
+    if outline is not None:
+        try:
+            outline = tuple((float(x), float(z)) for x, z in outline)
+        except (TypeError, ValueError):
+            outline = ()
+        if len(outline) < 3:
+            raise ConfigError(f"{where} has a \"footprint\" that is not a list of at least 3 [x, z] points")
+    return AssetInfo(asset_id, str(object_type), size, entry.get("primary"), (), entry.get("split"), None, outline)
+
+
 @lru_cache(maxsize=1)
-def load_catalog() -> AssetCatalog:
-    """Load the catalog shipped in the package (parsed once per process; the result is immutable)."""
+def _shipped_catalog() -> AssetCatalog:
+    """The catalog shipped in the package (parsed once per process)."""
     doc = json.loads(resources.files("adaptenv.scene").joinpath("data/assets.json").read_text("utf-8"))
     assets = {
         aid: AssetInfo(aid, a["type"], tuple(a["size"]), a.get("primary"), tuple(a.get("secondary", ())),
-                       a.get("split"), tuple(a["open_size"]) if a.get("open_size") else None)
+                       a.get("split"), tuple(a["open_size"]) if a.get("open_size") else None,
+                       counter_footprint(aid, tuple(a["size"])))
         for aid, a in doc["assets"].items()
     }
     types = {}

@@ -71,14 +71,27 @@ class Footprint:
     """Top of the object above the floor, m."""
     role: ObjectRole
     movable: bool
+    shape: tuple[tuple[float, float], ...] | None = None
+    """Local (x, z) outline for an asset that is not a box (L- and C-shaped counters, user assets)."""
 
     @cached_property
     def corners(self) -> np.ndarray:
+        """Corners (4, 2) of the bounding rectangle (see :func:`footprint_corners`)."""
         return footprint_corners(self.center[0], self.center[1], self.size[0], self.size[1], self.yaw)
 
     @cached_property
+    def outline(self) -> np.ndarray:
+        """World (x, z) vertices (N, 2) of the true floor outline: the shape when set, else the corners."""
+        if self.shape is None:
+            return self.corners
+        ux, uz = yaw_axes(self.yaw)
+        local = np.asarray(self.shape, dtype=float)
+        return np.asarray(self.center) + local[:, :1] * ux + local[:, 1:] * uz
+
+    @cached_property
     def polygon(self) -> Polygon:
-        return Polygon(self.corners)
+        """The true floor outline as a polygon (the bounding rectangle for boxes)."""
+        return Polygon(self.outline)
 
     @property
     def occludes(self) -> bool:
@@ -87,14 +100,14 @@ class Footprint:
 
 
 def object_footprint(obj: HouseObject, catalog: AssetCatalog, *, is_child: bool = False) -> Footprint:
-    """Footprint of a house object from its asset's bounding box."""
+    """Footprint of a house object from its asset's bounding box (and outline, if it is not a box)."""
     asset = catalog.asset(obj.assetId)
     sx, sy, sz = asset.size
     bottom = obj.position.y - sy / 2.0
     role = object_role(asset.object_type, bottom, is_child)
     return Footprint(obj.id, asset.object_type, obj.assetId, (obj.position.x, obj.position.z), (sx, sz),
                      obj.rotation.y % 360.0, obj.position.y + sy / 2.0, role,
-                     is_movable(asset.object_type, role))
+                     is_movable(asset.object_type, role), asset.footprint)
 
 
 def wall_floor_segment(wall: Wall) -> tuple[np.ndarray, np.ndarray]:

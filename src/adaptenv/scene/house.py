@@ -223,13 +223,15 @@ def read_house_document(path: str | Path) -> Any:
                                   f"column {exc.colno}); fix the syntax", str(p))]) from None
 
 
-def load_house(path: str | Path, *, validate: bool = True) -> House:
+def load_house(path: str | Path, *, validate: bool = True, catalog: Any = None) -> House:
     """Load a ProcTHOR house JSON file.
 
     Args:
         path: the house file.
         validate: also run the semantic checks of :func:`adaptenv.scene.validate.validate_house`
             (wall ids, door walls, asset ids, polygons, objects inside rooms).
+        catalog: the AssetCatalog to check asset ids against (default ``load_catalog()``; e.g.
+            ``load_catalog("my_assets.json")`` for a house of Objaverse assets).
 
     Raises:
         HouseError: with one sentence per problem naming the file and JSON path.
@@ -239,7 +241,7 @@ def load_house(path: str | Path, *, validate: bool = True) -> House:
     if validate:
         from adaptenv.scene.validate import validate_house
 
-        problems = validate_house(house, file=str(path))
+        problems = validate_house(house, file=str(path), catalog=catalog)
         if problems:
             raise HouseError(problems)
     return house

@@ -131,7 +131,7 @@ def rasterize(geometry: SceneGeometry, resolution: float = DEFAULT_RESOLUTION) -
     draw = ImageDraw.Draw(label_img)
     floor = geometry.floor_objects
     for k, fp in enumerate(floor):
-        _draw_polygon(draw, fp.corners, x0, z0, res, LABEL_OBJECT0 + k)
+        _draw_polygon(draw, fp.outline, x0, z0, res, LABEL_OBJECT0 + k)
     for a, b in geometry.blocking_segments():
         _draw_segment(draw, a, b, x0, z0, res, LABEL_WALL)
     for win in geometry.windows:

@@ -185,13 +185,21 @@ def _check_objects(house: House, floor, catalog: AssetCatalog, add) -> None:
     seen: dict[str, str] = {}
     tops: list[tuple[int, str, np.ndarray]] = []  # (index, role, footprint corners)
     kids: list[tuple[int, int, np.ndarray | None]] = []  # (parent index, child index, parent corners)
+    unknown: dict[str, tuple] = {}  # unknown asset id -> location of its first use
     for i, obj in enumerate(house.objects):
-        found = _check_object(obj, ("objects", i), seen, catalog, add, is_child=False)
+        found = _check_object(obj, ("objects", i), seen, catalog, add, unknown, is_child=False)
         if found is not None:
             tops.append((i, *found))
         for j, child in enumerate(obj.children):
-            if _check_object(child, ("objects", i, "children", j), seen, catalog, add, is_child=True) is not None:
+            if _check_object(child, ("objects", i, "children", j), seen, catalog, add, unknown,
+                             is_child=True) is not None:
                 kids.append((i, j, found[1] if found is not None else None))
+    if unknown:
+        first = ", ".join(repr(a) for a in list(unknown)[:3])
+        add((*next(iter(unknown.values())), "assetId"),
+            f"{len(unknown)} assetId{'s are' if len(unknown) > 1 else ' is'} in neither the ProcTHOR catalog nor an "
+            f"--assets table (first: {first}); pass --assets FILE with a table of your assets (asset id -> "
+            "object type and bounding box, see docs/scene.md)")
     if floor is None:
         return
     floor_tol = floor.buffer(PLACEMENT_TOLERANCE)
@@ -222,15 +230,16 @@ def _check_objects(house: House, floor, catalog: AssetCatalog, add) -> None:
 
 
 def _check_object(obj: HouseObject, loc: tuple, seen: dict[str, str], catalog: AssetCatalog,
-                  add, *, is_child: bool) -> tuple[str, np.ndarray] | None:
-    """Unique id and known asset of one object; returns (role, footprint corners) when the asset is known."""
+                  add, unknown: dict[str, tuple], *, is_child: bool) -> tuple[str, np.ndarray] | None:
+    """Unique id and known asset of one object (unknown ids are collected in ``unknown``); returns
+    (role, footprint corners) when the asset is known."""
     if obj.id in seen:
         add((*loc, "id"), f"the object id {obj.id!r} is already used by {seen[obj.id]}; give every object a unique id")
     else:
         seen[obj.id] = json_path(loc)
     asset = catalog.assets.get(obj.assetId)
     if asset is None:
-        add((*loc, "assetId"), f"the assetId {obj.assetId!r} is not a ProcTHOR asset; use an id from the asset catalog")
+        unknown.setdefault(obj.assetId, loc)
         return None
     if is_child:
         return "small", np.empty((0, 2))

@@ -20,6 +20,7 @@ from dataclasses import dataclass
 
 import numba
 import numpy as np
+from scipy import ndimage
 
 from adaptenv.sim.spec import AGENT_RADIUS, SUCCESS_DISTANCE
 from adaptenv.sim.task import Episode, los_clear, target_points
@@ -207,10 +208,12 @@ def first_region_cell(mask: np.ndarray, occluder: np.ndarray, label: np.ndarray,
 
 
 def success_region(world: NavWorld, target_type: str) -> np.ndarray:
-    """bool (H, W): navigable cells from whose centre turning toward some instance makes ``end`` succeed.
+    """bool (H, W): :func:`enterable` cells from whose centre turning toward some instance makes ``end`` succeed.
 
-    Exactly the cells where :func:`adaptenv.sim.task.visible_instances` with a 360-degree field of
-    view is non-empty at the cell centre (same sample points, same line-of-sight walk).
+    Exactly the :func:`enterable` cells where :func:`adaptenv.sim.task.visible_instances` with a
+    360-degree field of view is non-empty at the cell centre (same sample points, same line-of-sight
+    walk): a region the agent cannot enter in its own motion is no region, so solvability, the
+    distance fields and the episode sampler agree with what the agent (and the expert) can reach.
     """
     values = world.cache.get(("distance", target_type))
     if values is not None:  # the region is exactly where the field is 0 (its sources; every step costs > 0)
@@ -228,13 +231,26 @@ def _compute_region(world: NavWorld, target_type: str) -> np.ndarray:
     if len(tp.points):
         _region(g.clearance, world.occluder, g.label, g.x0, g.z0, g.resolution, AGENT_RADIUS,
                 tp.points, tp.label, SUCCESS_DISTANCE, out)
-    return out
+    return out & enterable(world)
 
 
 def navigable(world: NavWorld) -> np.ndarray:
     """bool (H, W): cells where the agent disc fits (recomputed from the clearance: one comparison per
     cell; the cached :func:`cell_index` holds the same information for the simulator)."""
     return world.grid.navigable(AGENT_RADIUS)
+
+
+def enterable(world: NavWorld) -> np.ndarray:
+    """bool (H, W): navigable cells the agent can stop on in its own motion: the navigable mask opened
+    by a 3 x 3 square, so a pocket or strip of navigable cells less than three cells (0.15 m) wide is
+    dropped. The disc fits there, but 0.2 m moves along 6-degree headings step over or past it; a
+    success region made only of such cells made episodes "solvable" that the expert ran to the step
+    limit on. Corridors stay passable (the distance fields run over :func:`navigable`).
+    """
+    return ndimage.binary_opening(navigable(world), structure=_ENTER, border_value=0)
+
+
+_ENTER = np.ones((3, 3), dtype=bool)
 
 
 CHUNK_BITS = 7

@@ -170,20 +170,43 @@ def is_success(world: NavWorld, x: float, z: float, yaw: float, target_type: str
 # --------------------------------------------------------------------------- episodes
 
 def available_targets(world: NavWorld) -> list[str]:
-    """Target types whose success region touches the largest navigable component."""
-    from adaptenv.sim.geodesic import success_region
+    """Target types an episode exists for: the success region touches the largest navigable
+    component and does not cover all of its enterable cells (some start lies outside the region)."""
+    from adaptenv.sim.geodesic import enterable, success_region
 
     key = ("available_targets",)
     if key not in world.cache:
         comp, n = world.grid.components(AGENT_RADIUS)
         if n == 0:
-            world.cache[key] = []
+            world.cache[key], world.cache[("trivial_targets",)] = [], []
             return []
         largest = int(np.argmax(np.bincount(comp.ravel())[1:])) + 1
+        floor = (comp == largest) & enterable(world)  # where starts are drawn
         present = set(world.object_types)
-        world.cache[key] = [t for t in TARGET_TYPES
-                            if t in present and bool((success_region(world, t) & (comp == largest)).any())]
+        avail, trivial = [], []
+        for t in TARGET_TYPES:
+            if t not in present:
+                continue
+            inside = success_region(world, t) & floor
+            if not inside.any():
+                continue
+            (avail if int(inside.sum()) < int(floor.sum()) else trivial).append(t)
+        world.cache[key], world.cache[("trivial_targets",)] = avail, trivial
     return list(world.cache[key])
+
+
+def trivial_targets(world: NavWorld) -> list[str]:
+    """Target types visible from every enterable cell of the largest navigable component: no episode
+    can start away from them, so the house is trivial for these types."""
+    available_targets(world)
+    return list(world.cache[("trivial_targets",)])
+
+
+def _others(world: NavWorld, target_type: str) -> str:
+    """The other target types an episode exists for, as a phrase for an error message."""
+    others = [t for t in available_targets(world) if t != target_type]
+    return f"choose another target ({', '.join(others)})" if others else \
+        "no other target type has episodes in this house either"
 
 
 def _check_target(world: NavWorld, target_type: str) -> None:
@@ -200,7 +223,7 @@ def sample_episode(world: NavWorld, rng: np.random.Generator | int, target_type:
                    use_house_start: bool = False, min_distance: float = 0.0) -> Episode:
     """Draw a solvable episode: a target type and a start from which its success region is reachable.
 
-    The start is the centre of a navigable cell (clearance >= AGENT_RADIUS) drawn uniformly among
+    The start is the centre of an enterable cell (:func:`adaptenv.sim.geodesic.enterable`) drawn uniformly among
     those with a finite, positive geodesic distance to the success region (so not already
     successful whatever the yaw), with yaw a multiple of 30 degrees. ``use_house_start`` takes the
     house's metadata pose instead (yaw rounded to the 6-degree lattice); that episode may be
@@ -216,6 +239,11 @@ def sample_episode(world: NavWorld, rng: np.random.Generator | int, target_type:
     if target_type is None:
         avail = available_targets(world)
         if not avail:
+            trivial = trivial_targets(world)
+            if trivial:
+                raise AdaptenvError(f"{world.name}: no episode exists in this house: every reachable cell already "
+                                    f"sees the {', '.join(trivial)}, and no other ObjectNav target type is "
+                                    "solvable; use a larger house or add another target object")
             raise AdaptenvError(f"{world.name}: no ObjectNav target type is solvable in this house (none of "
                                 f"{', '.join(TARGET_TYPES)} can be seen from reachable floor); add a target "
                                 "object or open a door to it")
@@ -236,8 +264,14 @@ def sample_episode(world: NavWorld, rng: np.random.Generator | int, target_type:
     cells = start_cells(world, target_type, min_distance)
     rows, cols = np.divmod(cells, world.grid.shape[1])
     if len(rows) == 0:
-        raise AdaptenvError(f"{world.name}: the {target_type} cannot be reached from any free floor; "
-                            f"choose another target ({', '.join(available_targets(world)) or 'none available'})")
+        from adaptenv.sim.geodesic import distance_field  # geodesic imports this module
+
+        if (distance_field(world, target_type) == 0).any():  # a region exists but covers every reachable cell
+            raise AdaptenvError(f"{world.name}: the {target_type} is visible from every reachable cell, so no "
+                                f"episode can start away from it (the house is trivial for {target_type}); "
+                                + _others(world, target_type))
+        raise AdaptenvError(f"{world.name}: the {target_type} cannot be seen from any reachable floor; "
+                            + _others(world, target_type))
     k = int(rng.integers(len(rows)))
     x, z = world.grid.cell_center(rows[k], cols[k])
     yaw = float(rng.integers(int(360 / ROTATE_LARGE)) * ROTATE_LARGE)
@@ -245,11 +279,12 @@ def sample_episode(world: NavWorld, rng: np.random.Generator | int, target_type:
 
 
 def start_cells(world: NavWorld, target_type: str, min_distance: float = 0.0) -> np.ndarray:
-    """Flat indices of the start cells of a type: finite geodesic distance, positive and >= ``min_distance``."""
-    from adaptenv.sim.geodesic import distance_field
+    """Flat indices of the start cells of a type: enterable, finite geodesic distance, positive and >= ``min_distance``."""
+    from adaptenv.sim.geodesic import distance_field, enterable
 
     key = ("starts", target_type) if min_distance <= 0 else ("starts", target_type, float(min_distance))
     if key not in world.cache:
         field = distance_field(world, target_type)
-        world.cache[key] = np.flatnonzero(np.isfinite(field) & (field > 0) & (field >= min_distance)).astype(np.int32)
+        world.cache[key] = np.flatnonzero(np.isfinite(field) & (field > 0) & (field >= min_distance)
+                                          & enterable(world)).astype(np.int32)
     return world.cache[key]

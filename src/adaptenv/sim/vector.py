@@ -471,8 +471,8 @@ class EpisodeSampler:
     """Draws ObjectNav episodes for many slots quickly (for auto-reset and benchmarks).
 
     Same distribution as ``task.sample_episode`` (a house uniformly, a target type uniformly among
-    ``task.available_targets`` or the given types, the start at the centre of a cell drawn uniformly
-    among those with finite positive geodesic distance, yaw a multiple of 30 degrees), but the
+    ``task.available_targets`` or the given types, the start at the centre of an enterable cell drawn
+    uniformly among those with finite positive geodesic distance, yaw a multiple of 30 degrees), but the
     candidate cells are computed once per (house, target) pair, so a draw costs microseconds.
     """
 
@@ -499,7 +499,7 @@ class EpisodeSampler:
         key = (e, target_type)
         if key not in self._cells:
             field = geodesic.distance_field(self.worlds[e], target_type)
-            cells = np.flatnonzero(np.isfinite(field) & (field > 0))
+            cells = np.flatnonzero(np.isfinite(field) & (field > 0) & geodesic.enterable(self.worlds[e]))
             if cells.size == 0:
                 raise AdaptenvError(f"{self.worlds[e].name}: the {target_type} cannot be reached from any free "
                                     "floor; choose other target types or houses")

@@ -1,0 +1,40 @@
+"""tools/check_houses.py: the real-house conformance table and its --check verdict."""
+
+from __future__ import annotations
+
+import importlib.util
+import sys
+from pathlib import Path
+
+from adaptenv.scene.house import save_house
+from tests.conftest import REAL_HOUSE
+from tests.sim import helpers as H
+
+TOOL = Path(__file__).resolve().parents[1] / "tools" / "check_houses.py"
+
+
+def _tool():
+    spec = importlib.util.spec_from_file_location("check_houses", TOOL)
+    mod = importlib.util.module_from_spec(spec)
+    sys.modules["check_houses"] = mod  # dataclasses look their module up while the class is built
+    spec.loader.exec_module(mod)
+    return mod
+
+
+def test_counts_every_stage_and_fails_the_check_on_a_broken_house(tmp_path, capsys):
+    tool = _tool()
+    d = tmp_path / "houses"
+    save_house(H.corridor_house(), d / "a_good.json")
+    save_house(H.one_room(), d / "b_no_target.json")
+    (d / "c_broken.json").write_text("{", encoding="utf-8")
+    (d / "d_real.json").write_text(REAL_HOUSE.read_text(encoding="utf-8"), encoding="utf-8")
+    rep = tool.check_set(str(d), episodes=6, seed=0, agent=None)
+    assert (rep.houses, rep.loaded, rep.round_trip, rep.usable) == (4, 3, 3, 2)
+    assert rep.sampled == 6 and rep.solvable == rep.expert_success == 6
+    assert [s.name for s in rep.skipped] == ["b_no_target"]
+    assert tool.failed([rep], 0.98) == [f"{d}: 1 house(s) failed to load, 0 to round-trip"]
+    assert tool.main([str(d), "--episodes", "2", "--agent", "none", "--check"]) == 1
+    out = capsys.readouterr().out
+    assert "round trip" in out and "3/3 (100.0%)" in out and "c_broken" in out
+    (d / "c_broken.json").unlink()
+    assert tool.main([str(d), "--episodes", "2", "--agent", "none", "--check"]) == 0
