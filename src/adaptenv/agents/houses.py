@@ -10,9 +10,12 @@ from __future__ import annotations
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
 
+from adaptenv.agents.suites import SuiteWorlds, suite_spec
 from adaptenv.errors import ConfigError
+from adaptenv.scene.house import House, load_house
+from adaptenv.scene.procedural import PRESETS, generate_preset
+from adaptenv.sim.world import NavWorld, compile_world
 
 HOUSES_HELP = ("Houses: a folder of house JSON files, one house file, preset:NAME (e.g. preset:pretrain-train) "
                "or suite:NAME (e.g. suite:long-unseen).")
@@ -23,8 +26,8 @@ class HouseSet:
     """Houses and their compiled worlds, aligned, with the spec they came from."""
 
     spec: str
-    houses: list[Any]
-    worlds: list[Any]
+    houses: list[House]
+    worlds: list[NavWorld]
 
     @property
     def names(self) -> list[str]:
@@ -33,18 +36,12 @@ class HouseSet:
 
 def load_house_set(spec: str | Path) -> HouseSet:
     """Load and compile the houses named by ``spec`` (see module docstring), in a stable order."""
-    from adaptenv.scene.house import load_house
-
     text = str(spec)
     if text.startswith("suite:"):
-        from adaptenv.agents.suites import SuiteWorlds, suite_spec
-
         suite = suite_spec(text.partition(":")[2])
         base = load_house_set(suite.houses)
         return HouseSet(text, base.houses, SuiteWorlds(base.worlds, suite.floor))
     if text.startswith("preset:"):
-        from adaptenv.scene.procedural import PRESETS, generate_preset
-
         name = text.partition(":")[2]
         if name not in PRESETS:
             raise ConfigError(f"--houses {text!r}: unknown preset; choose one of "
@@ -68,9 +65,7 @@ def load_house_set(spec: str | Path) -> HouseSet:
     return HouseSet(text, houses, compile_houses(houses, names))
 
 
-def compile_houses(houses: Sequence[Any], names: Sequence[str] | None = None) -> list[Any]:
+def compile_houses(houses: Sequence[House | NavWorld], names: Sequence[str] | None = None) -> list[NavWorld]:
     """``compile_world`` each house (objects that are already NavWorlds pass through)."""
-    from adaptenv.sim.world import NavWorld, compile_world
-
     names = list(names) if names is not None else [f"house-{i:03d}" for i in range(len(houses))]
     return [h if isinstance(h, NavWorld) else compile_world(h, n) for h, n in zip(houses, names, strict=True)]
