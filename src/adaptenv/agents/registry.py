@@ -37,7 +37,7 @@ def pretrained_path() -> Path:
 
 def load_pretrained(*, greedy: bool = False, seed: int = 0) -> Policy:
     """The shipped pretrained policy; a missing file names the command that creates it."""
-    from adaptenv.agents.checkpoint import load_checkpoint
+    from adaptenv.agents.checkpoint import load_checkpoint  # torch: only when a checkpoint is loaded
 
     path = pretrained_path()
     if not path.is_file():
@@ -64,7 +64,7 @@ def resolve_policy(spec: str, *, seed: int = 0) -> Policy:
         return RandomPolicy(seed=int(tail) if tail else seed)
     path = Path(spec)
     if path.suffix in (".pt", ".pth") or (path.is_file() and ":" not in spec):
-        from adaptenv.agents.checkpoint import load_checkpoint
+        from adaptenv.agents.checkpoint import load_checkpoint  # torch: only when a checkpoint is loaded
 
         return load_checkpoint(path).policy(seed=seed)
     if ":" in spec:
