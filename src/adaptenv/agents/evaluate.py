@@ -264,7 +264,8 @@ class EvalReport:
 def _evaluate_shard(args: tuple) -> tuple[list[EpisodeResult], dict[int, Recorded], list[EpisodeResult]]:
     """Worker entry: evaluate a slice of the episodes (and the expert on it) in a fresh process."""
     policy_spec, houses, names, episodes, batch, max_steps, with_expert = args
-    from adaptenv.agents.network import configure_torch  # torch: loaded in worker processes only
+    # torch: loaded in worker processes only
+    from adaptenv.agents.network import configure_torch
     configure_torch(1)
     worlds = compile_houses(houses, names)
     policy = resolve_policy(policy_spec) if isinstance(policy_spec, str) else policy_spec

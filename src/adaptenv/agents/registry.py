@@ -37,7 +37,8 @@ def pretrained_path() -> Path:
 
 def load_pretrained(*, greedy: bool = False, seed: int = 0) -> Policy:
     """The shipped pretrained policy; a missing file names the command that creates it."""
-    from adaptenv.agents.checkpoint import load_checkpoint  # torch: only when a checkpoint is loaded
+    # torch: only when a checkpoint is loaded
+    from adaptenv.agents.checkpoint import load_checkpoint
 
     path = pretrained_path()
     if not path.is_file():
@@ -64,7 +65,8 @@ def resolve_policy(spec: str, *, seed: int = 0) -> Policy:
         return RandomPolicy(seed=int(tail) if tail else seed)
     path = Path(spec)
     if path.suffix in (".pt", ".pth") or (path.is_file() and ":" not in spec):
-        from adaptenv.agents.checkpoint import load_checkpoint  # torch: only when a checkpoint is loaded
+        # torch: only when a checkpoint is loaded
+        from adaptenv.agents.checkpoint import load_checkpoint
 
         return load_checkpoint(path).policy(seed=seed)
     if ":" in spec:
