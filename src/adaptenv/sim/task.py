@@ -171,7 +171,7 @@ def is_success(world: NavWorld, x: float, z: float, yaw: float, target_type: str
 
 def available_targets(world: NavWorld) -> list[str]:
     """Target types whose success region touches the largest navigable component."""
-    from adaptenv.sim.geodesic import success_region
+    from adaptenv.sim.geodesic import success_region  # cycle: geodesic imports this module
 
     key = ("available_targets",)
     if key not in world.cache:
@@ -246,7 +246,7 @@ def sample_episode(world: NavWorld, rng: np.random.Generator | int, target_type:
 
 def start_cells(world: NavWorld, target_type: str, min_distance: float = 0.0) -> np.ndarray:
     """Flat indices of the start cells of a type: finite geodesic distance, positive and >= ``min_distance``."""
-    from adaptenv.sim.geodesic import distance_field
+    from adaptenv.sim.geodesic import distance_field  # cycle: geodesic imports this module
 
     key = ("starts", target_type) if min_distance <= 0 else ("starts", target_type, float(min_distance))
     if key not in world.cache:
