@@ -237,7 +237,7 @@ def load_house(path: str | Path, *, validate: bool = True) -> House:
     doc = read_house_document(path)
     house = parse_house(doc, str(path))
     if validate:
-        from adaptenv.scene.validate import validate_house
+        from adaptenv.scene.validate import validate_house  # cycle: validate imports this module
 
         problems = validate_house(house, file=str(path))
         if problems:
