@@ -11,22 +11,22 @@ them into object moves is the generator's job.
 
 from __future__ import annotations
 
-import io
 import logging
 import math
 from collections import Counter
-from typing import TYPE_CHECKING, Any, Literal, Protocol, runtime_checkable
+from typing import Any, Literal, Protocol, runtime_checkable
 
 import numpy as np
 from pydantic import BaseModel, Field
 
+from adaptenv.adapt.llm import LLMBackend, LLMError, Message, ModelAnswerError
+from adaptenv.adapt.llm.prompts import PAPER_F_PROMPT
+from adaptenv.errors import ConfigError
+from adaptenv.render.topdown import png_bytes, render_house
 from adaptenv.scene.occupancy import LABEL_DOOR, LABEL_OBJECT0, LABEL_WINDOW
 from adaptenv.sim.spec import AGENT_RADIUS, MAX_STEPS, MOVE_STEP
 from adaptenv.sim.trajectory import Trajectory
 from adaptenv.sim.world import NavWorld
-
-if TYPE_CHECKING:
-    from adaptenv.adapt.llm.backend import LLMBackend
 
 log = logging.getLogger(__name__)
 
@@ -423,17 +423,9 @@ Report three things:
    the numbers (1-based) of the concerns it addresses; and a priority between 0 and 1."""
 
 
-def _png_bytes(image) -> bytes:
-    buf = io.BytesIO()
-    image.save(buf, format="PNG")
-    return buf.getvalue()
-
-
 def render_for_analysis(trajectory: Trajectory, world: NavWorld, *, size: int = 768) -> bytes:
     """The PNG F looks at: the top-down map with the normalized grid and the episode drawn on it."""
-    from adaptenv.render.topdown import render_house
-
-    return _png_bytes(render_house(None, geometry=world.geometry, trajectory=trajectory, grid=True, size=size))
+    return png_bytes(render_house(None, geometry=world.geometry, trajectory=trajectory, grid=True, size=size))
 
 
 def answer_to_analysis(answer: LLMAnalysisAnswer, task: str, trajectory: Trajectory,
@@ -490,15 +482,11 @@ class LLMAnalyzer:
     def prompt(self, trajectory: Trajectory) -> str:
         """The user prompt: the paper's verbatim, or the task description and what to report."""
         if self.prompts == "paper":
-            from adaptenv.adapt.llm.prompts import PAPER_F_PROMPT
-
             return PAPER_F_PROMPT
         task = f"Task: the robot had to find a {trajectory.target_type} (object navigation) in this apartment."
         return ANALYZER_PROMPT.format(task=task)
 
     def analyze(self, trajectory: Trajectory, world: NavWorld) -> Analysis:
-        from adaptenv.adapt.llm import Message, ModelAnswerError
-
         png = render_for_analysis(trajectory, world, size=self.image_size)
         messages = [Message.user(self.prompt(trajectory), png)]
         task = f"Find a {trajectory.target_type} (ObjectNav) in house {trajectory.house}."
@@ -518,8 +506,6 @@ class LLMAnalyzer:
                 out.usage = usage.to_dict()
                 return out
         if not self.fallback:
-            from adaptenv.adapt.llm import LLMError
-
             raise LLMError(f"the analysis model gave no valid answer in {self.max_attempts} attempts "
                            f"(last: {self.last_error})")
         log.warning("falling back to the built-in analysis: %s", self.last_error)
@@ -535,6 +521,4 @@ def make_analyzer(name: str = "builtin", **kw) -> Analyzer:
         return BuiltinAnalyzer()
     if name == "llm":
         return LLMAnalyzer(**kw)
-    from adaptenv.errors import ConfigError
-
     raise ConfigError(f"unknown analyzer {name!r}; use builtin or llm")

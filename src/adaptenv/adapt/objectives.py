@@ -27,6 +27,7 @@ from dataclasses import asdict, dataclass
 import numpy as np
 
 from adaptenv.adapt.analysis import NARROW_CLEARANCE, SuggestionKind
+from adaptenv.adapt.realism import realism
 from adaptenv.sim.geodesic import distance_field, geodesic_distance
 from adaptenv.sim.spec import MAX_RANGE
 from adaptenv.sim.task import visible_points
@@ -204,6 +205,4 @@ def suggestion_kind(kind: str) -> SuggestionKind:
 
 def realism_score(house, original=None, *, geometry=None) -> float:
     """Realism of a scene in [0, 1] (:func:`adaptenv.adapt.realism.realism`'s ``total``), judged against ``original``."""
-    from adaptenv.adapt.realism import realism
-
     return float(realism(house, original=original, geometry=geometry).total)

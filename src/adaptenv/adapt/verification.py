@@ -19,12 +19,17 @@ import logging
 import math
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Generic, Literal, TypeVar
+from typing import Generic, Literal, TypeVar
 
+from adaptenv.adapt.llm import (
+    LLMBackend,
+    Message,
+    ModelAnswerError,
+    Verification,
+    parse_verification,
+    verify_tool,
+)
 from adaptenv.adapt.objectives import ObjectiveValues, gain
-
-if TYPE_CHECKING:
-    from adaptenv.adapt.llm import LLMBackend, Message, Verification
 
 log = logging.getLogger(__name__)
 
@@ -101,9 +106,6 @@ def ask_llm(backend: LLMBackend, system: str, messages: list[Message], allowed_i
     Returns (the parsed verification or None after ``max_attempts`` invalid answers, a note for
     the log). ``messages`` is extended in place with rejected answers and their feedback.
     """
-    from adaptenv.adapt.llm import Message as Msg
-    from adaptenv.adapt.llm import ModelAnswerError, parse_verification, verify_tool
-
     tool = verify_tool(allowed_ids)
     last = ""
     for attempt in range(max_attempts):
@@ -113,5 +115,5 @@ def ask_llm(backend: LLMBackend, system: str, messages: list[Message], allowed_i
         except ModelAnswerError as exc:
             last = str(exc)
             log.info("verification answer %d rejected: %s", attempt + 1, exc)
-            messages += [Msg.assistant(exc.raw or "(no answer)"), Msg.user(exc.feedback)]
+            messages += [Message.assistant(exc.raw or "(no answer)"), Message.user(exc.feedback)]
     return None, f"no valid verification answer in {max_attempts} attempts (last: {last})"

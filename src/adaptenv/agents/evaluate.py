@@ -21,16 +21,26 @@ from __future__ import annotations
 import csv
 import json
 import math
+import multiprocessing as mp
 from collections.abc import Callable, Sequence
+from concurrent.futures import ProcessPoolExecutor
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
 
 import numpy as np
+from PIL import Image, ImageDraw
 
-from adaptenv.agents.policy import Policy, PolicyContext, bind_policy, policy_name
+from adaptenv.agents.houses import HouseSet, compile_houses
+from adaptenv.agents.policy import ExpertPolicy, Policy, PolicyContext, bind_policy, policy_name
+from adaptenv.agents.registry import resolve_policy
 from adaptenv.agents.suites import EpisodeFloor, sample_floored
+from adaptenv.render.topdown import render_house
+from adaptenv.sim import task
 from adaptenv.sim.spec import ACTIONS, MAX_STEPS
+from adaptenv.sim.trajectory import Pose, Step, Trajectory
+from adaptenv.sim.vector import BatchSim
+from adaptenv.sim.world import NavWorld
 
 Z95 = 1.959963984540054
 
@@ -65,16 +75,14 @@ class Recorded:
     moved: list[bool] = field(default_factory=list)
 
 
-def sample_episodes(worlds: Sequence[Any], n: int, seed: int, *, use_house_start: bool = False, start: int = 0,
-                    floor: EpisodeFloor | None = None) -> list[tuple[int, Any]]:
+def sample_episodes(worlds: Sequence[NavWorld], n: int, seed: int, *, use_house_start: bool = False, start: int = 0,
+                    floor: EpisodeFloor | None = None) -> list[tuple[int, task.Episode]]:
     """Episodes ``start..n-1`` as (house index, Episode) pairs: house ``k % len(worlds)``, episode seed
     derived from ``(seed, k)``, so any slice equals the same slice of the whole list.
 
     ``floor`` (default: the floor a ``suite:`` house set carries, see :mod:`adaptenv.agents.suites`)
     keeps only starts far enough from the target.
     """
-    from adaptenv.sim import task
-
     floor = floor if floor is not None else getattr(worlds, "floor", None)
     if floor is not None and floor.active and not use_house_start:
         return sample_floored(worlds, n, seed, floor, start=start)
@@ -87,7 +95,7 @@ def sample_episodes(worlds: Sequence[Any], n: int, seed: int, *, use_house_start
     return out
 
 
-def _sync(ctx: PolicyContext, sim: Any) -> None:
+def _sync(ctx: PolicyContext, sim: BatchSim) -> None:
     """Point the policy context at the simulator's current arrays (they are replaced on reset)."""
     ctx.worlds = sim.worlds
     ctx.env_idx = sim.env
@@ -95,7 +103,7 @@ def _sync(ctx: PolicyContext, sim: Any) -> None:
     ctx.x, ctx.z, ctx.yaw = sim.x, sim.z, sim.yaw
 
 
-def run_episodes(worlds: Sequence[Any], episodes: Sequence[tuple[int, Any]], policy: Policy, *,
+def run_episodes(worlds: Sequence[NavWorld], episodes: Sequence[tuple[int, task.Episode]], policy: Policy, *,
                  batch: int = 64, max_steps: int = MAX_STEPS,
                  record: Callable[[EpisodeResult], bool] | None = None,
                  progress: Callable[[int], None] | None = None) -> tuple[list[EpisodeResult], dict[int, Recorded]]:
@@ -105,8 +113,6 @@ def run_episodes(worlds: Sequence[Any], episodes: Sequence[tuple[int, Any]], pol
     returned True (all poses are tracked while running; only those are kept). ``progress`` is
     called with the number of episodes finished at each completion.
     """
-    from adaptenv.sim.vector import BatchSim
-
     n = len(episodes)
     if n == 0:
         return [], {}
@@ -265,10 +271,8 @@ class EvalReport:
 def _evaluate_shard(args: tuple) -> tuple[list[EpisodeResult], dict[int, Recorded], list[EpisodeResult]]:
     """Worker entry: evaluate a slice of the episodes (and the expert on it) in a fresh process."""
     policy_spec, houses, names, episodes, batch, max_steps, with_expert = args
-    from adaptenv.agents.houses import compile_houses
+    # torch: loaded in worker processes only
     from adaptenv.agents.network import configure_torch
-    from adaptenv.agents.registry import resolve_policy
-
     configure_torch(1)
     worlds = compile_houses(houses, names)
     policy = resolve_policy(policy_spec) if isinstance(policy_spec, str) else policy_spec
@@ -276,13 +280,11 @@ def _evaluate_shard(args: tuple) -> tuple[list[EpisodeResult], dict[int, Recorde
                                  record=lambda r: not r.success)
     expert: list[EpisodeResult] = []
     if with_expert:
-        from adaptenv.agents.policy import ExpertPolicy
-
         expert, _ = run_episodes(worlds, episodes, ExpertPolicy(), batch=batch, max_steps=max_steps)
     return results, recs, expert
 
 
-def evaluate(policy: Policy | str, house_set: Any, *, episodes: int = 200, seed: int = 0, batch: int = 64,
+def evaluate(policy: Policy | str, house_set: HouseSet, *, episodes: int = 200, seed: int = 0, batch: int = 64,
              workers: int = 1, max_steps: int = MAX_STEPS, with_expert: bool = True,
              progress: Callable[[int], None] | None = None, floor: EpisodeFloor | None = None) -> EvalReport:
     """Evaluate ``policy`` (an object, or a ``--policy`` spec when using workers) on a HouseSet.
@@ -291,16 +293,10 @@ def evaluate(policy: Policy | str, house_set: Any, *, episodes: int = 200, seed:
     one torch thread each); the policy must then be given as a spec string. ``floor`` overrides the
     start-distance floor of a ``suite:`` house set (see :func:`sample_episodes`).
     """
-    from adaptenv.agents.policy import ExpertPolicy
-    from adaptenv.agents.registry import resolve_policy
-
     worlds = house_set.worlds
     eps = sample_episodes(worlds, episodes, seed, floor=floor)
     name = policy if isinstance(policy, str) else policy_name(policy)
     if workers > 1:
-        import multiprocessing as mp
-        from concurrent.futures import ProcessPoolExecutor
-
         if not isinstance(policy, str):
             raise TypeError("evaluate(workers > 1) needs the policy as a --policy spec string")
         bounds = np.linspace(0, len(eps), workers + 1).astype(int)
@@ -335,10 +331,8 @@ def evaluate(policy: Policy | str, house_set: Any, *, episodes: int = 200, seed:
     return EvalReport(name, house_set.spec, seed, summary, results, recordings)
 
 
-def trajectory_of(world: Any, result: EpisodeResult, rec: Recorded, policy: str) -> Any:
+def trajectory_of(world: NavWorld, result: EpisodeResult, rec: Recorded, policy: str) -> Trajectory:
     """Build a :class:`~adaptenv.sim.trajectory.Trajectory` from a recording (for rendering)."""
-    from adaptenv.sim.trajectory import Pose, Step, Trajectory
-
     targets = world.instances_of(result.target_type)
     steps = [Step(pose=Pose(x=p[0], z=p[1], yaw=p[2]), action=ACTIONS[a], moved=m)
              for p, a, m in zip(rec.poses[:-1], rec.actions, rec.moved, strict=True)]
@@ -350,12 +344,9 @@ def trajectory_of(world: Any, result: EpisodeResult, rec: Recorded, policy: str)
                       final_pose=Pose(x=last[0], z=last[1], yaw=last[2]), policy=policy, seed=result.seed)
 
 
-def failure_grid(report: EvalReport, house_set: Any, *, limit: int = 12, tile: int = 360, columns: int = 4):
+def failure_grid(report: EvalReport, house_set: HouseSet, *, limit: int = 12, tile: int = 360,
+                 columns: int = 4) -> Image.Image | None:
     """A PIL image tiling top-down renders of the first ``limit`` failed episodes (None if none failed)."""
-    from PIL import Image, ImageDraw
-
-    from adaptenv.render.topdown import render_house
-
     failed = [r for r in report.results if not r.success and r.index in report.recordings][:limit]
     if not failed:
         return None
@@ -373,7 +364,7 @@ def failure_grid(report: EvalReport, house_set: Any, *, limit: int = 12, tile: i
     return grid
 
 
-def write_report(report: EvalReport, house_set: Any, out: Path, *, command: str = "") -> dict[str, Path]:
+def write_report(report: EvalReport, house_set: HouseSet, out: Path, *, command: str = "") -> dict[str, Path]:
     """Write summary.json, episodes.csv, houses.csv, failures.png and failed trajectories to ``out``."""
     out.mkdir(parents=True, exist_ok=True)
     paths = {"summary": out / "summary.json", "episodes": out / "episodes.csv", "houses": out / "houses.csv"}

@@ -58,6 +58,7 @@ from adaptenv.sim.spec import (
     ROTATE_RIGHT,
     ROTATE_SMALL,
     SUCCESS_DISTANCE,
+    class_id,
 )
 from adaptenv.sim.task import bearing_deg, wrap_deg
 
@@ -173,8 +174,6 @@ class ExplorerPolicy:
     name = "explorer"
 
     def __init__(self) -> None:
-        from adaptenv.sim.spec import class_id
-
         self._class_id = class_id
         self._context: PolicyContext | None = None
         self._mem: list[_Memory | None] = []

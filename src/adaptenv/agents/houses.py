@@ -17,9 +17,14 @@ import logging
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
 
+from adaptenv.agents.suites import SuiteWorlds, suite_spec
 from adaptenv.errors import AdaptenvError, ConfigError
+from adaptenv.scene.house import House, load_house
+from adaptenv.scene.procedural import PRESETS, generate_preset
+from adaptenv.sim.spec import TARGET_TYPES
+from adaptenv.sim.task import available_targets, trivial_targets
+from adaptenv.sim.world import NavWorld, compile_world
 
 log = logging.getLogger(__name__)
 
@@ -41,8 +46,8 @@ class HouseSet:
     """Houses and their compiled worlds, aligned, with the spec they came from and the houses skipped."""
 
     spec: str
-    houses: list[Any]
-    worlds: list[Any]
+    houses: list[House]
+    worlds: list[NavWorld]
     skipped: list[SkippedHouse] = field(default_factory=list)
 
     @property
@@ -50,11 +55,8 @@ class HouseSet:
         return [w.name for w in self.worlds]
 
 
-def unusable_reason(world: Any) -> str | None:
+def unusable_reason(world: NavWorld) -> str | None:
     """Why no ObjectNav episode can be drawn in a compiled house, or None when one can."""
-    from adaptenv.sim.spec import TARGET_TYPES
-    from adaptenv.sim.task import available_targets, trivial_targets
-
     if available_targets(world):
         return None
     trivial = trivial_targets(world)
@@ -67,15 +69,13 @@ def unusable_reason(world: Any) -> str | None:
     return f"no target object ({', '.join(present)}) can be seen from the reachable floor"
 
 
-def usable_houses(houses: Sequence[Any], names: Sequence[str], *, strict: bool = False, spec: str = "houses"
-                  ) -> tuple[list[Any], list[Any], list[SkippedHouse]]:
+def usable_houses(houses: Sequence[House | NavWorld | BaseException], names: Sequence[str], *, strict: bool = False,
+                  spec: str = "houses") -> tuple[list[House | NavWorld], list[NavWorld], list[SkippedHouse]]:
     """Compile houses and keep those with at least one episode: (houses, worlds, skipped).
 
     An entry of ``houses`` may be an exception (a load error), which is skipped with its message.
     Each skip logs one warning line; ``strict`` raises ConfigError on the first one instead.
     """
-    from adaptenv.sim.world import NavWorld, compile_world
-
     kept_h, kept_w, skipped = [], [], []
     for house, name in zip(houses, names, strict=True):
         reason, world = None, None
@@ -108,18 +108,12 @@ def load_house_set(spec: str | Path, *, strict: bool = False) -> HouseSet:
 
     Houses that cannot be used are skipped (``HouseSet.skipped``) unless ``strict``.
     """
-    from adaptenv.scene.house import load_house
-
     text = str(spec)
     if text.startswith("suite:"):
-        from adaptenv.agents.suites import SuiteWorlds, suite_spec
-
         suite = suite_spec(text.partition(":")[2])
         base = load_house_set(suite.houses, strict=strict)
         return HouseSet(text, base.houses, SuiteWorlds(base.worlds, suite.floor), base.skipped)
     if text.startswith("preset:"):
-        from adaptenv.scene.procedural import PRESETS, generate_preset
-
         name = text.partition(":")[2]
         if name not in PRESETS:
             raise ConfigError(f"--houses {text!r}: unknown preset; choose one of "
@@ -144,7 +138,7 @@ def load_house_set(spec: str | Path, *, strict: bool = False) -> HouseSet:
     return HouseSet(text, houses, worlds, skipped)
 
 
-def _try_load(load, path: Path) -> Any:
+def _try_load(load, path: Path) -> House | AdaptenvError:
     """The loaded house, or the AdaptenvError that loading raised (skipped later, with its message)."""
     try:
         return load(path)
@@ -152,9 +146,7 @@ def _try_load(load, path: Path) -> Any:
         return exc
 
 
-def compile_houses(houses: Sequence[Any], names: Sequence[str] | None = None) -> list[Any]:
+def compile_houses(houses: Sequence[House | NavWorld], names: Sequence[str] | None = None) -> list[NavWorld]:
     """``compile_world`` each house (objects that are already NavWorlds pass through)."""
-    from adaptenv.sim.world import NavWorld, compile_world
-
     names = list(names) if names is not None else [f"house-{i:03d}" for i in range(len(houses))]
     return [h if isinstance(h, NavWorld) else compile_world(h, n) for h, n in zip(houses, names, strict=True)]

@@ -24,7 +24,10 @@ from typing import Any, Protocol, runtime_checkable
 import numpy as np
 
 from adaptenv.errors import ConfigError
-from adaptenv.sim.spec import END, NO_ACTION
+from adaptenv.sim.expert import ShortestPathExpert
+from adaptenv.sim.physics import PackedGrids
+from adaptenv.sim.scan import pack_semantic, scan
+from adaptenv.sim.spec import END, NO_ACTION, class_id
 from adaptenv.sim.task import Episode
 from adaptenv.sim.world import NavWorld
 
@@ -147,8 +150,6 @@ class ExpertPolicy:
     name = "expert"
 
     def __init__(self) -> None:
-        from adaptenv.sim.expert import ShortestPathExpert
-
         self.expert = ShortestPathExpert()
         self._context: PolicyContext | None = None
 
@@ -184,10 +185,6 @@ class StepPolicy:
         self._context: PolicyContext | None = None
 
     def __call__(self, world: NavWorld, episode: Episode, x: float, z: float, yaw: float, collided: bool, step: int) -> int:
-        from adaptenv.sim.physics import PackedGrids
-        from adaptenv.sim.scan import pack_semantic, scan
-        from adaptenv.sim.spec import class_id
-
         first = step == 0 or self._context is None or self._context.worlds[0] is not world
         if first:
             self._context = PolicyContext.empty([world], 1)

@@ -37,6 +37,7 @@ def pretrained_path() -> Path:
 
 def load_pretrained(*, greedy: bool = False, seed: int = 0) -> Policy:
     """The shipped pretrained policy; a missing file names the command that creates it."""
+    # torch: only when a checkpoint is loaded
     from adaptenv.agents.checkpoint import load_checkpoint
 
     path = pretrained_path()
@@ -64,6 +65,7 @@ def resolve_policy(spec: str, *, seed: int = 0) -> Policy:
         return RandomPolicy(seed=int(tail) if tail else seed)
     path = Path(spec)
     if path.suffix in (".pt", ".pth") or (path.is_file() and ":" not in spec):
+        # torch: only when a checkpoint is loaded
         from adaptenv.agents.checkpoint import load_checkpoint
 
         return load_checkpoint(path).policy(seed=seed)

@@ -19,6 +19,7 @@ from typing import Any
 import numpy as np
 import torch
 
+from adaptenv.agents.evaluate import sample_episodes
 from adaptenv.agents.network import choose_actions, obs_to_tensors
 from adaptenv.sim import metrics, task
 from adaptenv.sim.spec import END, MAX_STEPS
@@ -85,8 +86,6 @@ def stop_outcomes(net: Any, worlds: Sequence[Any], episodes: Sequence[tuple[int,
 def calibrate_end_threshold(net: Any, worlds: Sequence[Any], *, episodes: int = 200, seed: int = 0,
                             grid: Sequence[float] = THRESHOLDS, max_steps: int = MAX_STEPS) -> StopCalibration:
     """Pick the ``end`` threshold on ``episodes`` fresh episodes in ``worlds`` (the training houses)."""
-    from adaptenv.agents.evaluate import sample_episodes
-
     eps = sample_episodes(list(worlds), episodes, seed=seed)
     success, spl = stop_outcomes(net, worlds, eps, grid=grid, seed=seed, max_steps=max_steps)
     g = sorted(float(x) for x in grid)

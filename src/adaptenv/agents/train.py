@@ -51,9 +51,28 @@ import numpy as np
 import torch
 import torch.nn.functional as F
 
+from adaptenv.agents.checkpoint import atomic_torch_save, load_checkpoint, save_checkpoint
 from adaptenv.agents.config import FinetuneConfig, PPOConfig, TrainConfig, field_docs
+from adaptenv.agents.evaluate import run_episodes, sample_episodes, summarize
+from adaptenv.agents.houses import compile_houses, load_house_set
+from adaptenv.agents.network import (
+    END_THRESHOLD,
+    NavNet,
+    NetConfig,
+    NeuralPolicy,
+    choose_actions,
+    configure_torch,
+    count_parameters,
+    obs_to_tensors,
+)
+from adaptenv.agents.stop import calibrate_end_threshold
+from adaptenv.agents.teachers import make_teacher
 from adaptenv.errors import ConfigError
 from adaptenv.progress import ProgressBar
+from adaptenv.scene.house import House
+from adaptenv.sim.spec import END, N_RAYS
+from adaptenv.sim.vector import BatchSim, EpisodeSampler
+from adaptenv.sim.world import NavWorld
 
 __all__ = ["TrainConfig", "FinetuneConfig", "field_docs", "train", "finetune", "finetune_policy"]
 
@@ -166,6 +185,7 @@ class RunLogger:
         self.writer = None
         if run_dir and tensorboard:
             try:
+                # tensorboard: optional, and slow to import; only when a run asks for it
                 from torch.utils.tensorboard import SummaryWriter
 
                 self.writer = SummaryWriter(str(run_dir / "tb"))
@@ -197,13 +217,11 @@ class RunLogger:
 class TrainResult:
     """What a run returns: the trained policy network, its card and the logged rows."""
 
-    net: Any
+    net: NavNet
     card: dict[str, Any]
     rows: list[dict[str, Any]] = field(default_factory=list)
 
-    def policy(self, *, name: str = "finetuned") -> Any:
-        from adaptenv.agents.network import END_THRESHOLD, NeuralPolicy
-
+    def policy(self, *, name: str = "finetuned") -> NeuralPolicy:
         return NeuralPolicy(self.net, name=name, end_threshold=self.card.get("end_threshold", END_THRESHOLD))
 
 
@@ -214,29 +232,13 @@ def default_run_dir(cfg: TrainConfig) -> Path | None:
     return Path("runs/train") / Path(cfg.output).stem if cfg.output else None
 
 
-def train(cfg: TrainConfig, *, worlds: Sequence[Any] | None = None, init_net: Any = None,
+def train(cfg: TrainConfig, *, worlds: Sequence[NavWorld] | None = None, init_net: NavNet | None = None,
           command: str = "") -> TrainResult:
     """Run behaviour cloning + DAgger as configured; returns the trained network and its card.
 
     ``worlds`` (compiled NavWorlds) override ``cfg.houses``; ``init_net`` (a NavNet) overrides
     ``cfg.init``. Both are how :func:`finetune` trains on houses held in memory.
     """
-    from adaptenv.agents.checkpoint import atomic_torch_save, load_checkpoint, save_checkpoint
-    from adaptenv.agents.evaluate import run_episodes, sample_episodes, summarize
-    from adaptenv.agents.houses import load_house_set
-    from adaptenv.agents.network import (
-        NavNet,
-        NetConfig,
-        NeuralPolicy,
-        choose_actions,
-        configure_torch,
-        count_parameters,
-    )
-    from adaptenv.agents.stop import calibrate_end_threshold
-    from adaptenv.agents.teachers import make_teacher
-    from adaptenv.sim.spec import END, N_RAYS
-    from adaptenv.sim.vector import BatchSim, EpisodeSampler
-
     check_config(cfg)
     threads = configure_torch(cfg.threads or None)
     run_dir = default_run_dir(cfg)
@@ -463,7 +465,7 @@ def train(cfg: TrainConfig, *, worlds: Sequence[Any] | None = None, init_net: An
     return TrainResult(net, card, logger.rows)
 
 
-def finetune(net: Any, worlds: Sequence[Any], cfg: FinetuneConfig, seed: int) -> tuple[Any, dict[str, Any]]:
+def finetune(net: NavNet, worlds: Sequence[NavWorld], cfg: FinetuneConfig, seed: int) -> tuple[NavNet, dict[str, Any]]:
     """Fine-tune a copy of ``net`` (a NavNet) on ``worlds`` (NavWorlds) as ``cfg`` says; returns (new net, card).
 
     ``algo='dagger'``: DAgger from the current weights with a fresh Adam optimizer, expert-action
@@ -476,7 +478,8 @@ def finetune(net: Any, worlds: Sequence[Any], cfg: FinetuneConfig, seed: int) ->
         raise ConfigError(f"FinetuneConfig.algo must be 'dagger' or 'ppo', got {cfg.algo!r}")
     evals = cfg.final_eval_episodes or len(worlds)
     if cfg.algo == "ppo":
-        from adaptenv.agents.ppo import train_ppo  # ppo.py imports this module
+        # cycle: ppo imports this module (RunLogger, TrainResult)
+        from adaptenv.agents.ppo import train_ppo
 
         iterations = -(-cfg.frames // (cfg.num_envs * cfg.rollout_steps))
         pc = PPOConfig(houses="(in memory)", value_warmup_iters=min(PPOConfig.value_warmup_iters, iterations // 2), frames=cfg.frames, init="", output="", seed=seed, num_envs=cfg.num_envs,
@@ -497,7 +500,8 @@ def finetune(net: Any, worlds: Sequence[Any], cfg: FinetuneConfig, seed: int) ->
     return result.net, result.card
 
 
-def finetune_policy(policy: Any, houses: Sequence[Any] | str, frames: int, *, seed: int = 0, **overrides: Any) -> Any:
+def finetune_policy(policy: NeuralPolicy | NavNet | str | Path, houses: Sequence[House | NavWorld] | str, frames: int, *,
+                    seed: int = 0, **overrides: Any) -> NeuralPolicy:
     """Continue training ``policy`` (a NeuralPolicy or checkpoint path) on ``houses``; returns a new policy.
 
     ``houses`` may be House objects, NavWorlds or a ``--houses`` spec. DAgger keeps the expert in
@@ -505,9 +509,6 @@ def finetune_policy(policy: Any, houses: Sequence[Any] | str, frames: int, *, se
     docs/agent.md); nothing is written unless ``output``/``run_dir`` is given in ``overrides`` (any
     TrainConfig field).
     """
-    from adaptenv.agents.checkpoint import load_checkpoint
-    from adaptenv.agents.houses import compile_houses, load_house_set
-
     net = load_checkpoint(policy).net if isinstance(policy, (str, Path)) else getattr(policy, "net", policy)
     worlds = load_house_set(houses).worlds if isinstance(houses, str) else compile_houses(list(houses))
     settings = {"frames": frames, "seed": seed, "output": "", "houses": "(in memory)", "beta_start": 0.8,
@@ -517,6 +518,4 @@ def finetune_policy(policy: Any, houses: Sequence[Any] | str, frames: int, *, se
 
 
 def _to_tensors(obs: dict[str, np.ndarray]) -> dict[str, torch.Tensor]:
-    from adaptenv.agents.network import obs_to_tensors
-
     return obs_to_tensors(obs)

@@ -1,6 +1,8 @@
 """Benchmark helpers: timing with medians and one way to print results (table or JSON).
 
 Speed targets live here and in docs/BENCHMARKS.md, never in unit tests.
+
+rich is imported only when a table is printed (``--json`` output does without it).
 """
 
 from __future__ import annotations

@@ -13,6 +13,9 @@ re-run the policy from the same start on the same target. Reported:
 - validated edits per second (placement + validation, no rollouts) from
   :mod:`adaptenv.bench.adapt_edits` (target: at least 1,000 on one core for a 5-room house), and
   the wall time per adapted house.
+
+Imports sit inside the functions: this module is loaded by its ``adaptenv bench`` command, and a
+benchmark loads what it measures (torch, numba, ray) only when it runs.
 """
 
 from __future__ import annotations

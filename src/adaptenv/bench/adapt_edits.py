@@ -3,6 +3,9 @@
 Random proposals (a random movable object, a displacement uniform in -30..30 grid units on each
 axis, a random absolute yaw half of the time) go through :class:`EditValidator` on a procedural
 5-room house, one core, no policy rollouts. Target: at least 1,000 validated edits per second.
+
+Imports sit inside the functions: this module is loaded by its ``adaptenv bench`` command, and a
+benchmark loads what it measures (torch, numba, ray) only when it runs.
 """
 
 from __future__ import annotations

@@ -10,6 +10,9 @@ Two workloads (``--workload``):
 Items carry their seeds, so every executor must return exactly the in-process results; the
 benchmark checks that before printing. Registered as ``adaptenv bench executor [--json] [--kind]
 [--workload]`` by :mod:`adaptenv.cli.executor`.
+
+Imports sit inside the functions: this module is loaded by its ``adaptenv bench`` command, and a
+benchmark loads what it measures (torch, numba, ray) only when it runs.
 """
 
 from __future__ import annotations

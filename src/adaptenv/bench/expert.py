@@ -5,6 +5,9 @@ starts at the house's own start pose with a target type drawn among all types pr
 or not), which is where unsolvable episodes show up: they are counted apart, never as failures.
 Label throughput is measured on a batch of agents spread over all houses, stepping with
 ``physics.step_poses`` and resetting finished episodes, as imitation learning would.
+
+Imports sit inside the functions: this module is loaded by its ``adaptenv bench`` command, and a
+benchmark loads what it measures (torch, numba, ray) only when it runs.
 """
 
 from __future__ import annotations

@@ -1,6 +1,9 @@
 """Benchmark: how long one procedural house takes (all stages, checks and retries included).
 
 Target: a 5-room house well under 100 ms on one core.
+
+Imports sit inside the functions: this module is loaded by its ``adaptenv bench`` command, and a
+benchmark loads what it measures (torch, numba, ray) only when it runs.
 """
 
 from __future__ import annotations

@@ -1,6 +1,9 @@
 """Speed of the top-down renderer on the real 10-room house (target: under 50 ms at 1024 px).
 
 Registered as ``adaptenv bench render [--json]`` by :mod:`adaptenv.cli.render`.
+
+Imports sit inside the functions: this module is loaded by its ``adaptenv bench`` command, and a
+benchmark loads what it measures (torch, numba, ray) only when it runs.
 """
 
 from __future__ import annotations

@@ -11,6 +11,9 @@ batch figure is given for both kernels (serial, and multi-threaded on 2 threads)
 thread count BatchSim's default picks. The clutter comparison runs one thread, so its CPU-time
 ratio is the per-step cost ratio; the two houses are timed alternately within each repeat and the
 ratio is the median of the per-repeat ratios.
+
+Imports sit inside the functions: this module is loaded by its ``adaptenv bench`` command, and a
+benchmark loads what it measures (torch, numba, ray) only when it runs.
 """
 
 from __future__ import annotations

@@ -14,6 +14,9 @@ Figures (median of repeated timings, houses of the ``pretrain-train`` preset, wa
 Each throughput is given per wall-clock second and per CPU-second of this process (all threads,
 ``time.process_time``), with the load average before and after: on a shared machine the wall
 figures fall with the load, the CPU figures much less.
+
+Imports sit inside the functions: this module is loaded by its ``adaptenv bench`` command, and a
+benchmark loads what it measures (torch, numba, ray) only when it runs.
 """
 
 from __future__ import annotations

@@ -1,4 +1,8 @@
-"""``adaptenv analyze`` (F on a recorded episode), ``adaptenv adapt`` (one closed-loop step) and ``adaptenv bench adapt``."""
+"""``adaptenv analyze`` (F on a recorded episode), ``adaptenv adapt`` (one closed-loop step) and ``adaptenv bench adapt``.
+
+Commands import their dependencies when they run, so ``adaptenv --help`` stays fast and never loads
+torch or numba.
+"""
 
 from __future__ import annotations
 

@@ -1,4 +1,8 @@
-"""``adaptenv train`` (imitation learning), ``adaptenv evaluate`` (the harness), ``adaptenv bench train``."""
+"""``adaptenv train`` (imitation learning), ``adaptenv evaluate`` (the harness), ``adaptenv bench train``.
+
+Commands import their dependencies when they run, so ``adaptenv --help`` stays fast and never loads
+torch or numba.
+"""
 
 from __future__ import annotations
 

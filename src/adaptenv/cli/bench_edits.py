@@ -1,4 +1,8 @@
-"""``adaptenv bench edits``: validated edits per second (placement + validation)."""
+"""``adaptenv bench edits``: validated edits per second (placement + validation).
+
+Commands import their dependencies when they run, so ``adaptenv --help`` stays fast and never loads
+torch or numba.
+"""
 
 from __future__ import annotations
 

@@ -1,4 +1,8 @@
-"""``adaptenv bench sim``: simulator steps per second (batched and single env), clutter cost, memory."""
+"""``adaptenv bench sim``: simulator steps per second (batched and single env), clutter cost, memory.
+
+Commands import their dependencies when they run, so ``adaptenv --help`` stays fast and never loads
+torch or numba.
+"""
 
 from __future__ import annotations
 

@@ -1,4 +1,8 @@
-"""``adaptenv loop`` (one method, one seed) and ``adaptenv experiment`` (methods x seeds)."""
+"""``adaptenv loop`` (one method, one seed) and ``adaptenv experiment`` (methods x seeds).
+
+Commands import their dependencies when they run, so ``adaptenv --help`` stays fast and never loads
+torch or numba.
+"""
 
 from __future__ import annotations
 

@@ -1,4 +1,8 @@
-"""``adaptenv demo``: the main job, the closed loop end to end, offline on built-in defaults."""
+"""``adaptenv demo``: the main job, the closed loop end to end, offline on built-in defaults.
+
+Commands import their dependencies when they run, so ``adaptenv --help`` stays fast and never loads
+torch or numba.
+"""
 
 from __future__ import annotations
 

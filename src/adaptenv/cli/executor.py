@@ -1,4 +1,8 @@
-"""``adaptenv bench executor``: speedup of the process pool and Ray from 1 to 2 workers."""
+"""``adaptenv bench executor``: speedup of the process pool and Ray from 1 to 2 workers.
+
+Commands import their dependencies when they run, so ``adaptenv --help`` stays fast and never loads
+torch or numba.
+"""
 
 from __future__ import annotations
 

@@ -1,6 +1,9 @@
 """``adaptenv houses``: generate procedural ProcTHOR-format houses and rearranged variants.
 
 Also registers ``adaptenv bench houses`` (generation speed).
+
+Commands import their dependencies when they run, so ``adaptenv --help`` stays fast and never loads
+torch or numba.
 """
 
 from __future__ import annotations

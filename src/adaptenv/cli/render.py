@@ -1,4 +1,8 @@
-"""``adaptenv render``: a house (and optionally an episode) as a top-down PNG; ``adaptenv bench render``."""
+"""``adaptenv render``: a house (and optionally an episode) as a top-down PNG; ``adaptenv bench render``.
+
+Commands import their dependencies when they run, so ``adaptenv --help`` stays fast and never loads
+torch or numba.
+"""
 
 from __future__ import annotations
 

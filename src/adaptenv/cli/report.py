@@ -1,4 +1,8 @@
-"""``adaptenv report``: an offline HTML report of a closed-loop run or an experiment folder."""
+"""``adaptenv report``: an offline HTML report of a closed-loop run or an experiment folder.
+
+Commands import their dependencies when they run, so ``adaptenv --help`` stays fast and never loads
+torch or numba.
+"""
 
 from __future__ import annotations
 

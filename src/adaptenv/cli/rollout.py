@@ -1,4 +1,8 @@
-"""``adaptenv rollout``: run one ObjectNav episode in a house; ``adaptenv bench expert``."""
+"""``adaptenv rollout``: run one ObjectNav episode in a house; ``adaptenv bench expert``.
+
+Commands import their dependencies when they run, so ``adaptenv --help`` stays fast and never loads
+torch or numba.
+"""
 
 from __future__ import annotations
 

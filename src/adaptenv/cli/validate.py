@@ -1,4 +1,8 @@
-"""``adaptenv validate``: list every problem of one or more house files (and ``adaptenv bench validate``)."""
+"""``adaptenv validate``: list every problem of one or more house files (and ``adaptenv bench validate``).
+
+Commands import their dependencies when they run, so ``adaptenv --help`` stays fast and never loads
+torch or numba.
+"""
 
 from __future__ import annotations
 

@@ -23,9 +23,13 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+from scipy import stats
 
 from adaptenv.adapt.llm.accounting import check_llm_section
-from adaptenv.curriculum.loop import METHODS, LoopConfig, run_loop
+from adaptenv.agents.checkpoint import load_checkpoint
+from adaptenv.curriculum.executor import InProcessExecutor
+from adaptenv.curriculum.jobs import PolicyWeights
+from adaptenv.curriculum.loop import METHODS, LoopConfig, evaluate_sets, run_loop
 from adaptenv.curriculum.records import atomic_write_text, iteration_dir, read_iterations
 from adaptenv.errors import ConfigError
 
@@ -144,8 +148,6 @@ def _budget(last: Any) -> dict[str, float]:
 
 def paired_test(a: list[float], b: list[float]) -> float | None:
     """Two-sided paired t-test p-value of a vs b over seeds (None when it is undefined)."""
-    from scipy import stats
-
     if len(a) < 2 or len(a) != len(b):
         return None
     diff = np.asarray(a) - np.asarray(b)
@@ -199,11 +201,6 @@ def final_evaluation(out: str | Path, cfg: ExperimentConfig, episodes: int, *, e
                      progress: Any = None) -> dict[str, Any]:
     """Evaluate pi_0 and every finished run's last policy on ``episodes`` held-out episodes per set
     (the seed's episodes, so comparisons stay paired), then write ``summary_final``; cached per run."""
-    from adaptenv.agents.checkpoint import load_checkpoint
-    from adaptenv.curriculum.executor import InProcessExecutor
-    from adaptenv.curriculum.jobs import PolicyWeights
-    from adaptenv.curriculum.loop import evaluate_sets
-
     out, ex = Path(out), executor if executor is not None else InProcessExecutor()
     specs = cfg.loop_config(cfg.reference, cfg.seeds[0]).heldout
     say = progress or (lambda text: None)
@@ -278,6 +275,7 @@ def curves(out: Path, cfg: ExperimentConfig, set_name: str, x: str) -> dict[str,
 
 
 def _plots(out: Path, cfg: ExperimentConfig) -> None:
+    # matplotlib: slow to import, so only when plots are drawn
     import matplotlib
 
     matplotlib.use("Agg")

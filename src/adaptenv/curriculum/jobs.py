@@ -19,6 +19,7 @@ from adaptenv.adapt.analysis import Analysis, Analyzer, BuiltinAnalyzer, LLMAnal
 from adaptenv.adapt.diagnosis import NoAnalyzer, hard_episodes
 from adaptenv.adapt.generators import Generator, make_generator
 from adaptenv.adapt.generators.random_perturbation import random_single_edits
+from adaptenv.adapt.llm import LLMConfig, make_backend
 from adaptenv.adapt.llm.accounting import scene_usage
 from adaptenv.adapt.llm.usage import Usage
 from adaptenv.adapt.step import adapt_scene
@@ -230,8 +231,6 @@ def _run_diagnosed(job: GenerateJob, rng: np.random.Generator) -> Generated:
 def make_fg(kind: GeneratorKind, llm: dict[str, Any]) -> tuple[Analyzer, Generator]:
     """Analyzer F and generator G: built-in, or LLM-backed (one backend shared by F and G)."""
     if kind == "llm":
-        from adaptenv.adapt.llm import LLMConfig, make_backend  # openai: imported only for LLM runs
-
         backend = make_backend(LLMConfig(**llm))
         return LLMAnalyzer(backend), make_generator("llm", backend=backend)
     if kind == "failure-modes":

@@ -17,6 +17,9 @@ from typing import Any, Literal
 
 from pydantic import ValidationError
 
+from adaptenv.adapt.analysis import Analysis
+from adaptenv.adapt.edits import EditLog
+from adaptenv.adapt.generators import StepRecord
 from adaptenv.curriculum.records import (
     HELDOUT_DIR,
     ITERATIONS,
@@ -216,8 +219,6 @@ def _inside(run_dir: Path, rel: str | None) -> Path | None:
 
 def load_gallery(run_dir: Path, item: GalleryItem) -> GalleryEntry:
     """Resolve one gallery item's files and parse its analysis and edits (problems become warnings)."""
-    from adaptenv.adapt.analysis import Analysis
-
     entry = GalleryEntry(item.scene, item.summary, _inside(run_dir, item.before_png), _inside(run_dir, item.after_png))
     for name, rel, found in (("before render", item.before_png, entry.before), ("after render", item.after_png, entry.after)):
         if rel and found is None:
@@ -258,11 +259,7 @@ def parse_edits(doc: Any) -> tuple[str, list[EditRow]]:
     Returns the generator name ('' when unknown) and one row per edit (per step for a generator log,
     so the verification result and the reason of skipped steps are kept).
     """
-    from adaptenv.adapt.edits import EditLog
-
     if isinstance(doc, dict) and isinstance(doc.get("steps"), list):
-        from adaptenv.adapt.generators import StepRecord
-
         rows = []
         for raw in doc["steps"]:
             step = StepRecord.model_validate(raw)

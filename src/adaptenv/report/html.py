@@ -22,6 +22,8 @@ from collections.abc import Iterable
 from pathlib import Path
 from urllib.parse import quote
 
+from PIL import Image, UnidentifiedImageError
+
 from adaptenv.curriculum.records import (
     ITERATIONS,
     ITERATIONS_CSV,
@@ -47,6 +49,7 @@ from adaptenv.report.data import (
     load_gallery,
     load_run,
 )
+from adaptenv.report.plots import experiment_curves, run_curves
 from adaptenv.scene.house import load_house
 from adaptenv.sim.trajectory import Trajectory
 
@@ -160,8 +163,6 @@ def plot_img(path: Path | None, base: Path, alt: str) -> str:
 
 def _image_size(path: Path) -> tuple[int, int] | None:
     """Pixel size of an image file, or None when it is not a readable image."""
-    from PIL import Image, UnidentifiedImageError
-
     try:
         with Image.open(path) as im:
             im.verify()
@@ -556,8 +557,6 @@ def run_meta(run: RunData) -> str:
 
 def write_run_report(run: RunData, out: Path, *, back: tuple[str, str] | None = None) -> Path:
     """Write one run's report into ``out`` (index.html plus its files); returns index.html's path."""
-    from adaptenv.report.plots import run_curves
-
     out.mkdir(parents=True, exist_ok=True)
     assets = Assets(out, out)
     subtitle = f"Run folder: {esc(run.path)}"
@@ -682,8 +681,6 @@ def runs_table(exp: ExperimentData, links: dict[Path, str]) -> str:
 
 def write_experiment_report(exp: ExperimentData, out: Path) -> Path:
     """Write the experiment report (summary, curves per set, per-run reports) into ``out``."""
-    from adaptenv.report.plots import experiment_curves
-
     out.mkdir(parents=True, exist_ok=True)
     assets = Assets(out, out)
     links: dict[Path, str] = {}

@@ -31,6 +31,7 @@ def _figure(lines_by_metric: dict[str, Sequence[Line]], title: str, path: Path) 
     """Draw the 2x2 grid for the given lines per metric and save it as PNG; None when nothing to draw."""
     if not any(line.points for lines in lines_by_metric.values() for line in lines):
         return None
+    # matplotlib: slow to import, so only when there is something to draw
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
     from matplotlib.ticker import EngFormatter, MaxNLocator

@@ -239,7 +239,7 @@ def load_house(path: str | Path, *, validate: bool = True, catalog: Any = None) 
     doc = read_house_document(path)
     house = parse_house(doc, str(path))
     if validate:
-        from adaptenv.scene.validate import validate_house
+        from adaptenv.scene.validate import validate_house  # cycle: validate imports this module
 
         problems = validate_house(house, file=str(path), catalog=catalog)
         if problems:

@@ -20,12 +20,18 @@ from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
 from adaptenv.errors import ConfigError
+from adaptenv.scene.house import House, load_house
+from adaptenv.scene.procedural import generate_houses
+from adaptenv.sim import task
 from adaptenv.sim.spec import ACTIONS, MAX_STEPS, N_ACTIONS, N_RAYS, TARGET_TYPES, n_classes
+from adaptenv.sim.trajectory import Pose, Step, Trajectory
+from adaptenv.sim.vector import BatchSim, EpisodeSampler
+from adaptenv.sim.world import NavWorld, compile_world
 
 FrameRenderer = Callable[[Any, Any, Any], np.ndarray]
 """``renderer(house or None, SceneGeometry, Trajectory) -> (H, W, 3) uint8``: what ``NavEnv.render`` returns."""
 
-HouseLike = Any
+HouseLike = House | str | Path | NavWorld
 """A ``House``, a path to a house JSON file, or a compiled ``NavWorld``."""
 
 BUILTIN_HOUSES = 8
@@ -44,14 +50,10 @@ def observation_space() -> spaces.Dict:
     })
 
 
-def _to_world(item: HouseLike, name: str):
+def _to_world(item: HouseLike, name: str) -> tuple[NavWorld, House | None]:
     """Compile a House or a house file into a NavWorld; a NavWorld passes through."""
-    from adaptenv.sim.world import NavWorld, compile_world
-
     if isinstance(item, NavWorld):
         return item, None
-    from adaptenv.scene.house import House, load_house
-
     if isinstance(item, str | Path):
         house = load_house(item)
         return compile_world(house, name=str(item)), house
@@ -71,8 +73,6 @@ class _HouseSet:
 
     def _ensure_items(self) -> list:
         if self._items is None:
-            from adaptenv.scene.procedural import generate_houses
-
             self._items = list(generate_houses(BUILTIN_HOUSES, self._builtin_seed))
         if not self._items:
             raise ConfigError("houses: the list is empty; pass at least one house or None for the built-in set")
@@ -138,8 +138,6 @@ class NavEnv(gymnasium.Env):
 
     def _sim_for(self, world, k: int | None):
         """(BatchSim, EpisodeSampler) of construction house k (kept), or of the last option house."""
-        from adaptenv.sim.vector import BatchSim, EpisodeSampler
-
         if k is None:
             return self._adhoc[3]
         if k not in self._sims:
@@ -151,9 +149,6 @@ class NavEnv(gymnasium.Env):
 
         Unfixed parts are drawn from ``self.np_random`` with ``task.sample_episode``'s distribution.
         """
-        from adaptenv.sim import task
-        from adaptenv.sim.vector import BatchSim, EpisodeSampler
-
         super().reset(seed=seed)
         options = dict(options or {})
         unknown = set(options) - {"house", "target_type", "start"}
@@ -193,15 +188,11 @@ class NavEnv(gymnasium.Env):
         self._action[0] = int(action)
         sim.advance(self._action)
         if before is not None:
-            from adaptenv.sim.trajectory import Step
-
             self._steps.append(Step(pose=before, action=ACTIONS[int(action)], moved=bool(sim.moved[0])))
         terminated = bool(sim.last_terminated[0])
         return self._obs(), float(sim.last_reward[0]), terminated, bool(sim.last_truncated[0]), self._info(terminated)
 
     def _pose(self):
-        from adaptenv.sim.trajectory import Pose
-
         return Pose(x=float(self._sim.x[0]), z=float(self._sim.z[0]), yaw=float(self._sim.yaw[0]))
 
     def _obs(self) -> dict[str, Any]:
@@ -234,8 +225,6 @@ class NavEnv(gymnasium.Env):
 
     def trajectory(self):
         """The current episode as a :class:`~adaptenv.sim.trajectory.Trajectory` (steps recorded when rendering)."""
-        from adaptenv.sim.trajectory import Pose, Trajectory
-
         sim, target = self._sim, self._sim.target_types[0]
         inst = self._world.instances_of(target)
         return Trajectory(house=self._world.name, target_type=target, target_ids=[t.object_id for t in inst],
@@ -279,8 +268,6 @@ class NavVectorEnv(VectorEnv):
 
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None):
         """Start a new episode in every slot; ``seed`` seeds the episode stream."""
-        from adaptenv.sim.vector import BatchSim, EpisodeSampler
-
         if options:
             raise ConfigError("options: NavVectorEnv.reset takes no options; build it with the houses to use")
         if seed is not None:

@@ -18,6 +18,7 @@ from __future__ import annotations
 
 from functools import lru_cache
 
+from adaptenv.scene.assets import load_catalog
 from adaptenv.vocabulary import AGENT_RADIUS, TARGET_TYPES
 
 __all__ = ["AGENT_RADIUS", "TARGET_TYPES"]  # re-exported: the agent body and targets are part of the sim's interface
@@ -54,8 +55,6 @@ _FIRST_OBJECT_CLASS = 4
 @lru_cache(maxsize=1)
 def object_classes() -> tuple[str, ...]:
     """Object types with a class id: ``class_id(t) = 4 + object_classes().index(t)``."""
-    from adaptenv.scene.assets import load_catalog
-
     return load_catalog().object_types
 
 

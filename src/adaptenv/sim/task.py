@@ -172,7 +172,10 @@ def is_success(world: NavWorld, x: float, z: float, yaw: float, target_type: str
 def available_targets(world: NavWorld) -> list[str]:
     """Target types an episode exists for: the success region touches the largest navigable
     component and does not cover all of its enterable cells (some start lies outside the region)."""
-    from adaptenv.sim.geodesic import enterable, success_region
+    from adaptenv.sim.geodesic import (  # cycle: geodesic imports this module
+        enterable,
+        success_region,
+    )
 
     key = ("available_targets",)
     if key not in world.cache:
@@ -280,7 +283,10 @@ def sample_episode(world: NavWorld, rng: np.random.Generator | int, target_type:
 
 def start_cells(world: NavWorld, target_type: str, min_distance: float = 0.0) -> np.ndarray:
     """Flat indices of the start cells of a type: enterable, finite geodesic distance, positive and >= ``min_distance``."""
-    from adaptenv.sim.geodesic import distance_field, enterable
+    from adaptenv.sim.geodesic import (  # cycle: geodesic imports this module
+        distance_field,
+        enterable,
+    )
 
     key = ("starts", target_type) if min_distance <= 0 else ("starts", target_type, float(min_distance))
     if key not in world.cache:

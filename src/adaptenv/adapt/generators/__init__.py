@@ -31,8 +31,9 @@ from pydantic import BaseModel, Field
 
 from adaptenv.adapt.edits import Edit, EditLog
 from adaptenv.adapt.llm.usage import Prices, Usage
+from adaptenv.adapt.placement import PlacementContext
 from adaptenv.errors import ConfigError
-from adaptenv.render.topdown import png_bytes
+from adaptenv.render.topdown import png_bytes, render_house, save_render
 
 if TYPE_CHECKING:
     from PIL import Image
@@ -155,8 +156,6 @@ class Generator(Protocol):
 def render_scene(house: House, context: GenerationContext, *, highlight: dict[str, str] | None = None,
                  title: str | None = None) -> Image.Image:
     """The top-down render with the normalized grid and the analysed trajectory (if any)."""
-    from adaptenv.render.topdown import render_house
-
     return render_house(house, trajectory=context.trajectory, grid=True, size=context.render_size,
                         highlight=highlight, title=title)
 
@@ -166,8 +165,6 @@ def keep_render(result: GenerationResult, image: Image.Image, context: Generatio
     result.renders.append(image)
     if context.out_dir is None:
         return None
-    from adaptenv.render.topdown import save_render
-
     path = save_render(image, Path(context.out_dir) / f"step-{step:02d}.png")
     result.render_paths.append(path)
     return str(path)
@@ -175,14 +172,14 @@ def keep_render(result: GenerationResult, image: Image.Image, context: Generatio
 
 def movable_ids(house: House) -> list[str]:
     """Ids of the top-level floor objects placement may move (the LLM's allowed ids)."""
-    from adaptenv.adapt.placement import PlacementContext
-
     ctx = PlacementContext.from_house(house)
     return [oid for oid, m in zip(ctx.ids, ctx.movable, strict=True) if m]
 
 
 def make_generator(name: str = "builtin", **kw: Any) -> Generator:
     """Build a generator by name: ``builtin`` (default), ``llm`` (needs ``backend=``) or ``random``."""
+    # cycle: each generator module imports this package (GenerationResult, StepRecord, ...), so the
+    # classes are imported when one is asked for.
     if name == "builtin":
         from adaptenv.adapt.generators.builtin import BuiltinGenerator
 

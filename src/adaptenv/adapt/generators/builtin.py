@@ -47,6 +47,7 @@ from adaptenv.adapt.objectives import (
     RouteSpec,
     gain,
     measure,
+    realism_score,
     route_points,
 )
 from adaptenv.adapt.validation import EditValidator, Proposal
@@ -118,8 +119,6 @@ class BuiltinGenerator:
     # ----------------------------------------------------------------------------- the loop
     def generate(self, house: House, analysis: Analysis, *, steps: int, context: GenerationContext,
                  rng: np.random.Generator) -> GenerationResult:
-        from adaptenv.adapt.objectives import realism_score
-
         ep = context.episode
         route = RouteSpec.from_episode(ep.target_type, ep.start, context.trajectory)
         v = EditValidator(house, episode_targets=[ep.target_type], start=ep.start[:2])
@@ -246,8 +245,6 @@ class BuiltinGenerator:
                   original: House, episode: Episode) -> Candidate | None:
         """Dry-run one proposal; None when placement or validation rejects it, it changes nothing, or
         (with ``require_expert``) the shortest-path expert no longer solves the episode."""
-        from adaptenv.adapt.objectives import realism_score
-
         proposal = v.propose(cand.object_id, cand.dx_units, cand.dy_units, cand.rotation)
         res = proposal.result
         if not proposal.valid or not res.changed:

@@ -17,6 +17,7 @@ from adaptenv.scene.geometry import Footprint, SceneGeometry, yaw_axes
 from adaptenv.scene.house import House
 from adaptenv.scene.occupancy import OccupancyGrid, rasterize
 from adaptenv.scene.procedural.config import GenerationConfig, StageFailed
+from adaptenv.scene.validate import validate_house
 from adaptenv.vocabulary import TARGET_TYPES
 
 #: Agent start positions lie on this lattice (m), as in ProcTHOR.
@@ -160,8 +161,6 @@ def house_problems(house: House, cfg: GenerationConfig, catalog: AssetCatalog,
         if missing:
             problems.append(f"target types {', '.join(missing)} are no longer reachable")
     problems += footprint_problems(nav.geometry, allowed_overlaps)
-    from adaptenv.scene.validate import validate_house
-
     problems += [str(p) for p in validate_house(house, catalog=catalog)]
     return problems
 
