@@ -20,6 +20,14 @@ PINNED = {
     ("far", "1"): "cd1ad2e696fc73ed",
     ("clutter", "1"): "530d43e37d00724d",
     ("doors", "1"): "bbdf09112176db82",
+    # version 2: starts are drawn from enterable cells only (success regions the agent can stop in)
+    ("clutter", "2"): "e631480a08add0f4",
+    ("doors", "2"): "e844b9008745a676",
+    ("far", "2"): "51cde8452977e5f2",
+    ("large", "2"): "95f58d46b1bb77f6",
+    ("long-rearranged", "2"): "bc38e65aa5cf4316",
+    ("long-train", "2"): "81a5e8755f0bc13a",
+    ("long-unseen", "2"): "55a8acc6450bd72c",
 }
 
 

@@ -20,7 +20,7 @@ from adaptenv.errors import ConfigError
 def tiny_config(policy: Path, method: str, **kw) -> LoopConfig:
     base = dict(method=method, policy=str(policy), houses="preset:tiny", heldout={"tiny": "preset:tiny"},
                 iterations=2, scenes_per_iteration=2, edit_steps=1, finetune_frames=512, finetune_envs=16,
-                heldout_episodes=3, gallery=1, buffer_capacity=4, diagnose_episodes=2)
+                heldout_episodes=3, gallery=1, buffer_capacity=4, diagnose_episodes=1)
     return LoopConfig(**{**base, **kw})
 
 

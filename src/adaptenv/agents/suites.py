@@ -74,19 +74,19 @@ class SuiteSpec:
 LONG = EpisodeFloor(min_geodesic=6.0)
 
 SUITES: dict[str, SuiteSpec] = {
-    "long-train": SuiteSpec("preset:pretrain-train", LONG, "1",
+    "long-train": SuiteSpec("preset:pretrain-train", LONG, "2",
                             "pretraining houses, starts >= 6 m from the target (Figure 1: train)"),
-    "long-rearranged": SuiteSpec("preset:pretrain-rearranged", LONG, "1",
+    "long-rearranged": SuiteSpec("preset:pretrain-rearranged", LONG, "2",
                                  "rearranged pretraining houses, starts >= 6 m (Figure 1: rearranged)"),
-    "long-unseen": SuiteSpec("preset:pretrain-unseen", LONG, "1",
+    "long-unseen": SuiteSpec("preset:pretrain-unseen", LONG, "2",
                              "unseen houses of the pretraining distribution, starts >= 6 m (Figure 1: unseen)"),
-    "large": SuiteSpec("preset:suite-large", EpisodeFloor(min_geodesic=4.0), "1",
+    "large": SuiteSpec("preset:suite-large", EpisodeFloor(min_geodesic=4.0), "2",
                        "7-10 room houses, starts >= 4 m from the target"),
-    "far": SuiteSpec("preset:suite-large", EpisodeFloor(min_geodesic=10.0), "1",
+    "far": SuiteSpec("preset:suite-large", EpisodeFloor(min_geodesic=10.0), "2",
                      "7-10 room houses, starts >= 10 m from the target (it lies rooms away)"),
-    "clutter": SuiteSpec("preset:suite-clutter", EpisodeFloor(min_geodesic=4.0), "1",
+    "clutter": SuiteSpec("preset:suite-clutter", EpisodeFloor(min_geodesic=4.0), "2",
                          "cluttered 3-6 room houses, starts >= 4 m from the target"),
-    "doors": SuiteSpec("preset:suite-doors", EpisodeFloor(min_geodesic=6.0), "1",
+    "doors": SuiteSpec("preset:suite-doors", EpisodeFloor(min_geodesic=6.0), "2",
                        "5-8 room houses joined only by doors (a tree of rooms), starts >= 6 m"),
 }
 
