@@ -57,8 +57,11 @@ def test_every_method_runs_and_counts_its_budget(method, tiny_policy, tmp_path):
     assert read_iterations(tmp_path / method) == records
     scenes = json.loads((tmp_path / method / "iter_0002" / "scenes.json").read_text())
     assert scenes["trained_on"], "every iteration fine-tunes on some scenes"
-    houses = (tmp_path / method / "iter_0002" / "heldout" / "tiny" / "houses.csv").read_text().splitlines()
+    heldout = tmp_path / method / "iter_0002" / "heldout" / "tiny"
+    houses = (heldout / "houses.csv").read_text().splitlines()
     assert houses[0].startswith("house,episodes,success") and len(houses) > 1, "per-house held-out table for the report"
+    failed = json.loads((heldout / "summary.json").read_text())["success"] < 1.0
+    assert (heldout / "failures.png").is_file() == failed, "failed held-out episodes are drawn for the report"
     if method in ("plr", "accel"):
         state = json.loads((tmp_path / method / STATE).read_text())["state"]
         buffered = set(state["buffer"]["level_ids"])

@@ -240,13 +240,6 @@ def per_house(results: Sequence[EpisodeResult]) -> list[dict[str, Any]]:
     return rows
 
 
-def write_house_table(results: Sequence[EpisodeResult], path: Path) -> Path:
-    """Write :func:`per_house` of ``results`` as CSV (the table ``adaptenv evaluate`` and the loop write)."""
-    path.parent.mkdir(parents=True, exist_ok=True)
-    _write_csv(path, per_house(results))
-    return path
-
-
 def drop(base: dict[str, Any], other: dict[str, Any], key: str = "success") -> dict[str, float]:
     """Difference base - other of a metric with a 95% normal interval (independent samples)."""
     d = base[key] - other[key]

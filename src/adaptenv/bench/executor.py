@@ -70,7 +70,7 @@ def heldout_chunk(job: Any) -> list[tuple[bool, float, int, int]]:
     """Run one evaluation job; (success, SPL, steps, collisions) per episode, comparable across executors."""
     from adaptenv.curriculum.jobs import run_eval
 
-    return [(bool(r.success), float(r.spl), int(r.steps), int(r.collisions)) for r in run_eval(job)]
+    return [(bool(r.success), float(r.spl), int(r.steps), int(r.collisions)) for r in run_eval(job)[0]]
 
 
 #: workload name -> (item function, items builder taking the item count or None for its default).

@@ -23,7 +23,7 @@ from adaptenv.adapt.llm import LLMConfig, make_backend
 from adaptenv.adapt.llm.accounting import scene_usage
 from adaptenv.adapt.llm.usage import Usage
 from adaptenv.adapt.step import adapt_scene
-from adaptenv.agents.evaluate import EpisodeResult, run_episodes, sample_episodes
+from adaptenv.agents.evaluate import EpisodeResult, Recorded, run_episodes, sample_episodes
 from adaptenv.agents.houses import HouseSet, load_house_set
 from adaptenv.agents.policy import ExpertPolicy
 from adaptenv.agents.rollout import run_recorded
@@ -89,12 +89,17 @@ def eval_jobs(weights: PolicyWeights, specs: dict[str, str], episodes: int, seed
             for name, spec in specs.items() for a in range(0, episodes, EVAL_CHUNK)]
 
 
-def run_eval(job: EvalJob) -> list[EpisodeResult]:
-    """Run one chunk of held-out episodes; returns their EpisodeResults in order."""
+def run_eval(job: EvalJob) -> tuple[list[EpisodeResult], dict[int, Recorded]]:
+    """Run one chunk of held-out episodes: their EpisodeResults in order, and the failed ones' recordings.
+
+    Results and recordings carry the episode's index in the whole set (``start`` + position).
+    """
     hs = heldout_set(job.spec)
     eps = sample_episodes(hs.worlds, job.stop, job.seed, start=job.start)
-    results, _ = run_episodes(hs.worlds, eps, job.weights.policy(), batch=len(eps))
-    return results
+    results, recs = run_episodes(hs.worlds, eps, job.weights.policy(), batch=len(eps), record=lambda r: not r.success)
+    for r in results:
+        r.index += job.start
+    return results, {k + job.start: rec for k, rec in recs.items()}
 
 
 @dataclass(frozen=True)

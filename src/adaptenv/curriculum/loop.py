@@ -41,7 +41,7 @@ import numpy as np
 from adaptenv.adapt.llm.accounting import check_llm_section, same_run, scenes_usage
 from adaptenv.agents.checkpoint import load_checkpoint, save_checkpoint
 from adaptenv.agents.config import FinetuneConfig
-from adaptenv.agents.evaluate import EpisodeResult, mean_se, write_house_table
+from adaptenv.agents.evaluate import EpisodeResult, EvalReport, mean_se, summarize, write_report
 from adaptenv.agents.houses import load_house_set
 from adaptenv.agents.network import NeuralPolicy
 from adaptenv.agents.registry import resolve_policy
@@ -53,6 +53,7 @@ from adaptenv.curriculum.jobs import (
     Rollout,
     RolloutJob,
     eval_jobs,
+    heldout_set,
     run_eval,
     run_rollout,
 )
@@ -165,18 +166,24 @@ def rollout_scenes(store: SceneStore, names: list[str], weights: PolicyWeights, 
 
 
 def evaluate_sets(weights: PolicyWeights, specs: dict[str, str], episodes: int, seed: int, executor: Executor,
-                  out_dir: Path | None = None) -> dict[str, SetMetrics]:
+                  out_dir: Path | None = None, label: str = "pi") -> dict[str, SetMetrics]:
     """Held-out figures of a policy on each set, on the same episodes every call (paired comparisons).
 
-    With ``out_dir``, each set's per-house table goes to ``out_dir/<set>/houses.csv`` (the report reads it).
+    With ``out_dir``, each set's results go to ``out_dir/<set>/`` in ``adaptenv evaluate``'s layout
+    (summary, per-episode and per-house tables, renders of failed episodes), which the report reads.
     """
     tagged = eval_jobs(weights, specs, episodes, seed)
     chunks = executor.map(run_eval, [job for _, job in tagged], desc="held-out evaluation")
-    per_set = {name: [r for (n, _), rs in zip(tagged, chunks, strict=True) if n == name for r in rs] for name in specs}
-    if out_dir is not None:
-        for name, results in per_set.items():
-            write_house_table(results, out_dir / name / "houses.csv")
-    return {name: _set_metrics(results) for name, results in per_set.items()}
+    metrics = {}
+    for name, spec in specs.items():
+        results = [r for (n, _), (rs, _) in zip(tagged, chunks, strict=True) if n == name for r in rs]
+        metrics[name] = _set_metrics(results)
+        if out_dir is not None:
+            recordings = {k: v for (n, _), (_, recs) in zip(tagged, chunks, strict=True) if n == name
+                          for k, v in recs.items()}
+            report = EvalReport(label, spec, seed, summarize(results), results, recordings)
+            write_report(report, heldout_set(spec), out_dir / name)
+    return metrics
 
 
 def finetune_config(cfg: LoopConfig, end_threshold: float) -> FinetuneConfig:
@@ -263,7 +270,7 @@ def run_loop(cfg: LoopConfig, run_dir: str | Path, *, resume: bool = False, exec
         # 4. held-out evaluation of pi_{t+1}
         say(f"t={t}: evaluating on the held-out sets")
         heldout = evaluate_sets(PolicyWeights.of(pi_next), cfg.heldout, cfg.heldout_episodes, cfg.seed, ex,
-                                out_dir=iteration_dir(run_dir, t) / HELDOUT_DIR)
+                                out_dir=iteration_dir(run_dir, t) / HELDOUT_DIR, label=f"pi_{t}")
         state.buffer = it.buffer.to_dict() if it.buffer.size else None
         state.iteration = t
         records.append(IterationRecord(iteration=t, env_steps=state.env_steps, grad_updates=state.grad_updates,

@@ -446,9 +446,9 @@ def heldout_html(run: RunData, assets: Assets) -> str:
         head = "<tr><th class=l>house</th>" + "".join(f"<th>{c}</th>" for c in cols) + "</tr>"
         failed = any(float(row.get("success") or 1.0) < 1.0 for row in h.rows)
         fail = (assets.image(h.failures, f"img/heldout/{h.name}", "failures.png", f"{h.name}: failed episodes")
-                if h.failures else '<p class="note">' + ("The loop records no renders of failed held-out episodes; "
-                                                         "<code>adaptenv evaluate</code> on this iteration's "
-                                                         "policy.pt draws them." if failed else
+                if h.failures else '<p class="note">' + ("No renders of the failed episodes were recorded for this "
+                                                         "evaluation; <code>adaptenv evaluate</code> on this "
+                                                         "iteration's policy.pt draws them." if failed else
                                                          "No failed episodes.") + "</p>")
         parts.append(f"<h3>{esc(h.name)} <span class=\"muted\">(iteration {h.iteration})</span></h3>"
                      + table(head, rows) + "<h5>Failed episodes</h5>" + fail)
