@@ -144,14 +144,11 @@ class RandomPolicy:
         return actions, state
 
 
-class ExpertPolicy:
-    """The shortest-path expert as a batched policy (privileged: needs :meth:`bind`)."""
+class PrivilegedMemoryless:
+    """Base of privileged policies without memory: they keep the runner's context and carry no state."""
 
-    name = "expert"
-
-    def __init__(self) -> None:
-        self.expert = ShortestPathExpert()
-        self._context: PolicyContext | None = None
+    name = "privileged"
+    _context: PolicyContext | None = None
 
     def bind(self, context: PolicyContext) -> None:
         self._context = context
@@ -159,11 +156,24 @@ class ExpertPolicy:
     def initial_state(self, batch: int) -> State:
         return None
 
+    def bound(self) -> PolicyContext:
+        """The runner's context; a clear error when the policy is run outside adaptenv's runners."""
+        if self._context is None:
+            raise ConfigError(f"the {self.name} policy needs privileged access to the world; run it through "
+                              "adaptenv's runners (evaluate, rollout, adapt, train), which bind a PolicyContext")
+        return self._context
+
+
+class ExpertPolicy(PrivilegedMemoryless):
+    """The shortest-path expert as a batched policy (privileged: needs :meth:`bind`)."""
+
+    name = "expert"
+
+    def __init__(self) -> None:
+        self.expert = ShortestPathExpert()
+
     def act(self, obs: Observation, state: State, done: np.ndarray) -> tuple[np.ndarray, State]:
-        ctx = self._context
-        if ctx is None:
-            raise ConfigError("the expert policy needs privileged access to the world; run it through "
-                              "adaptenv's runners (evaluate, rollout, train) which bind a PolicyContext")
+        ctx = self.bound()
         actions = self.expert.act_batch(ctx.worlds, ctx.env_idx, ctx.target_types, ctx.x, ctx.z, ctx.yaw)
         return np.asarray(actions, dtype=np.int64), state
 
@@ -207,7 +217,7 @@ class StepPolicy:
         return self._prev
 
 
-class StepFunctionPolicy:
+class StepFunctionPolicy(PrivilegedMemoryless):
     """A per-step callable of :mod:`adaptenv.sim.rollout` as a batched, privileged :class:`Policy`.
 
     ``fn(world, episode, x, z, yaw, collided, step) -> action`` is called once per agent and step
@@ -218,21 +228,11 @@ class StepFunctionPolicy:
     def __init__(self, fn: Callable[..., int]):
         self.fn = fn
         self.name = str(getattr(fn, "name", type(fn).__name__))
-        self._context: PolicyContext | None = None
         self._episodes: list[Any] = []
         self._steps = np.zeros(0, dtype=np.int64)
 
-    def bind(self, context: PolicyContext) -> None:
-        self._context = context
-
-    def initial_state(self, batch: int) -> State:
-        return None
-
     def act(self, obs: Observation, state: State, done: np.ndarray) -> tuple[np.ndarray, State]:
-        ctx = self._context
-        if ctx is None:
-            raise ConfigError("a per-step policy needs the runner's context; run it through adaptenv's runners "
-                              "(evaluate, rollout, adapt, train), which bind one")
+        ctx = self.bound()
         batch = len(done)
         if len(self._episodes) != batch:
             self._episodes, self._steps = [None] * batch, np.zeros(batch, dtype=np.int64)
