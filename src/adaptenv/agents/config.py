@@ -181,6 +181,8 @@ class FinetuneConfig:
     """DAgger: probability of executing the expert's action, constant over the run."""
     end_threshold: float = 0.8
     """End threshold while collecting."""
+    teacher: str = "expert"
+    """DAgger: who labels the visited states, 'expert' (shortest path), 'explorer' (searches) or 'mix'."""
     calibrate_episodes: int = 0
     """Fresh episodes in the training houses on which the returned card's end threshold is chosen (0: keep end_threshold)."""
     final_eval_episodes: int = 0

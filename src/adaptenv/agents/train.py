@@ -469,7 +469,7 @@ def finetune(net: NavNet, worlds: Sequence[NavWorld], cfg: FinetuneConfig, seed:
     """Fine-tune a copy of ``net`` (a NavNet) on ``worlds`` (NavWorlds) as ``cfg`` says; returns (new net, card).
 
     ``algo='dagger'``: DAgger from the current weights with a fresh Adam optimizer, expert-action
-    probability ``beta`` throughout, ``rollout_steps``-step blocks that are also the training
+    probability ``beta`` throughout, labels from ``cfg.teacher``, ``rollout_steps``-step blocks that are also the training
     sequences, a dataset holding the whole run. ``algo='ppo'``: :func:`adaptenv.agents.ppo.train_ppo`
     on the simulator's reward with PPOConfig's defaults for the rest (value warm-up at most half the
     iterations). Nothing is written to disk.
@@ -493,7 +493,7 @@ def finetune(net: NavNet, worlds: Sequence[NavWorld], cfg: FinetuneConfig, seed:
     tc = TrainConfig(houses="(in memory)", frames=cfg.frames, output="", seed=seed, num_envs=cfg.num_envs,
                      rollout_steps=steps, chunk_len=steps, batch_chunks=cfg.batch_chunks,
                      updates_per_iter=cfg.updates_per_iter, buffer_frames=max(cfg.frames, steps * cfg.num_envs),
-                     beta_start=cfg.beta, beta_end=cfg.beta, end_threshold=cfg.end_threshold,
+                     beta_start=cfg.beta, beta_end=cfg.beta, end_threshold=cfg.end_threshold, teacher=cfg.teacher,
                      calibrate_episodes=cfg.calibrate_episodes, eval_every=0, final_eval_episodes=evals,
                      progress=False, tensorboard=False, learning_rate=cfg.learning_rate, save_every=10**9)
     result = train(tc, worlds=worlds, init_net=net)

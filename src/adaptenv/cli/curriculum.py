@@ -85,6 +85,8 @@ def loop(
     edit_steps: int = typer.Option(5, "--edit-steps", min=0, help="Single-object edits per adapted scene."),
     finetune_frames: int = typer.Option(16_384, "--finetune-frames", min=1, help="DAgger frames per iteration."),
     finetune_lr: float = typer.Option(1e-4, "--finetune-lr", min=0.0, help="Adam learning rate of fine-tuning."),
+    finetune_teacher: str = typer.Option("expert", "--finetune-teacher", help="Who labels fine-tuning's states: "
+                                         "expert, explorer (searches) or mix."),
     heldout_episodes: int = typer.Option(100, "--heldout-episodes", min=1, help="Episodes per held-out set."),
     heldout: list[str] = typer.Option(None, "--heldout", help="Held-out set NAME=HOUSES (repeatable); default: "
                                       "rearranged=preset:pretrain-rearranged and unseen=preset:pretrain-unseen."),
@@ -122,7 +124,7 @@ def loop(
                            allow_target_moves=allow_target_moves or None)
     cfg = LoopConfig(method=method, policy=policy, houses=houses, iterations=iterations, seed=seed,
                      scenes_per_iteration=scenes, edit_steps=edit_steps, finetune_frames=finetune_frames,
-                     finetune_lr=finetune_lr,
+                     finetune_lr=finetune_lr, finetune_teacher=finetune_teacher,
                      heldout_episodes=heldout_episodes, llm=llm, **({"heldout": h} if (h := _heldout(heldout)) else {}))
     check_house_sets([cfg.houses, *cfg.heldout.values()], strict, console.print)
     with ExecutorOptions(executor, workers, address).make() as ex:

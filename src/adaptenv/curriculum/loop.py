@@ -45,6 +45,7 @@ from adaptenv.agents.evaluate import EpisodeResult, EvalReport, mean_se, summari
 from adaptenv.agents.houses import load_house_set
 from adaptenv.agents.network import NeuralPolicy
 from adaptenv.agents.registry import resolve_policy
+from adaptenv.agents.teachers import TEACHERS
 from adaptenv.agents.train import finetune
 from adaptenv.curriculum import buffer as lb
 from adaptenv.curriculum.executor import Executor, InProcessExecutor
@@ -102,6 +103,8 @@ class LoopConfig:
     finetune_lr: float = 1e-4
     """Adam learning rate of fine-tuning, annealed to zero over each iteration's frames (the gentler of
     the two rates compared in docs/RESULTS.md)."""
+    finetune_teacher: str = "expert"
+    """Who labels fine-tuning's DAgger states: expert (shortest path), explorer (searches, docs/agent.md) or mix."""
     replay_fraction: float = 0.5
     """Share of the fine-tuning scenes drawn from earlier scenes so the policy does not forget."""
     heldout_episodes: int = 100
@@ -126,6 +129,9 @@ class LoopConfig:
         if self.edit_steps < 0 or self.diagnose_episodes < 1 or not 0.0 <= self.replay_fraction < 1.0:
             raise ConfigError("loop config: edit_steps must be >= 0, diagnose_episodes >= 1 and replay_fraction "
                               "in [0, 1)")
+        if self.finetune_teacher not in TEACHERS:
+            raise ConfigError(f"loop config: finetune_teacher {self.finetune_teacher!r} is unknown; use one of "
+                              f"{', '.join(TEACHERS)}")
         if self.method == "ours-llm" and not self.llm:
             raise ConfigError("loop config: method ours-llm needs an llm section (provider, model, base_url); "
                               "see docs/llm.md")
@@ -187,9 +193,9 @@ def evaluate_sets(weights: PolicyWeights, specs: dict[str, str], episodes: int, 
 
 
 def finetune_config(cfg: LoopConfig, end_threshold: float) -> FinetuneConfig:
-    """The loop's fine-tuning recipe (identical for every method): DAgger at beta 0.8, ``finetune_frames`` per iteration."""
+    """The loop's fine-tuning recipe (identical for every method): DAgger at beta 0.8 with ``finetune_teacher``'s labels."""
     return FinetuneConfig(frames=cfg.finetune_frames, num_envs=cfg.finetune_envs, learning_rate=cfg.finetune_lr,
-                          end_threshold=end_threshold)
+                          end_threshold=end_threshold, teacher=cfg.finetune_teacher)
 
 
 def run_loop(cfg: LoopConfig, run_dir: str | Path, *, resume: bool = False, executor: Executor | None = None,
