@@ -5,11 +5,15 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
+import numpy as np
 import pytest
+from scipy import stats
 
 from adaptenv.curriculum.experiment import (
     ExperimentConfig,
     final_evaluation,
+    holm,
+    paired_effect,
     paired_test,
     run_experiment,
     summary_markdown,
@@ -44,6 +48,22 @@ def test_paired_test_is_a_real_test():
     assert paired_test([0.5, 0.55, 0.45], [0.52, 0.5, 0.5]) > 0.3
 
 
+def test_paired_effect_interval_matches_scipy():
+    a, b = [0.62, 0.70, 0.58, 0.66, 0.71], [0.55, 0.61, 0.60, 0.57, 0.63]
+    e = paired_effect(a, b)
+    ci = stats.ttest_rel(a, b).confidence_interval(0.95)
+    assert e["diff"] == pytest.approx(np.mean(np.subtract(a, b)))
+    assert (e["low"], e["high"]) == pytest.approx((ci.low, ci.high))
+    assert paired_effect([0.5], [0.4]) is None
+
+
+def test_holm_adjusts_step_down_and_keeps_order():
+    adjusted = holm({"a": 0.01, "b": 0.04, "c": 0.03, "d": None})
+    # sorted 0.01, 0.03, 0.04 times 3, 2, 1, made monotone: 0.03, 0.06, max(0.04, 0.06)
+    assert adjusted == pytest.approx({"a": 0.03, "c": 0.06, "b": 0.06, "d": None})
+    assert holm({"x": 0.6, "y": 0.5}) == {"x": 1.0, "y": 1.0}
+
+
 @pytest.mark.slow
 def test_small_experiment_writes_every_artifact(tiny_policy, tmp_path):
     cfg = ExperimentConfig.load(REPO / "configs" / "experiment-small.json")
@@ -67,6 +87,9 @@ def test_small_experiment_writes_every_artifact(tiny_policy, tmp_path):
     assert "success_gain:tiny" in summary["tests"]["none"]
     md = (tmp_path / "summary.md").read_text()
     assert "| ours |" in md and "paired t-test" in md
+    assert set(summary["effects"]) == {"none", "dr"} and "p (Holm)" in md
+    holm_p = summary["holm"]["none"]["success:tiny"]
+    assert holm_p is None or holm_p >= summary["tests"]["none"]["success:tiny"]
     for x in ("iteration", "env_steps"):
         assert (tmp_path / "plots" / f"heldout_tiny_vs_{x}.png").stat().st_size > 1000
     # a second call resumes finished runs instead of recomputing them

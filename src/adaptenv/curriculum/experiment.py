@@ -156,6 +156,27 @@ def paired_test(a: list[float], b: list[float]) -> float | None:
     return float(stats.ttest_rel(a, b).pvalue)
 
 
+def paired_effect(a: list[float], b: list[float]) -> dict[str, float] | None:
+    """Mean of a - b over seeds with its t-based 95% interval (None with fewer than two seeds)."""
+    if len(a) < 2 or len(a) != len(b):
+        return None
+    diff = np.asarray(a, dtype=float) - np.asarray(b, dtype=float)
+    half = float(stats.t.ppf(0.975, diff.size - 1) * diff.std(ddof=1) / math.sqrt(diff.size))
+    mean = float(diff.mean())
+    return {"diff": mean, "low": mean - half, "high": mean + half}
+
+
+def holm(pvalues: dict[str, float | None]) -> dict[str, float | None]:
+    """Holm-Bonferroni adjusted p-values of one family of tests (undefined tests stay None)."""
+    known = sorted((p, k) for k, p in pvalues.items() if p is not None)
+    adjusted: dict[str, float | None] = {k: None for k in pvalues}
+    running = 0.0
+    for rank, (p, k) in enumerate(known):
+        running = max(running, min(1.0, (len(known) - rank) * p))
+        adjusted[k] = running
+    return adjusted
+
+
 def summarize(out: str | Path, cfg: ExperimentConfig | None = None) -> dict[str, Any]:
     """Write per-seed CSVs, summary.json, summary.md and plots for an experiment folder."""
     out = Path(out)
@@ -176,7 +197,8 @@ def write_summary(out: Path, cfg: ExperimentConfig, table: dict[str, dict[int, d
             lines.append(key + "," + ",".join(f"{seeds[s].get(key, float('nan')):.6g}" for s in cols))
         atomic_write_text(out / m / f"per_seed{suffix}.csv", "\n".join(lines) + "\n")
 
-    summary: dict[str, Any] = {"methods": {}, "tests": {}, "reference": cfg.reference, "seeds": cfg.seeds}
+    summary: dict[str, Any] = {"methods": {}, "tests": {}, "effects": {}, "holm": {}, "reference": cfg.reference,
+                               "seeds": cfg.seeds}
     for m, seeds in table.items():
         summary["methods"][m] = {key: dict(zip(("mean", "se"), _mean_se([row[key] for row in seeds.values()
                                                                           if key in row]), strict=True))
@@ -188,6 +210,14 @@ def write_summary(out: Path, cfg: ExperimentConfig, table: dict[str, dict[int, d
         common = sorted(set(ref) & set(seeds))
         summary["tests"][m] = {key: paired_test([ref[s][key] for s in common], [seeds[s][key] for s in common])
                                for key in metrics if key.split(":")[0] in TESTED}
+        summary["effects"][m] = {key: paired_effect([ref[s][key] for s in common], [seeds[s][key] for s in common])
+                                 for key in metrics if key.split(":")[0] == "success"}
+    # the family the claim rests on: held-out success of the reference against every method on every set
+    family = {f"{m}|{key}": p for m, tests in summary["tests"].items() for key, p in tests.items()
+              if key.split(":")[0] == "success"}
+    for name, p in holm(family).items():
+        m, key = name.split("|")
+        summary["holm"].setdefault(m, {})[key] = p
     atomic_write_text(out / f"summary{suffix}.json", json.dumps(summary, indent=1, default=float))
     atomic_write_text(out / f"summary{suffix}.md", summary_markdown(summary))
     return summary
@@ -255,7 +285,29 @@ def summary_markdown(summary: dict[str, Any]) -> str:
     lines.append("")
     lines.append(f"Mean ± standard error over seeds {summary['seeds']}; p: paired t-test of {ref} against the "
                  "method on the same seeds (two-sided).")
+    lines += ["", *effects_markdown(summary)]
     return "\n".join(lines) + "\n"
+
+
+def _p(value: float | None) -> str:
+    return "n/a" if value is None else f"{value:.4f}"
+
+
+def effects_markdown(summary: dict[str, Any]) -> list[str]:
+    """Held-out success of the reference minus each method: paired mean, 95% interval, p and Holm's p."""
+    ref, rows = summary["reference"], []
+    for m, effects in summary.get("effects", {}).items():
+        for key, e in sorted(effects.items()):
+            if e is None:
+                continue
+            p, ph = summary["tests"][m].get(key), summary["holm"].get(m, {}).get(key)
+            rows.append(f"| {m} | {key.split(':', 1)[1]} | {e['diff']:+.3f} | [{e['low']:+.3f}, {e['high']:+.3f}] "
+                        f"| {_p(p)} | {_p(ph)} |")
+    if not rows:
+        return []
+    return [f"Effect on held-out success: {ref} minus each method (paired over seeds)", "",
+            "| method | set | difference | 95% interval | p | p (Holm) |", "|---|---|---|---|---|---|", *rows, "",
+            f"Holm's correction runs over all {len(rows)} success comparisons of this table."]
 
 
 def curves(out: Path, cfg: ExperimentConfig, set_name: str, x: str) -> dict[str, tuple[np.ndarray, np.ndarray, np.ndarray]]:
