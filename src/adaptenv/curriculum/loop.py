@@ -244,11 +244,13 @@ def run_loop(cfg: LoopConfig, run_dir: str | Path, *, resume: bool = False, exec
                        buffer=lb.LevelBufferState.from_dict(state.buffer) if state.buffer else lb.empty_state(),
                        buffer_cfg=bcfg, weights=PolicyWeights.of(pi_t))
         edits_before = state.edits
+        stages = StageClock()
 
         # 1. roll pi_t out in the scenes this method looks at (analysis or scoring)
         rolled = method.scenes_to_roll_out(it)
         say(f"t={t}: rolling out pi_{t - 1} in {len(rolled)} scenes")
         rollouts = rollout_scenes(store, rolled, it.weights, it.seed(Stream.ROLLOUT_EPISODES), ex)
+        stages.lap("rollouts")
         state.env_steps += sum(ro.result.steps for ro in rollouts)
         train_metrics = _set_metrics([ro.result for ro in rollouts])
 
@@ -256,6 +258,7 @@ def run_loop(cfg: LoopConfig, run_dir: str | Path, *, resume: bool = False, exec
         method.update_buffer(it, rolled, rollouts)
         new = method.make_scenes(it, rolled, rollouts)
         train_names = method.train_on(it, rolled, new)
+        stages.lap("scenes")
         llm_usage = None
         if method.uses_llm:
             made = [m for _, m in it.made]
@@ -270,6 +273,7 @@ def run_loop(cfg: LoopConfig, run_dir: str | Path, *, resume: bool = False, exec
         state.env_steps += int(card["frames"])
         state.grad_updates += int(card["updates"])
         pi_next = NeuralPolicy(net, end_threshold=pi_t.end_threshold)
+        stages.lap("finetune")
         save_checkpoint(iteration_dir(run_dir, t) / "policy.pt", net,
                         {"iteration": t, "method": cfg.method, "end_threshold": pi_next.end_threshold})
 
@@ -277,16 +281,31 @@ def run_loop(cfg: LoopConfig, run_dir: str | Path, *, resume: bool = False, exec
         say(f"t={t}: evaluating on the held-out sets")
         heldout = evaluate_sets(PolicyWeights.of(pi_next), cfg.heldout, cfg.heldout_episodes, cfg.seed, ex,
                                 out_dir=iteration_dir(run_dir, t) / HELDOUT_DIR, label=f"pi_{t}")
+        stages.lap("evaluate")
         state.buffer = it.buffer.to_dict() if it.buffer.size else None
         state.iteration = t
         records.append(IterationRecord(iteration=t, env_steps=state.env_steps, grad_updates=state.grad_updates,
                                        edits=state.edits, train=train_metrics, heldout=heldout, gallery=it.gallery,
-                                       wall_time_s=round(time.perf_counter() - start, 2), llm_usage=llm_usage))
+                                       wall_time_s=round(time.perf_counter() - start, 2),
+                                       stage_seconds=stages.seconds, llm_usage=llm_usage))
         (iteration_dir(run_dir, t) / "scenes.json").write_text(json.dumps(
             {"rolled_out": rolled, "trained_on": train_names, "edits_this_iteration": state.edits - edits_before}),
             encoding="utf-8")
         _checkpoint(run_dir, cfg, state, records)
     return records
+
+
+class StageClock:
+    """Wall seconds per named stage of one iteration (``lap(name)`` closes the stage that just ended)."""
+
+    def __init__(self) -> None:
+        self.seconds: dict[str, float] = {}
+        self._last = time.perf_counter()
+
+    def lap(self, name: str) -> None:
+        now = time.perf_counter()
+        self.seconds[name] = round(now - self._last, 2)
+        self._last = now
 
 
 def _open_run(cfg: LoopConfig, run_dir: Path, resume: bool, command: str

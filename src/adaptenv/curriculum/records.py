@@ -102,6 +102,8 @@ class IterationRecord(BaseModel):
     """pi_{t+1} on each held-out set (e.g. 'rearranged', 'unseen')."""
     gallery: list[GalleryItem] = Field(default_factory=list)
     wall_time_s: float = 0.0
+    stage_seconds: dict[str, float] = Field(default_factory=dict)
+    """Wall time of this iteration's stages: rollouts, scenes (buffer and generation), finetune, evaluate."""
     llm_usage: dict[str, Any] | None = None
     """LLM tokens, calls, retries, cache hits (and cost when priced) of this iteration, per role (ours-llm)."""
 
