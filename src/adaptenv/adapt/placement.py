@@ -369,9 +369,6 @@ class PlacementContext:
         self.outlines[i] = self.outline(i, center, yaw)
 
 
-
-
-
 def _room_index(fp: Footprint, geometry: SceneGeometry, room_ids: list[str]) -> int:
     """Index of the object's own room by its true footprint (the first room when it touches none)."""
     rid = footprint_room(fp, geometry.rooms)
