@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import json
+
 import numpy as np
 import pytest
 import shapely
@@ -12,10 +14,12 @@ from adaptenv.adapt.placement import (
     PlacementContext,
     place,
     place_units,
+    poly_depth,
     rect_depth,
     reference_place,
 )
-from adaptenv.scene.geometry import SceneGeometry, footprint_corners
+from adaptenv.scene.assets import ASSETS_ENV, COUNTER_ARM_DEPTH, load_catalog, use_assets
+from adaptenv.scene.geometry import Footprint, SceneGeometry, footprint_corners
 from tests.sim import helpers as H
 
 BED, CHAIR, TABLE = "Bed_1", "Chair_002_1", "Dining_Table_16_1"
@@ -131,14 +135,104 @@ def test_fast_march_equals_reference_on_a_generated_house():
 def test_results_never_collide(real_house):
     """Every achieved pose is free of new overlaps and inside the object's room (checked with shapely)."""
     ctx = PlacementContext.from_house(real_house)
-    polys = shapely.polygons(ctx.objects.verts)
+    polys = [shapely.Polygon(o) for o in ctx.outlines]  # true footprints (the L counter is not a box)
     rooms = list(SceneGeometry.from_house(real_house).rooms.values())
     for oid, dx, dz, yaw in _requests(ctx, 100, seed=11):
         res = place(ctx, oid, dx, dz, yaw)
         i = ctx.index[oid]
         c = ctx.centers[i] + np.array(res.achieved)
-        poly = shapely.Polygon(ctx.corners(i, c, res.yaw_after))
+        poly = shapely.Polygon(ctx.outline(i, c, res.yaw_after))
         assert rooms[ctx.room_of[i]].buffer(0.003, join_style="mitre").covers(poly)
         for j, other in enumerate(polys):
             if j != i and (min(i, j), max(i, j)) not in ctx.preexisting:
                 assert poly.intersection(other).area < 1e-4, (oid, ctx.ids[j])
+
+
+L_COUNTER = "Countertop_L_10x10"
+
+
+def l_kitchen(chair: tuple[float, float]) -> tuple[PlacementContext, Footprint]:
+    """A 5 x 5 m room with a 3 x 3 m L counter in its back-right corner (arms along z = 0 and x = 5,
+    wrapping the floor in front-left of them) and a chair; returns the context and the counter."""
+    sx, _, sz = load_catalog().asset(L_COUNTER).size
+    house = H.one_room((5.0, 5.0), objects=[H.Obj(L_COUNTER, 5.0 - sx / 2 - 0.01, sz / 2 + 0.01), H.Obj(CHAIR, *chair)],
+                       agent=(0.5, 4.5, 0.0))
+    geometry = SceneGeometry.from_house(house)
+    counter = next(f for f in geometry.floor_objects if f.asset_id == L_COUNTER)
+    return PlacementContext.from_house(house, geometry=geometry), counter
+
+
+def _arms(counter: Footprint) -> tuple[float, float]:
+    """World z of the back arm's inner edge and world x of the side arm's inner edge (yaw 0)."""
+    z0, x1 = counter.corners[0][1], counter.corners[2][0]
+    return z0 + COUNTER_ARM_DEPTH, x1 - COUNTER_ARM_DEPTH
+
+
+def test_an_object_moves_into_the_floor_an_l_counter_wraps():
+    ctx, counter = l_kitchen((1.0, 4.0))
+    chair = next(oid for oid in ctx.ids if oid.startswith("Chair"))
+    res = place(ctx, chair, 2.0, -2.2)  # to (3.0, 1.8): inside the L's bounding box, off its arms
+    assert res.stop_reason == "reached" and res.achieved == pytest.approx((2.0, -2.2))
+    assert res == reference_place(ctx, chair, 2.0, -2.2)
+    i = ctx.index[chair]
+    at = shapely.Polygon(ctx.outline(i, ctx.centers[i] + np.array(res.achieved), res.yaw_after))
+    assert shapely.Polygon(counter.corners).intersection(at).area > 0.1  # a box counter would have stopped it
+    assert counter.polygon.intersection(at).area == 0.0
+
+
+@pytest.mark.parametrize("d", [(0.0, -1.5), (2.0, 0.0), (1.2, -1.2)])
+def test_an_object_in_the_wrap_stops_at_the_l_counter_arms(d):
+    ctx, counter = l_kitchen((3.0, 1.8))
+    chair = next(oid for oid in ctx.ids if oid.startswith("Chair"))
+    assert ctx.preexisting == {}, "standing in the wrap is no overlap with the counter"
+    res = place(ctx, chair, *d)
+    assert res.stop_reason == "blocked_by_object" and res.blocked_by == counter.object_id
+    assert res == reference_place(ctx, chair, *d)
+    i = ctx.index[chair]
+    hx, hz = ctx.half(i)
+    back_arm, side_arm = _arms(counter)
+    left = 1.8 + res.achieved[1] - hz - back_arm  # gap to the back arm (>= 0: never on it)
+    right = side_arm - (3.0 + res.achieved[0] + hx)  # gap to the side arm
+    gaps = [g for g, moved in ((left, d[1] < 0), (right, d[0] > 0)) if moved]
+    assert all(g >= -1e-9 for g in (left, right))
+    assert min(gaps) < 0.05 + 1e-9, "stopped within one step of the arm it ran into"
+
+
+def test_a_movable_l_shaped_asset_is_placed_by_its_outline(tmp_path, monkeypatch):
+    """A user asset with an L outline that can move: the fast march equals the plain loop and never overlaps."""
+    table = {"assets": {"ltable": {"type": "DiningTable", "size": [1.6, 0.75, 1.6],
+                                   "footprint": [[-0.8, -0.8], [0.8, -0.8], [0.8, 0.8], [0.2, 0.8], [0.2, -0.2],
+                                                 [-0.8, -0.2]]}}}
+    (tmp_path / "t.json").write_text(json.dumps(table), encoding="utf-8")
+    monkeypatch.setenv(ASSETS_ENV, "")
+    use_assets(tmp_path / "t.json")
+    house = H.one_room((5.0, 4.0), objects=[H.Obj("ltable", 1.5, 1.5), H.Obj(CHAIR, 1.0, 2.0), H.Obj(BED, 3.8, 2.0)],
+                       agent=(0.4, 3.6, 0.0))
+    ctx = PlacementContext.from_house(house)
+    k = ctx.index[next(oid for oid in ctx.ids if oid.startswith("DiningTable"))]
+    assert len(ctx.local_pieces[k]) > 1 and (min(k, ctx.index["Chair|1"]), max(k, ctx.index["Chair|1"])) \
+        not in ctx.preexisting, "the chair stands in the table's cut-out corner, not on the table"
+    polys = [shapely.Polygon(o) for o in ctx.outlines]
+    rooms = list(SceneGeometry.from_house(house).rooms.values())
+    for oid, dx, dz, yaw in _requests(ctx, 120, seed=5):
+        res = place(ctx, oid, dx, dz, yaw)
+        assert res == reference_place(ctx, oid, dx, dz, yaw)
+        i = ctx.index[oid]
+        poly = shapely.Polygon(ctx.outline(i, ctx.centers[i] + np.array(res.achieved), res.yaw_after))
+        assert rooms[0].buffer(0.003, join_style="mitre").covers(poly)
+        assert all(poly.intersection(o).area < 1e-4 for j, o in enumerate(polys) if j != i)
+
+
+def test_poly_depth_matches_rect_depth_and_shapely():
+    rng = np.random.default_rng(4)
+    for _ in range(200):
+        c, size, yaw = rng.uniform(-1, 1, 2), rng.uniform(0.2, 1.5, 2), rng.uniform(0, 360)
+        obstacles = ConvexSet.build(np.array([footprint_corners(*rng.uniform(-1, 1, 2), *rng.uniform(0.2, 1.5, 2),
+                                                                rng.uniform(0, 360)) for _ in range(3)]))
+        offsets = footprint_corners(0.0, 0.0, *size, yaw)
+        assert np.allclose(poly_depth(c, offsets, obstacles), rect_depth(c, tuple(size / 2), yaw, obstacles))
+        tri = rng.uniform(-0.8, 0.8, (3, 2))
+        depth = poly_depth(c, np.vstack([tri, tri[-1:]]), obstacles)[0]
+        areas = [shapely.Polygon(tri + c).intersection(shapely.Polygon(v)).area for v in obstacles.verts]
+        for dp, area in zip(depth, areas, strict=True):
+            assert (dp > OVERLAP_EPS) == (area > 1e-6) or abs(dp) < 1e-3

@@ -8,9 +8,10 @@ import os
 
 import numpy as np
 import pytest
-from shapely.geometry import Point
+from shapely.geometry import Point, Polygon
 from typer.testing import CliRunner
 
+from adaptenv.adapt.placement import PlacementContext
 from adaptenv.adapt.validation import NavRaster
 from adaptenv.cli import app
 from adaptenv.errors import ConfigError, HouseError
@@ -21,8 +22,10 @@ from adaptenv.scene.assets import (
     read_asset_table,
     use_assets,
 )
-from adaptenv.scene.geometry import SceneGeometry
-from adaptenv.scene.house import load_house, save_house
+from adaptenv.scene.geometry import SceneGeometry, footprint_room
+from adaptenv.scene.graph import NEXT_TO_DISTANCE, build_scene_graph
+from adaptenv.scene.house import House, HouseObject, Room, Vec3, Wall, load_house, save_house
+from adaptenv.scene.validate import validate_house
 from adaptenv.sim.geodesic import is_solvable
 from adaptenv.sim.rollout import expert_policy, run_episode
 from adaptenv.sim.spec import AGENT_RADIUS
@@ -31,6 +34,7 @@ from adaptenv.sim.world import compile_world
 from tests.conftest import REAL_HOUSE
 from tests.sim import helpers as H
 
+L_COUNTER = "Countertop_L_10x10"
 SOFA, BED, TABLE = "0a1b2c3d4e5f4a5b8c9d0e1f2a3b4c5d", "9f8e7d6c5b4a49388271605f4e3d2c1b", "5e5e5e5e5e5e4e5e9e5e5e5e5e5e5e5e"
 
 
@@ -139,3 +143,71 @@ def test_wrapped_floor_of_l_and_c_counters_is_navigable(asset_id):
     # The editing validator's raster agrees with the simulator's.
     geom = SceneGeometry.from_house(house)
     assert np.array_equal(NavRaster(geom).navigable(), world.grid.navigable(AGENT_RADIUS))
+
+
+def _l_room_house(notch_room: bool) -> House:
+    """A 6 x 5 m room missing its 3 x 2 m top-left corner (x < 3, z > 3), which is a second room when
+    ``notch_room``, else outside the house; an L counter wraps the room's inner corner (3, 3), so its
+    arms stand in the room and the square they wrap is the notch (its bounding box's centre too)."""
+    size = load_catalog().asset("Countertop_L_6x6").size
+    d = COUNTER_ARM_DEPTH
+    cx, cz = 3.0 + d - size[0] / 2, 3.0 - d + size[2] / 2
+    rooms = {"room|2": [(0.0, 0.0), (6.0, 0.0), (6.0, 5.0), (3.0, 5.0), (3.0, 3.0), (0.0, 3.0)]}
+    if notch_room:
+        rooms["room|3"] = [(0.0, 3.0), (3.0, 3.0), (3.0, 5.0), (0.0, 5.0)]
+    walls, sides = [], {}
+    for rid, pts in rooms.items():
+        for a, b in zip(pts, pts[1:] + pts[:1], strict=True):
+            sides.setdefault(frozenset((a, b)), []).append(rid)
+            walls.append(_wall(rid, a, b))
+    walls += [_wall("exterior", *sorted(ab)) for ab, rids in sides.items() if len(rids) == 1]
+    objects = [HouseObject(id="CounterTop|2|0", assetId="Countertop_L_6x6", position=Vec3(x=cx, y=size[1] / 2, z=cz),
+                           rotation=Vec3(y=0.0)),
+               HouseObject(id="Fridge|2|1", assetId=H.TALL_TARGET, position=Vec3(x=5.0, y=1.0, z=1.0))]
+    house = House(rooms=[Room(id=rid, roomType="Kitchen", floorPolygon=[Vec3(x=x, z=z) for x, z in pts])
+                         for rid, pts in rooms.items()], walls=walls, objects=objects)
+    house.set_agent_pose(4.5, 4.0, 0.0)
+    return house
+
+
+def _wall(room: str, a: tuple[float, float], b: tuple[float, float]) -> Wall:
+    number = room.split("|")[-1]
+    (x0, z0), (x1, z1) = a, b
+    wid = f"wall|{number}|{min(x0, x1):.2f}|{min(z0, z1):.2f}|{max(x0, x1):.2f}|{max(z0, z1):.2f}"
+    return Wall(id=wid, roomId=room, polygon=[Vec3(x=x0, z=z0), Vec3(x=x1, z=z1),
+                                              Vec3(x=x0, y=2.5, z=z0), Vec3(x=x1, y=2.5, z=z1)])
+
+
+def test_an_l_counter_is_in_the_room_its_outline_stands_in():
+    """Its bounding box's centre lies in the notch (outside, or another room); its outline decides."""
+    alone = _l_room_house(notch_room=False)
+    fp = SceneGeometry.from_house(alone).footprint("CounterTop|2|0")
+    assert not Polygon(fp.corners).within(SceneGeometry.from_house(alone).floor.buffer(0.05))
+    assert validate_house(alone) == []  # the in-room check uses the true outline
+    with_notch = _l_room_house(notch_room=True)
+    geometry = SceneGeometry.from_house(with_notch)
+    assert geometry.room_of_point(*fp.center) == "room|3"
+    assert footprint_room(geometry.footprint("CounterTop|2|0"), geometry.rooms) == "room|2"
+    assert build_scene_graph(with_notch).has("in_room", "CounterTop|2|0", "room|2")
+    ctx = PlacementContext.from_house(with_notch)
+    assert ctx.room_ids[ctx.room_of[ctx.index["CounterTop|2|0"]]] == "room|2"
+
+
+def test_next_to_an_l_counter_is_measured_from_its_arms():
+    """In the wrapped floor, an object 0.3 m from an arm is next to the counter; one 0.8 m from both is not
+    (though both stand inside the counter's bounding box)."""
+    sx, _, sz = load_catalog().asset(L_COUNTER).size
+    cx, cz = 5.0 - sx / 2 - 0.01, sz / 2 + 0.01
+    back_arm = cz - sz / 2 + COUNTER_ARM_DEPTH  # z of the back arm's inner edge
+    can = load_catalog().asset(H.LOW_TARGET).size
+    near = (cx - 0.5, back_arm + 0.3 + can[2] / 2)
+    far = (cx - 0.5, back_arm + 0.8 + can[2] / 2)
+    house = H.one_room((5.0, 5.0), objects=[H.Obj(L_COUNTER, cx, cz), H.Obj(H.LOW_TARGET, *near),
+                                            H.Obj(H.LOW_TARGET, *far)], agent=(0.5, 4.5, 0.0))
+    geometry = SceneGeometry.from_house(house)
+    counter, a, b = geometry.floor_objects
+    assert Polygon(counter.corners).covers(Polygon(b.corners)), "the far object stands inside the bounding box"
+    assert counter.polygon.distance(b.polygon) > NEXT_TO_DISTANCE > counter.polygon.distance(a.polygon)
+    g = build_scene_graph(house, geometry)
+    assert g.has("next_to", counter.object_id, a.object_id)
+    assert not g.has("next_to", counter.object_id, b.object_id)

@@ -4,7 +4,10 @@ Given an object and a requested displacement ``d`` (and optionally a new absolut
 object is (a) turned in place if the turned footprint is collision-free, else it keeps its yaw;
 (b) moved along ``d`` to ``p(k) = p_orig + min(k * delta, |d|) * d / |d|`` for k = 1, 2, ...,
 stopping before the first pose that collides and keeping the last collision-free pose
-(Fig. 3 of the paper). A pose collides when its footprint
+(Fig. 3 of the paper). Footprints are the true floor outlines of
+:attr:`adaptenv.scene.geometry.Footprint.outline` (the shape the simulator, validation and renderer
+use): an L- or C-shaped counter blocks its arms, not the floor it wraps around. A pose collides when
+its footprint
 
 - overlaps another floor object with positive depth (touching is fine), except pairs that
   already overlapped in the original scene (chairs tucked under a table): such a pair collides
@@ -17,12 +20,13 @@ Doorway clearance is not a placement constraint: :mod:`adaptenv.adapt.validation
 Children (objects resting on the moved one) move rigidly with it and are not collision-checked.
 
 Speed: a :class:`PlacementContext` holds every obstacle as arrays once per scene (updated in place
-by :meth:`PlacementContext.commit`). :func:`place` keeps only the obstacles whose bounding box
-meets the swept bounding box of the path, evaluates every step pose against them at once with a
-separating-axis test in NumPy, and takes the first colliding step; pre-existing pairs use exact
-areas and a concavity shortcut (the square root of the intersection area of two convex shapes is
-concave along a straight translation). The result equals the plain step-by-step loop
-:func:`reference_place` at ``delta`` resolution (tested).
+by :meth:`PlacementContext.commit`); a footprint that is not convex is held as its convex pieces
+(:attr:`~adaptenv.scene.geometry.Footprint.local_pieces`). :func:`place` keeps only the obstacles
+whose bounding box meets the swept bounding box of the path, evaluates every step pose against them
+at once with a separating-axis test in NumPy, and takes the first colliding step; pre-existing pairs
+use exact areas and, when both footprints are convex, a concavity shortcut (the square root of the
+intersection area of two convex shapes is concave along a straight translation). The result equals
+the plain step-by-step loop :func:`reference_place` at ``delta`` resolution (tested).
 """
 
 from __future__ import annotations
@@ -35,7 +39,13 @@ import shapely
 
 from adaptenv.adapt.edits import StopReason
 from adaptenv.scene.assets import AssetCatalog, load_catalog
-from adaptenv.scene.geometry import SceneGeometry, footprint_corners
+from adaptenv.scene.geometry import (
+    Footprint,
+    SceneGeometry,
+    footprint_corners,
+    footprint_room,
+    pose_outline,
+)
 from adaptenv.scene.grid import NormalizedGrid
 from adaptenv.scene.house import House
 
@@ -138,6 +148,37 @@ def rect_depth(centers: np.ndarray, half: tuple[float, float], yaw: float, obsta
     return np.minimum(depth, d_rect)
 
 
+def poly_depth(centers: np.ndarray, offsets: np.ndarray, obstacles: ConvexSet,
+               idx: np.ndarray | None = None) -> np.ndarray:
+    """:func:`rect_depth` of any convex polygon: its vertices ``offsets`` (Q, 2) relative to K centres.
+
+    Degenerate polygons (repeated vertices, e.g. triangles padded to 4 vertices) are fine.
+    """
+    if idx is not None:
+        normals, lo, hi, verts = obstacles.normals[idx], obstacles.lo[idx], obstacles.hi[idx], obstacles.verts[idx]
+    else:
+        normals, lo, hi, verts = obstacles.normals, obstacles.lo, obstacles.hi, obstacles.verts
+    centers = np.asarray(centers, dtype=float).reshape(-1, 2)
+    n_obs, n_pts = lo.shape
+    if n_obs == 0:
+        return np.full((len(centers), 0), -np.inf)
+    offsets = np.asarray(offsets, dtype=float)
+    flat = normals.reshape(-1, 2)
+    # The polygon on the obstacles' normals: centre projection + [amin, amax].
+    q = offsets @ flat.T  # (Q, C*P)
+    c = centers @ flat.T  # (K, C*P)
+    d_obs = np.minimum(c + (q.max(axis=0) - lo.ravel()), (hi.ravel() - q.min(axis=0)) - c)
+    depth = d_obs.reshape(len(centers), n_obs, n_pts).min(axis=2)
+    # The obstacles on the polygon's own normals.
+    own, own_lo, own_hi, _ = _convex_arrays(offsets[None])
+    n_own = own[0]  # (Q, 2)
+    p = verts @ n_own.T  # (C, P, Q)
+    pmin, pmax = p.min(axis=1), p.max(axis=1)  # (C, Q)
+    pc = centers @ n_own.T  # (K, Q)
+    d_own = np.minimum(pc[:, None, :] + (own_hi[0] - pmin), (pmax - own_lo[0]) - pc[:, None, :]).min(axis=2)
+    return np.minimum(depth, d_own)
+
+
 def _axes(yaw: float) -> tuple[np.ndarray, np.ndarray]:
     t = math.radians(yaw)
     c, s = math.cos(t), math.sin(t)
@@ -198,7 +239,12 @@ class PlacementContext:
     sizes: np.ndarray
     """(N, 2) full footprint extents in the object's local (x, z)."""
     yaws: np.ndarray
+    local_pieces: list[np.ndarray]
+    """Per object: convex pieces (C_i, 4, 2) of its true footprint in its local frame (one for a box)."""
     objects: ConvexSet
+    """Every object's pieces at its current pose, object after object (``owner`` maps them back)."""
+    owner: np.ndarray
+    """(M,) object index of each piece of ``objects``."""
     room_ids: list[str]
     room_of: np.ndarray
     """(N,) index into ``room_ids`` of each object's own room."""
@@ -213,6 +259,14 @@ class PlacementContext:
     preexisting: dict[tuple[int, int], float] = field(default_factory=dict)
     """Allowed intersection area (m^2) of each pair (i < j) that overlapped in the original scene."""
     index: dict[str, int] = field(default_factory=dict)
+    first: np.ndarray = field(default_factory=lambda: np.zeros(1, dtype=int))
+    """(N + 1,) the pieces of object i are ``objects[first[i]:first[i + 1]]``."""
+    outlines: list[np.ndarray] = field(default_factory=list)
+    """Per object: its true footprint outline (world x, z) at its current pose."""
+    local_outlines: list[np.ndarray] = field(default_factory=list)
+    """Per object: ``Footprint.local_outline``."""
+    boxes: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=bool))
+    """(N,) whether each footprint is its bounding rectangle (``Footprint.shape is None``)."""
 
     @classmethod
     def from_house(cls, house: House, *, original: House | None = None, catalog: AssetCatalog | None = None,
@@ -225,10 +279,13 @@ class PlacementContext:
         centers = np.array([f.center for f in floor], dtype=float).reshape(-1, 2)
         sizes = np.array([f.size for f in floor], dtype=float).reshape(-1, 2)
         yaws = np.array([f.yaw for f in floor], dtype=float)
-        corners = np.array([f.corners for f in floor], dtype=float).reshape(-1, 4, 2)
+        local = [f.local_pieces for f in floor]
+        pieces = np.concatenate([pose_outline(lp, *f.center, f.yaw) for lp, f in zip(local, floor, strict=True)]
+                                ).reshape(-1, 4, 2) if floor else np.zeros((0, 4, 2))
+        owner = np.repeat(np.arange(len(floor)), [len(lp) for lp in local]).astype(int)
         room_ids = list(geometry.rooms)
         polys = [geometry.rooms[r] for r in room_ids]
-        room_of = np.array([_room_index(f.polygon, f.center, polys) for f in floor], dtype=int)
+        room_of = np.array([_room_index(f, geometry, room_ids) for f in floor], dtype=int)
         segs = geometry.blocking_segments()
         wall_ids = [_wall_ids_of(seg, geometry) for seg in segs]
         open_segs = [(d.p0, d.p1) for d in geometry.doors + geometry.windows]
@@ -238,11 +295,15 @@ class PlacementContext:
                 open_segs.append((w.p0, w.p1))
                 open_ids.append(w.wall_ids[0])
         ctx = cls(geometry.grid or NormalizedGrid.for_house(house), ids, [f.object_type for f in floor],
-                  np.array([f.movable for f in floor], dtype=bool), centers, sizes, yaws, ConvexSet.build(corners),
-                  room_ids, room_of, [ConvexSet.build(room_complement(p)) for p in polys],
+                  np.array([f.movable for f in floor], dtype=bool), centers, sizes, yaws, local,
+                  ConvexSet.build(pieces), owner, room_ids, room_of, [ConvexSet.build(room_complement(p)) for p in polys],
                   ConvexSet.build(_segments_as_polys(segs)), wall_ids,
                   ConvexSet.build(_segments_as_polys(np.array(open_segs, dtype=float).reshape(-1, 2, 2))), open_ids)
         ctx.index = {oid: k for k, oid in enumerate(ids)}
+        ctx.first = np.concatenate([[0], np.cumsum([len(lp) for lp in local])]).astype(int)
+        ctx.outlines = [f.outline.copy() for f in floor]
+        ctx.local_outlines = [f.local_outline for f in floor]
+        ctx.boxes = np.array([f.shape is None for f in floor], dtype=bool)
         base = ctx.overlap_areas()
         if original is not None:
             orig = PlacementContext.from_house(original, catalog=catalog)
@@ -260,10 +321,10 @@ class PlacementContext:
     def overlap_areas(self) -> dict[tuple[int, int], float]:
         """Intersection area of every pair of floor objects that overlaps (depth > OVERLAP_EPS)."""
         out = {}
-        polys = shapely.polygons(self.objects.verts)
+        polys = [shapely.Polygon(o) for o in self.outlines]
         for i in range(len(self.ids)):
-            depth = rect_depth(self.centers[i], self.half(i), float(self.yaws[i]), self.objects)[0]
-            for j in np.nonzero(depth > OVERLAP_EPS)[0]:
+            depth = self.depth(i, self.centers[i], float(self.yaws[i]), self.objects)[0]
+            for j in np.unique(self.owner[depth > OVERLAP_EPS]):
                 if j > i:
                     out[(i, int(j))] = float(shapely.area(shapely.intersection(polys[i], polys[j])))
         return out
@@ -272,23 +333,46 @@ class PlacementContext:
         return float(self.sizes[i, 0]) / 2.0, float(self.sizes[i, 1]) / 2.0
 
     def corners(self, i: int, center: np.ndarray, yaw: float) -> np.ndarray:
+        """Corners (4, 2) of object i's bounding rectangle at a pose."""
         return footprint_corners(float(center[0]), float(center[1]), float(self.sizes[i, 0]),
                                  float(self.sizes[i, 1]), yaw)
+
+    def outline(self, i: int, center: np.ndarray, yaw: float) -> np.ndarray:
+        """Object i's true footprint outline at a pose (its corners for a box)."""
+        if self.is_box(i):
+            return self.corners(i, center, yaw)
+        return pose_outline(self.local_outlines[i], float(center[0]), float(center[1]), yaw)
+
+    def is_box(self, i: int) -> bool:
+        """Whether object i's footprint is its bounding rectangle (no shape of its own)."""
+        return bool(self.boxes[i])
+
+    def reach(self, i: int) -> float:
+        """Largest distance (m) from object i's centre to its footprint (bounds the swept box of a path)."""
+        return float(np.linalg.norm(self.local_pieces[i].reshape(-1, 2), axis=1).max())
+
+    def depth(self, i: int, centers: np.ndarray, yaw: float, obstacles: ConvexSet,
+              idx: np.ndarray | None = None) -> np.ndarray:
+        """Penetration depth (K, C) of object i at K centres (one yaw) into convex obstacles (max over its pieces)."""
+        if self.is_box(i):
+            return rect_depth(centers, self.half(i), yaw, obstacles, idx)
+        pieces = pose_outline(self.local_pieces[i], 0.0, 0.0, yaw)
+        return np.max([poly_depth(centers, p, obstacles, idx) for p in pieces], axis=0)
 
     def commit(self, i: int, center: np.ndarray, yaw: float) -> None:
         """Record that object i now stands at ``center`` with ``yaw`` (after an accepted edit)."""
         self.centers[i] = center
         self.yaws[i] = yaw % 360.0
-        self.objects.update(i, self.corners(i, center, yaw))
+        world = pose_outline(self.local_pieces[i], float(center[0]), float(center[1]), yaw)
+        for k, piece in zip(range(self.first[i], self.first[i + 1]), world, strict=True):
+            self.objects.update(k, piece)
+        self.outlines[i] = self.outline(i, center, yaw)
 
 
-def _room_index(poly: shapely.Polygon, center: tuple[float, float], rooms: list[shapely.Polygon]) -> int:
-    pt = shapely.Point(center)
-    for k, r in enumerate(rooms):
-        if r.covers(pt):
-            return k
-    areas = [r.intersection(poly).area for r in rooms]
-    return int(np.argmax(areas)) if rooms else -1
+def _room_index(fp: Footprint, geometry: SceneGeometry, room_ids: list[str]) -> int:
+    """Index of the object's own room by its true footprint (the first room when it touches none)."""
+    rid = footprint_room(fp, geometry.rooms)
+    return room_ids.index(rid) if rid is not None else (0 if room_ids else -1)
 
 
 def _wall_ids_of(seg: np.ndarray, geometry: SceneGeometry) -> tuple[str, ...]:
@@ -336,7 +420,7 @@ class PlacementResult:
 def _blocked_at(ctx: PlacementContext, i: int, center: np.ndarray, yaw: float) -> tuple[str, str | None] | None:
     """Scalar predicate of the reference loop: why the pose collides, or None when it is free."""
     center = np.asarray(center, dtype=float)
-    r = math.hypot(*ctx.half(i)) + ROOM_EPS
+    r = ctx.reach(i) + ROOM_EPS
     sweep = np.array([center[0] - r, center[1] - r, center[0] + r, center[1] + r])
     hit = _first_collision(ctx, i, center[None], yaw, sweep)
     return None if hit is None else hit[1]
@@ -352,7 +436,6 @@ def _first_collision(ctx: PlacementContext, i: int, centers: np.ndarray, yaw: fl
     both stop the same pose.
     """
     k_count = len(centers)
-    half = ctx.half(i)
     objs, outside = ctx.objects, ctx.room_outside[ctx.room_of[i]]
 
     def near(s: ConvexSet) -> np.ndarray:
@@ -361,22 +444,22 @@ def _first_collision(ctx: PlacementContext, i: int, centers: np.ndarray, yaw: fl
         a = s.aabb
         return np.nonzero((a[:, 0] < sweep[2]) & (a[:, 2] > sweep[0]) & (a[:, 1] < sweep[3]) & (a[:, 3] > sweep[1]))[0]
 
-    cand = near(objs)
-    cand = cand[cand != i]
-    is_pre = np.array([(min(i, j), max(i, j)) in ctx.preexisting for j in cand], dtype=bool)
-    pre = [int(j) for j in cand[is_pre] if j not in skip]
+    cand = near(objs)  # pieces; ctx.owner maps them to objects
+    cand = cand[ctx.owner[cand] != i]
+    is_pre = np.array([(min(i, j), max(i, j)) in ctx.preexisting for j in ctx.owner[cand]], dtype=bool)
+    pre = [int(j) for j in dict.fromkeys(ctx.owner[cand[is_pre]].tolist()) if j not in skip]
     plain = cand[~is_pre] if len(cand) else cand
     k_obj, who = k_count, -1
     if len(plain):
-        depth = rect_depth(centers, half, yaw, objs, plain)
+        depth = ctx.depth(i, centers, yaw, objs, plain)
         hit = np.nonzero(depth.max(axis=1) > OVERLAP_EPS)[0]
         if len(hit):
             k_obj = int(hit[0])
-            who = int(plain[int(depth[k_obj].argmax())])
+            who = int(ctx.owner[plain[int(depth[k_obj].argmax())]])
     k_room = k_count
     pieces = near(outside)
     if len(pieces):
-        hit = np.nonzero(rect_depth(centers, half, yaw, outside, pieces).max(axis=1) > ROOM_EPS)[0]
+        hit = np.nonzero(ctx.depth(i, centers, yaw, outside, pieces).max(axis=1) > ROOM_EPS)[0]
         if len(hit):
             k_room = int(hit[0])
     limit = min(k_obj, k_room)
@@ -395,25 +478,24 @@ def _first_collision(ctx: PlacementContext, i: int, centers: np.ndarray, yaw: fl
 
 def _room_reason(ctx: PlacementContext, i: int, center: np.ndarray, yaw: float) -> tuple[str, str | None]:
     """Why a pose that left its room did: a wall it crosses (``blocked_by_wall``) or an opening."""
-    half = ctx.half(i)
     room = ctx.room_ids[ctx.room_of[i]]
     if len(ctx.walls):
-        d = rect_depth(center[None], half, yaw, ctx.walls)[0]
+        d = ctx.depth(i, center[None], yaw, ctx.walls)[0]
         if d.max() > ROOM_EPS:
             ids = ctx.wall_ids[int(d.argmax())]
             own = [w for w in ids if w.split("|")[1:2] == [room.split("|")[1]]]
             return "blocked_by_wall", (own or list(ids) or [None])[0]
     if len(ctx.openings):
-        d = rect_depth(center[None], half, yaw, ctx.openings)[0]
+        d = ctx.depth(i, center[None], yaw, ctx.openings)[0]
         if d.max() > 0:
             return "left_room", ctx.opening_ids[int(d.argmax())]
     return "left_room", None
 
 
 def _pair_area(ctx: PlacementContext, i: int, j: int, centers: np.ndarray, yaw: float) -> np.ndarray:
-    offsets = ctx.corners(i, np.zeros(2), yaw)
+    offsets = ctx.outline(i, np.zeros(2), yaw)
     polys = shapely.polygons(np.asarray(centers)[:, None, :] + offsets[None])
-    other = shapely.polygons(ctx.objects.verts[j])
+    other = shapely.Polygon(ctx.outlines[j])
     return shapely.area(shapely.intersection(polys, other))
 
 
@@ -498,7 +580,7 @@ def place(ctx: PlacementContext, object_id: str, dx: float, dz: float, yaw: floa
     poses = _march_poses(start, d, step)
     reason, by, k_stop = "reached", None, len(poses)
     if len(poses):
-        r = np.hypot(*ctx.half(i)) + ROOM_EPS
+        r = ctx.reach(i) + ROOM_EPS
         sweep = np.array([min(start[0], poses[-1, 0]) - r, min(start[1], poses[-1, 1]) - r,
                           max(start[0], poses[-1, 0]) + r, max(start[1], poses[-1, 1]) + r])
         hit = _first_hit(ctx, i, poses, cur_yaw, sweep)
@@ -516,7 +598,8 @@ def _first_hit(ctx: PlacementContext, i: int, poses: np.ndarray, yaw: float,
 
     A pre-existing partner that overlaps now and whose overlap area does not grow on the first
     step can never exceed its allowance later on the straight path (the square root of the area
-    is concave along a translation, on an interval of the path), so it is skipped.
+    is concave along a translation, on an interval of the path, when both footprints are convex),
+    so it is skipped.
     """
     skip = set()
     start = ctx.centers[i][None]
@@ -524,7 +607,8 @@ def _first_hit(ctx: PlacementContext, i: int, poses: np.ndarray, yaw: float,
         if i in (a, b):
             j = b if a == i else a
             area = _pair_area(ctx, i, j, np.concatenate([start, poses[:1]]), yaw)
-            if 0.0 < area[0] <= ctx.preexisting[(a, b)] and area[1] <= area[0]:
+            convex = len(ctx.local_pieces[i]) == 1 and len(ctx.local_pieces[j]) == 1
+            if convex and 0.0 < area[0] <= ctx.preexisting[(a, b)] and area[1] <= area[0]:
                 skip.add(j)
     skip = frozenset(skip)
     lo, chunk = 0, 32

@@ -163,7 +163,7 @@ class NavRaster:
         self.room = occ.room
 
     def inflate(self, corners: np.ndarray) -> _Inflated:
-        """Inflated footprint of a footprint (corners (4, 2))."""
+        """Inflated footprint of a footprint (its outline (N, 2))."""
         r0, c0, m = _mask_window(corners, self.x0, self.z0, self.res, self.pad, self.shape)
         # Distance to the footprint's cells gives the disc dilation exactly (same rule as the raster).
         dist = ndimage.distance_transform_edt(~m) * self.res
@@ -232,11 +232,11 @@ class LabelRaster:
         self.tall[LABEL_OBJECT0:LABEL_OBJECT0 + len(floor)] = [f.occludes for f in floor]
         self.label = occ.label.copy()
         self.occluder = self.tall[self.label]
-        self.masks = [self.footprint(f.corners) for f in floor]
+        self.masks = [self.footprint(f.outline) for f in floor]  # true outlines, as rasterize draws them
         self.boxes = np.array([self._box(m) for m in self.masks], dtype=np.int64).reshape(-1, 4)
 
     def footprint(self, corners: np.ndarray) -> _Inflated:
-        """The cells a footprint (corners (4, 2)) is drawn on."""
+        """The cells a footprint (its outline (N, 2)) is drawn on."""
         return self.tight(_Inflated(*_mask_window(corners, self.x0, self.z0, self.res, 1, self.shape)))
 
     @staticmethod
@@ -425,7 +425,8 @@ def _containment_problems(geometry: SceneGeometry, moved: set[str] | None) -> li
             continue
         sx, sz = f.size
         shrunk = shapely.Polygon(footprint_corners(f.center[0], f.center[1], max(sx - 2 * CONTAIN_TOLERANCE, 1e-3),
-                                                   max(sz - 2 * CONTAIN_TOLERANCE, 1e-3), f.yaw))
+                                                   max(sz - 2 * CONTAIN_TOLERANCE, 1e-3), f.yaw)) \
+            if f.shape is None else f.polygon.buffer(-CONTAIN_TOLERANCE, join_style="mitre")  # L/C counters
         if len(lines) and shapely.intersects(lines, shrunk).any():
             out.append(ValidationProblem("crosses_wall", f"{f.object_id} crosses a wall; move it into one room",
                                          (f.object_id,)))
@@ -592,7 +593,7 @@ class EditValidator:
         self.need_doors = need.doors & set(self.doors)
         self.approach = approach_zones(self.geometry)
         base = SceneGeometry.from_house(original, self.catalog) if original is not None else self.geometry
-        self.approach_before = {z.door_id: covered_width(z, [shapely.Polygon(f.corners) for f in base.floor_objects])
+        self.approach_before = {z.door_id: covered_width(z, [f.polygon for f in base.floor_objects])
                                 for z in approach_zones(base)}
         self.need_targets = need.targets if episode_targets is None else set(episode_targets) & need.targets
         self.tall = np.array([f.occludes for f in self.geometry.floor_objects], dtype=bool)
@@ -652,7 +653,7 @@ class EditValidator:
             return region
         keep = np.ones(region.shape[1], dtype=bool)
         if self.raster.types[i] == t:
-            old = self.ctx.objects.verts[i]
+            old = self.ctx.outlines[i]
             keep &= ~self._near(region, np.array([old.min(axis=0), old.max(axis=0)]))
         if changed is not None:
             keep &= ~self._near(region, changed)
@@ -684,12 +685,12 @@ class EditValidator:
         return problems, unproven, flat == comp
 
     def _approach_check(self, moved: int, corners: np.ndarray) -> list[ValidationProblem]:
-        """Doorway approach zones the moved object (at ``corners``) would cover past the limit."""
+        """Doorway approach zones the moved object (true outline ``corners``) would cover past the limit."""
         lo, hi = corners.min(axis=0), corners.max(axis=0)
         zones = [z for z in self.approach if shapely.intersects(z.zone, shapely.box(lo[0], lo[1], hi[0], hi[1]))]
         if not zones:
             return []
-        polys = {oid: shapely.Polygon(corners if k == moved else self.ctx.objects.verts[k])
+        polys = {oid: shapely.Polygon(corners if k == moved else self.ctx.outlines[k])
                  for k, oid in enumerate(self.ctx.ids)}
         return [ValidationProblem("doorway_approach", f"{', '.join(ids)} would cover {cover:.2f} of the {width:.2f} m "
                                   f"in front of doorway {d}", (d, *ids))
@@ -777,10 +778,12 @@ class EditValidator:
         i = self.ctx.index[object_id]
         center = self.ctx.centers[i] + np.array(res.achieved)
         corners = self.ctx.corners(i, center, res.yaw_after)
-        inf = self.raster.inflate(corners)
-        exact = self._footprint(i, center, res.yaw_after).corners
-        drawn = LabelRaster.tight(_Inflated(inf.r0, inf.c0, inf.drawn)) if np.array_equal(exact, corners) \
-            else self.labels.footprint(exact)
+        outline = self.ctx.outline(i, center, res.yaw_after)  # the true footprint (its corners for a box)
+        inf = self.raster.inflate(outline)
+        exact_fp = self._footprint(i, center, res.yaw_after)
+        exact = exact_fp.corners  # target sample points come from the corners, as in sim.task
+        drawn = LabelRaster.tight(_Inflated(inf.r0, inf.c0, inf.drawn)) \
+            if np.array_equal(exact_fp.outline, outline) else self.labels.footprint(exact_fp.outline)
         quiet = self.labels.quiet(i, drawn)
         win = None if quiet else self.labels.window(i, drawn)
         problems, unproven, component = self._check(self.raster.navigable_with(i, inf), i,
@@ -796,7 +799,7 @@ class EditValidator:
                          for t in unproven if found[t] < 0]
         else:
             found = {}
-        problems += self._approach_check(i, corners)
+        problems += self._approach_check(i, outline)
         return Proposal(**request, problems=tuple(problems), center=center, corners=corners, inflated=inf,
                         drawn=drawn, labels=win, exact_targets=frozenset(unproven),
                         witnesses=tuple((t, c) for t, c in found.items() if c >= 0))

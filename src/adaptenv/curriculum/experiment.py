@@ -4,9 +4,10 @@
 ``OUT/<method>/seed_<s>/`` (resumable), then :func:`summarize` writes:
 
 - ``OUT/<method>/per_seed.csv``: rows ``metric:set``, one column per seed (final iteration);
-- ``OUT/summary.json`` and ``OUT/summary.md``: mean and standard error per method and set, and a
+- ``OUT/summary.json`` and ``OUT/summary.md``: mean and standard error per method and set, a
   paired t-test (over seeds: the same seed gives every method the same pi_0 and the same held-out
-  episodes) of ours against each baseline;
+  episodes) of ours against each baseline, and the unusable houses each house set skipped
+  (``skipped_houses``, gathered from the runs' ``run.json``);
 - ``OUT/plots/heldout_<set>_vs_iterations.png`` and ``..._vs_env_steps.png``.
 
 :func:`final_evaluation` (``adaptenv experiment --final-episodes N``) evaluates pi_0 and each run's
@@ -30,7 +31,13 @@ from adaptenv.agents.checkpoint import load_checkpoint
 from adaptenv.curriculum.executor import InProcessExecutor
 from adaptenv.curriculum.jobs import PolicyWeights
 from adaptenv.curriculum.loop import METHODS, LoopConfig, evaluate_sets, run_loop
-from adaptenv.curriculum.records import atomic_write_text, iteration_dir, read_iterations
+from adaptenv.curriculum.records import (
+    RunInfo,
+    SkippedHouses,
+    atomic_write_text,
+    iteration_dir,
+    read_iterations,
+)
 from adaptenv.errors import ConfigError
 
 METRICS = ("success", "spl", "collisions")
@@ -218,9 +225,22 @@ def write_summary(out: Path, cfg: ExperimentConfig, table: dict[str, dict[int, d
     for name, p in holm(family).items():
         m, key = name.split("|")
         summary["holm"].setdefault(m, {})[key] = p
+    summary["skipped_houses"] = {k: v.model_dump() for k, v in skipped_in_runs(out, cfg).items()}
     atomic_write_text(out / f"summary{suffix}.json", json.dumps(summary, indent=1, default=float))
     atomic_write_text(out / f"summary{suffix}.md", summary_markdown(summary))
     return summary
+
+
+def skipped_in_runs(out: Path, cfg: ExperimentConfig) -> dict[str, SkippedHouses]:
+    """Per house-set spec, the unusable houses the experiment's runs skipped (read from their ``run.json``)."""
+    merged: dict[str, dict[str, str]] = {}
+    for m in cfg.methods:
+        for s in cfg.seeds:
+            info = run_dir(out, m, s) / "run.json"
+            if info.is_file():
+                for spec, sk in RunInfo.model_validate_json(info.read_text(encoding="utf-8")).skipped_houses.items():
+                    merged.setdefault(spec, {}).update(sk.houses)
+    return {spec: SkippedHouses(count=len(h), houses=h) for spec, h in merged.items()}
 
 
 FINAL_EVAL = "final_eval.json"
@@ -286,7 +306,18 @@ def summary_markdown(summary: dict[str, Any]) -> str:
     lines.append(f"Mean ± standard error over seeds {summary['seeds']}; p: paired t-test of {ref} against the "
                  "method on the same seeds (two-sided).")
     lines += ["", *effects_markdown(summary)]
+    lines += ["", skipped_line(summary.get("skipped_houses") or {})]
     return "\n".join(lines) + "\n"
+
+
+def skipped_line(skipped: dict[str, dict[str, Any]]) -> str:
+    """One summary.md line: how many unusable houses each house set skipped, and the first few names."""
+    sets = [(spec, sk) for spec, sk in skipped.items() if sk["count"]]
+    if not sets:
+        return "Skipped houses: none (every house of every set was usable)."
+    parts = [f"{spec}: {sk['count']} ({', '.join(list(sk['houses'])[:3])}{', ...' if sk['count'] > 3 else ''})"
+             for spec, sk in sets]
+    return "Skipped houses (cannot be used; reasons in summary.json): " + "; ".join(parts) + "."
 
 
 def _p(value: float | None) -> str:

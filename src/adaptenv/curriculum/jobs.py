@@ -10,6 +10,7 @@ the same numbers.
 from __future__ import annotations
 
 import functools
+from collections.abc import Iterable
 from dataclasses import asdict, dataclass, field
 from typing import TYPE_CHECKING, Any, Literal
 
@@ -27,6 +28,7 @@ from adaptenv.agents.evaluate import EpisodeResult, Recorded, run_episodes, samp
 from adaptenv.agents.houses import HouseSet, load_house_set
 from adaptenv.agents.policy import ExpertPolicy
 from adaptenv.agents.rollout import run_recorded
+from adaptenv.curriculum.records import SkippedHouses
 from adaptenv.scene.house import House
 from adaptenv.sim.task import Episode, sample_episode
 from adaptenv.sim.trajectory import Trajectory
@@ -70,6 +72,12 @@ class PolicyWeights:
 def heldout_set(spec: str) -> HouseSet:
     """The compiled house set of ``spec``, loaded once per process (held-out sets never change)."""
     return load_house_set(spec)
+
+
+def skipped_houses(specs: Iterable[str]) -> dict[str, SkippedHouses]:
+    """Per house-set spec, the houses it skips (count, names and reasons) as a run records them."""
+    return {spec: SkippedHouses(count=len(s := heldout_set(spec).skipped), houses={h.name: h.reason for h in s})
+            for spec in dict.fromkeys(specs)}
 
 
 @dataclass(frozen=True)

@@ -57,6 +57,7 @@ from adaptenv.curriculum.jobs import (
     heldout_set,
     run_eval,
     run_rollout,
+    skipped_houses,
 )
 from adaptenv.curriculum.llm_usage import budget_left, iteration_lines, record_iteration
 from adaptenv.curriculum.methods import METHODS, Iteration, Stream
@@ -210,8 +211,9 @@ def run_loop(cfg: LoopConfig, run_dir: str | Path, *, resume: bool = False, exec
     run_dir = Path(run_dir)
     say = progress or (lambda text: None)
     state, records, command = _open_run(cfg, run_dir, resume, command)
+    skipped = skipped_houses([cfg.houses, *cfg.heldout.values()])
     atomic_write_text(run_dir / "run.json", RunInfo(method=cfg.method, seed=cfg.seed, config=asdict(cfg),
-                                                    command=command).model_dump_json(indent=1))
+                                                    command=command, skipped_houses=skipped).model_dump_json(indent=1))
     store = SceneStore(run_dir / "scenes")
     ex = executor if executor is not None else InProcessExecutor()
     method = METHODS[cfg.method]()

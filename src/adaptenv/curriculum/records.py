@@ -3,7 +3,7 @@
 The loop writes, the report reads; both go through these models, so the layout lives here only::
 
     RUN_DIR/
-      run.json                      RunInfo: method, seed, config, command
+      run.json                      RunInfo: method, seed, config, command, skipped (unusable) houses
       iterations.jsonl              one IterationRecord per finished iteration (append-only)
       iterations.csv                the same figures, flat, for spreadsheets
       iter_0001/
@@ -108,13 +108,23 @@ class IterationRecord(BaseModel):
     """LLM tokens, calls, retries, cache hits (and cost when priced) of this iteration, per role (ours-llm)."""
 
 
+class SkippedHouses(BaseModel):
+    """The houses of one house set (``--houses`` or a held-out spec) that could not be used and were skipped."""
+
+    count: int = 0
+    houses: dict[str, str] = Field(default_factory=dict)
+    """House name -> why it cannot be used (one sentence)."""
+
+
 class RunInfo(BaseModel):
-    """Which method and seed a run is, and the config it ran with."""
+    """Which method and seed a run is, the config it ran with, and the houses its sets skipped."""
 
     method: str
     seed: int
     config: dict[str, Any] = Field(default_factory=dict)
     command: str = ""
+    skipped_houses: dict[str, SkippedHouses] = Field(default_factory=dict)
+    """Per house-set spec (training houses and held-out sets), the unusable houses left out of it."""
 
 
 def atomic_write_text(path: Path, text: str) -> Path:

@@ -56,6 +56,28 @@ def footprint_corners(cx: float, cz: float, size_x: float, size_z: float, yaw_de
     return np.stack([c - hx * ux - hz * uz, c + hx * ux - hz * uz, c + hx * ux + hz * uz, c - hx * ux + hz * uz])
 
 
+def pose_outline(local: np.ndarray, cx: float, cz: float, yaw_deg: float) -> np.ndarray:
+    """World (x, z) points of local (x, z) points (..., 2) of an object centred at (cx, cz) turned by yaw."""
+    ux, uz = yaw_axes(yaw_deg)
+    local = np.asarray(local, dtype=float)
+    return np.array([cx, cz]) + local[..., :1] * ux + local[..., 1:] * uz
+
+
+def convex_pieces(local: np.ndarray) -> np.ndarray:
+    """Convex pieces (C, 4, 2) whose union is the simple polygon ``local`` (N, 2).
+
+    A 4-vertex convex outline (every box) is its own single piece; any other outline (an L or C
+    counter, a user asset's footprint) is cut into triangles, each repeating its last vertex.
+    """
+    local = np.asarray(local, dtype=float)
+    poly = Polygon(local)
+    if len(local) == 4 and poly.convex_hull.area - poly.area <= 1e-9 * max(poly.area, 1e-12):
+        return local[None].copy()
+    tris = shapely.get_parts(shapely.constrained_delaunay_triangles(poly))
+    pts = [np.asarray(t.exterior.coords)[:3] for t in tris if t.area > 1e-12]
+    return np.array([[a, b, c, c] for a, b, c in pts], dtype=float).reshape(-1, 4, 2)
+
+
 @dataclass(frozen=True)
 class Footprint:
     """The floor rectangle of one object plus what consumers need to know about it."""
@@ -80,13 +102,28 @@ class Footprint:
         return footprint_corners(self.center[0], self.center[1], self.size[0], self.size[1], self.yaw)
 
     @cached_property
+    def local_outline(self) -> np.ndarray:
+        """Local (x, z) vertices (N, 2) of the true floor outline: the shape when set, else the box."""
+        if self.shape is None:
+            return footprint_corners(0.0, 0.0, self.size[0], self.size[1], 0.0)
+        return np.asarray(self.shape, dtype=float)
+
+    @cached_property
     def outline(self) -> np.ndarray:
-        """World (x, z) vertices (N, 2) of the true floor outline: the shape when set, else the corners."""
+        """World (x, z) vertices (N, 2) of the true floor outline: the shape when set, else the corners.
+
+        The one footprint every consumer uses: simulator and validation rasters, the renderer,
+        collision-aware placement (through :attr:`local_pieces`), the in-room checks and the scene
+        graph's relations.
+        """
         if self.shape is None:
             return self.corners
-        ux, uz = yaw_axes(self.yaw)
-        local = np.asarray(self.shape, dtype=float)
-        return np.asarray(self.center) + local[:, :1] * ux + local[:, 1:] * uz
+        return pose_outline(self.local_outline, self.center[0], self.center[1], self.yaw)
+
+    @cached_property
+    def local_pieces(self) -> np.ndarray:
+        """Convex pieces (C, 4, 2) of :attr:`local_outline` (one for a box), for separating-axis tests."""
+        return convex_pieces(self.local_outline)
 
     @cached_property
     def polygon(self) -> Polygon:
@@ -97,6 +134,23 @@ class Footprint:
     def occludes(self) -> bool:
         """Tall objects block line of sight; low ones (beds, tables, chairs) do not."""
         return self.height >= OCCLUDER_MIN_HEIGHT
+
+
+def footprint_room(fp: Footprint, rooms: dict[str, Polygon]) -> str | None:
+    """The room an object stands in, by its true footprint: the room covering its centre when the centre
+    lies on the footprint (every box), else the room holding most of the footprint (None: no room).
+
+    The centre of an L or C counter's bounding box can lie in the floor it wraps around, even
+    outside the room; its outline cannot.
+    """
+    centre = shapely.Point(fp.center)
+    if fp.shape is None or fp.polygon.covers(centre):
+        for rid, poly in rooms.items():
+            if poly.covers(centre):
+                return rid
+    areas = {rid: poly.intersection(fp.polygon).area for rid, poly in rooms.items()}
+    best = max(areas, key=areas.get, default=None)
+    return best if best is not None and areas[best] > 0 else None
 
 
 def object_footprint(obj: HouseObject, catalog: AssetCatalog, *, is_child: bool = False) -> Footprint:

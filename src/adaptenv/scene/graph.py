@@ -8,6 +8,10 @@ position). Relations ``R`` are :class:`Relation` triples ``(kind, subject, objec
 - ``on``: child -> parent (a small object resting on furniture).
 - ``next_to``: floor object <-> floor object whose footprints are within :data:`NEXT_TO_DISTANCE`
   with no wall between them. Symmetric; stored once per pair.
+
+Footprints are the true floor outlines (:attr:`adaptenv.scene.geometry.Footprint.polygon`, the
+shape the simulator uses): an object standing in the floor an L counter wraps around is ``next_to``
+it only when it comes within :data:`NEXT_TO_DISTANCE` of an arm, and ``faces`` rays hit the arms.
 - ``against_wall``: object -> wall id (the side in the object's room); its footprint's back edge
   runs alongside a blocking wall within :data:`AGAINST_WALL_DISTANCE` and its front points away
   from that wall (within :data:`AGAINST_WALL_ANGLE`).
@@ -32,7 +36,14 @@ import numpy as np
 import shapely
 
 from adaptenv.scene.assets import AssetCatalog, ObjectRole, load_catalog
-from adaptenv.scene.geometry import Footprint, SceneGeometry, WallSegment, heading, object_footprint
+from adaptenv.scene.geometry import (
+    Footprint,
+    SceneGeometry,
+    WallSegment,
+    footprint_room,
+    heading,
+    object_footprint,
+)
 from adaptenv.scene.house import House
 
 RelationKind = Literal["in_room", "on", "next_to", "against_wall", "faces"]
@@ -155,7 +166,8 @@ def build_scene_graph(house: House, geometry: SceneGeometry | None = None,
 
 def _rooms_of(footprints: list[Footprint], geometry: SceneGeometry) -> list[str | None]:
     """Room of each object: the room covering its centre nudged 5 cm forward (so wall decor lands in
-    the room it faces), else its centre, else the room its footprint overlaps most."""
+    the room it faces), else its centre, else the room its footprint overlaps most; objects with a
+    shape of their own (L and C counters) by :func:`~adaptenv.scene.geometry.footprint_room`."""
     centres = np.array([fp.center for fp in footprints], dtype=float).reshape(-1, 2)
     fronts = np.array([heading(fp.yaw) for fp in footprints], dtype=float).reshape(-1, 2)
     out: list[str | None] = [None] * len(footprints)
@@ -165,10 +177,8 @@ def _rooms_of(footprints: list[Footprint], geometry: SceneGeometry) -> list[str 
                 if out[k] is None:
                     out[k] = rid
     for k, fp in enumerate(footprints):
-        if out[k] is None:
-            areas = {rid: poly.intersection(fp.polygon).area for rid, poly in geometry.rooms.items()}
-            best = max(areas, key=areas.get, default=None)
-            out[k] = best if best is not None and areas[best] > 0 else None
+        if out[k] is None or fp.shape is not None:  # an L counter's centre may lie off its outline
+            out[k] = footprint_room(fp, geometry.rooms)
     return out
 
 

@@ -21,8 +21,8 @@ import shapely
 from shapely.geometry import Point, Polygon
 
 from adaptenv.errors import HouseError, Problem
-from adaptenv.scene.assets import ROOM_TYPES, AssetCatalog, load_catalog, object_role
-from adaptenv.scene.geometry import footprint_corners, wall_floor_segment
+from adaptenv.scene.assets import ROOM_TYPES, AssetCatalog, load_catalog
+from adaptenv.scene.geometry import object_footprint, wall_floor_segment
 from adaptenv.scene.house import (
     House,
     HouseObject,
@@ -183,8 +183,8 @@ def _check_opening(house: House, op: Opening, loc: tuple, wall_ids: set[str], ro
 def _check_objects(house: House, floor, catalog: AssetCatalog, add) -> None:
     """Asset ids, unique ids and placement of top-level objects and their children."""
     seen: dict[str, str] = {}
-    tops: list[tuple[int, str, np.ndarray]] = []  # (index, role, footprint corners)
-    kids: list[tuple[int, int, np.ndarray | None]] = []  # (parent index, child index, parent corners)
+    tops: list[tuple[int, str, np.ndarray]] = []  # (index, role, true footprint outline)
+    kids: list[tuple[int, int, np.ndarray | None]] = []  # (parent index, child index, parent outline)
     unknown: dict[str, tuple] = {}  # unknown asset id -> location of its first use
     for i, obj in enumerate(house.objects):
         found = _check_object(obj, ("objects", i), seen, catalog, add, unknown, is_child=False)
@@ -206,7 +206,7 @@ def _check_objects(house: House, floor, catalog: AssetCatalog, add) -> None:
     shapely.prepare(floor_tol)
     bbox = Polygon.from_bounds(*floor.bounds).buffer(PLACEMENT_TOLERANCE)
     objs = house.objects
-    inside = shapely.covers(floor_tol, shapely.polygons(np.array([c for _, _, c in tops]).reshape(-1, 4, 2)))
+    inside = shapely.covers(floor_tol, [Polygon(c) for _, _, c in tops])
     centers = np.array([(objs[i].position.x, objs[i].position.z) for i, _, _ in tops]).reshape(-1, 2)
     in_bbox = shapely.covers(bbox, shapely.points(centers))
     for (i, role, _), ok, ok_bbox in zip(tops, inside, in_bbox, strict=True):
@@ -232,7 +232,7 @@ def _check_objects(house: House, floor, catalog: AssetCatalog, add) -> None:
 def _check_object(obj: HouseObject, loc: tuple, seen: dict[str, str], catalog: AssetCatalog,
                   add, unknown: dict[str, tuple], *, is_child: bool) -> tuple[str, np.ndarray] | None:
     """Unique id and known asset of one object (unknown ids are collected in ``unknown``); returns
-    (role, footprint corners) when the asset is known."""
+    (role, true footprint outline) when the asset is known."""
     if obj.id in seen:
         add((*loc, "id"), f"the object id {obj.id!r} is already used by {seen[obj.id]}; give every object a unique id")
     else:
@@ -243,9 +243,8 @@ def _check_object(obj: HouseObject, loc: tuple, seen: dict[str, str], catalog: A
         return None
     if is_child:
         return "small", np.empty((0, 2))
-    sx, sy, sz = asset.size
-    role = object_role(asset.object_type, obj.position.y - sy / 2.0, is_child=False)
-    return role, footprint_corners(obj.position.x, obj.position.z, sx, sz, obj.rotation.y)
+    fp = object_footprint(obj, catalog)
+    return fp.role, fp.outline
 
 
 def _check_agent(house: House, floor, add) -> None:
