@@ -6,7 +6,6 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from adaptenv.adapt.analysis import analyze_trajectory
 from adaptenv.adapt.diagnosis import SceneDiagnosis
 from adaptenv.adapt.generators import GenerationContext, make_generator
 from adaptenv.adapt.generators.failure_modes import (
@@ -20,23 +19,17 @@ from adaptenv.adapt.generators.failure_modes import (
 from adaptenv.adapt.objectives import RouteSpec, measure, route_points, visibility_fraction
 from adaptenv.adapt.validation import EditValidator, validate_scene
 from adaptenv.agents.policy import ExpertPolicy, StepFunctionPolicy
-from adaptenv.agents.rollout import draw_episode, rollout
 from adaptenv.scene.geometry import SceneGeometry
 from adaptenv.sim.rollout import expert_policy, run_episode
 from adaptenv.sim.spec import ACTIONS
 from adaptenv.sim.world import compile_world
+from tests.adapt.scenes import procedural_scene
 
 
 @pytest.fixture(scope="module")
 def scene():
     """A procedural 4-room house, an episode of at least 2.5 m and the expert's rollout and analysis."""
-    from adaptenv.scene.procedural import GenerationConfig, generate_house
-
-    house = generate_house(5, GenerationConfig(n_rooms=4))
-    world = compile_world(house, "h")
-    ep = draw_episode(world, np.random.default_rng([1, 1]))
-    traj = rollout(world, ep, ExpertPolicy())
-    return house, world, ep, traj, analyze_trajectory(traj, world)
+    return procedural_scene(5, 4, [1, 1])
 
 
 def _diagnosis(*families: str) -> SceneDiagnosis:

@@ -7,7 +7,6 @@ import math
 import numpy as np
 import pytest
 
-from adaptenv.adapt.analysis import analyze_trajectory
 from adaptenv.adapt.edits import replay
 from adaptenv.adapt.generators import GenerationContext, Generator, make_generator
 from adaptenv.adapt.generators.builtin import BuiltinGenerator
@@ -23,26 +22,20 @@ from adaptenv.adapt.objectives import (
 from adaptenv.adapt.validation import validate_scene
 from adaptenv.adapt.verification import Check, check_objective, revise_until_verified
 from adaptenv.agents.policy import ExpertPolicy
-from adaptenv.agents.rollout import draw_episode, rollout
 from adaptenv.errors import ConfigError
 from adaptenv.scene.validate import validate_house
 from adaptenv.sim.geodesic import distance_field, field_at
 from adaptenv.sim.rollout import expert_policy, run_episode
 from adaptenv.sim.world import compile_world
+from tests.adapt.scenes import procedural_scene
 from tests.sim import helpers as H
 
 
 @pytest.fixture(scope="module")
 def scene():
-    """A procedural 5-room house, an episode of at least 2.5 m, the expert's rollout and its analysis."""
-    from adaptenv.scene.procedural import GenerationConfig, generate_house
-
-    house = generate_house(3, GenerationConfig(n_rooms=5))
-    world = compile_world(house, "h")
-    ep = draw_episode(world, np.random.default_rng([0, 1]))
-    policy = ExpertPolicy()
-    traj = rollout(world, ep, policy)
-    return house, world, ep, policy, traj, analyze_trajectory(traj, world)
+    """A procedural 5-room house, an episode of at least 2.5 m, the expert (pi), its rollout and analysis."""
+    house, world, ep, traj, analysis = procedural_scene(3, 5, [0, 1])
+    return house, world, ep, ExpertPolicy(), traj, analysis
 
 
 @pytest.fixture(scope="module")

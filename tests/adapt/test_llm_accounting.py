@@ -8,75 +8,36 @@ from __future__ import annotations
 import json
 import threading
 
-import httpx2
 import numpy as np
 import pytest
 
-from adaptenv.adapt.analysis import LLMAnalyzer, analyze_trajectory
+from adaptenv.adapt.analysis import LLMAnalyzer
 from adaptenv.adapt.edits import replay
 from adaptenv.adapt.generators import GenerationContext
 from adaptenv.adapt.generators.llm import LLMGenerator
 from adaptenv.adapt.llm import ChatCompletionsBackend, LLMConfig
 from adaptenv.adapt.llm.prompts import PAPER_F_PROMPT, PAPER_G_PROMPT
-from adaptenv.sim.rollout import expert_policy, run_episode
-from adaptenv.sim.task import Episode
-from adaptenv.sim.world import compile_world
+from tests.adapt import llm_mock
 from tests.adapt import llm_server as srv
-from tests.sim import helpers as H
+from tests.adapt.llm_mock import move, poses, verify
 
 FAIL = (500, srv.error_body("the server fell over", "server_error"))
 
 
-class Mock:
-    """Scripted httpx2 replies in order (a callable reply gets the request body); records every body."""
+class Mock(llm_mock.Mock):
+    """No retries: a scripted failure is final."""
 
-    def __init__(self, *replies):
-        self.replies = list(replies)
-        self.bodies: list[dict] = []
-
-    def __call__(self, request: httpx2.Request) -> httpx2.Response:
-        self.bodies.append(json.loads(request.content))
-        status, body = self.replies.pop(0)
-        return httpx2.Response(status, json=body)
-
-    def backend(self, **cfg) -> ChatCompletionsBackend:
-        config = LLMConfig(provider="openai-compatible", base_url="http://127.0.0.1:9/v1", model="vlm",
-                           max_retries=0, **cfg)
-        return ChatCompletionsBackend(config, http_client=httpx2.Client(transport=httpx2.MockTransport(self)),
-                                      sleep=lambda s: None)
-
-
-def move(oid="CoffeeTable|2", xd="right", xu=5.0, yd="up", yu=0.0, rot=0.0) -> tuple[int, dict]:
-    return 200, srv.chat_tool_reply("propose_move_instruction", {
-        "object_id": oid, "x_direction": xd, "x_units": xu, "y_direction": yd, "y_units": yu, "rotation": rot})
-
-
-def verify(ok: bool, revised: dict | None = None) -> tuple[int, dict]:
-    return 200, srv.chat_tool_reply("verify_move", {"matches_intent": ok, "reason": "fine" if ok else "no",
-                                                    "revised_move": revised})
+    defaults = {"max_retries": 0}
 
 
 REVISED = {"object_id": "Desk|1", "x_direction": "right", "x_units": 4.0, "y_direction": "up", "y_units": 0.0,
            "rotation": 90.0}
 
 
-@pytest.fixture(scope="module")
-def scene():
-    house = H.corridor_house()
-    world = compile_world(house, "corridor")
-    ep = Episode("GarbageCan", (1.0, 0.5, 0.0))
-    traj = run_episode(world, ep, expert_policy())
-    return house, world, ep, traj, analyze_trajectory(traj, world)
-
-
-def _generate(scene, backend, steps=1, **kw):
-    house, world, ep, traj, analysis = scene
+def _generate(llm_scene, backend, steps=1, **kw):
+    house, world, ep, traj, analysis = llm_scene
     ctx = GenerationContext(episode=ep, trajectory=traj, render_size=256)
     return LLMGenerator(backend, **kw).generate(house, analysis, steps=steps, context=ctx, rng=np.random.default_rng(0))
-
-
-def poses(house) -> dict:
-    return {o.id: (round(o.position.x, 6), round(o.position.z, 6), round(o.rotation.y, 6)) for o in house.objects}
 
 
 def assert_house_matches_log(house, res) -> None:
@@ -98,9 +59,9 @@ FAILURE_POINTS = {
 
 
 @pytest.mark.parametrize("point", list(FAILURE_POINTS))
-def test_a_server_failure_at_any_point_leaves_house_and_log_in_agreement(scene, point):
-    house = scene[0]
-    res = _generate(scene, Mock(*FAILURE_POINTS[point]).backend(), steps=3)
+def test_a_server_failure_at_any_point_leaves_house_and_log_in_agreement(llm_scene, point):
+    house = llm_scene[0]
+    res = _generate(llm_scene, Mock(*FAILURE_POINTS[point]).backend(), steps=3)
     assert_house_matches_log(house, res)
     assert res.stopped.startswith("LLM unavailable") and res.steps[-1].status == "skipped"
     if point == "second step's verification":
@@ -113,9 +74,9 @@ def test_a_server_failure_at_any_point_leaves_house_and_log_in_agreement(scene, 
         assert res.edit_log.edits[-1].undone or not res.edit_log.edits[-1].changed
 
 
-def test_killing_the_server_mid_verification(scene):
+def test_killing_the_server_mid_verification(llm_scene):
     """The real SDK against a loopback server that shuts itself down when asked to verify."""
-    house = scene[0]
+    house = llm_scene[0]
     holder: dict = {}
 
     def die(body):
@@ -126,18 +87,18 @@ def test_killing_the_server_mid_verification(scene):
         holder["server"] = server
         cfg = LLMConfig(provider="openai-compatible", base_url=server.url, model="vlm", max_retries=2,
                         backoff_base_s=0.01, timeout_s=5)
-        res = _generate(scene, ChatCompletionsBackend(cfg), steps=2)
+        res = _generate(llm_scene, ChatCompletionsBackend(cfg), steps=2)
     assert_house_matches_log(house, res)
     assert poses(res.house) == poses(house) and [s.status for s in res.steps] == ["skipped"]
     assert server.url.removesuffix("/v1") in res.stopped, "the error names the server actually used"
     assert res.usage.calls == 1 and res.usage.records[0].role == "G"
 
 
-def test_zero_move_with_unchanged_heading_is_a_noop_asked_once_more(scene):
-    house = scene[0]
+def test_zero_move_with_unchanged_heading_is_a_noop_asked_once_more(llm_scene):
+    house = llm_scene[0]
     yaw = next(o.rotation.y for o in house.objects if o.id == "CoffeeTable|2") % 360
     mock = Mock(move(xu=0.0, rot=yaw), move(xu=0.0, rot=yaw))
-    res = _generate(scene, mock.backend())
+    res = _generate(llm_scene, mock.backend())
     (step,) = res.steps
     assert step.status == "no-op" and step.verified is None and not res.applied
     assert "changed nothing" in mock.bodies[1]["messages"][-1]["content"]
@@ -145,27 +106,27 @@ def test_zero_move_with_unchanged_heading_is_a_noop_asked_once_more(scene):
     assert_house_matches_log(house, res)
 
 
-def test_clamped_answers_are_recorded_in_the_edit_log(scene):
-    res = _generate(scene, Mock(move(xu=150.0, rot=-90.0), verify(True)).backend())
+def test_clamped_answers_are_recorded_in_the_edit_log(llm_scene):
+    res = _generate(llm_scene, Mock(move(xu=150.0, rot=-90.0), verify(True)).backend())
     intent = res.steps[0].edit.intent
     assert "clamped: x_units 150 -> 100, rotation -90 -> 270" in intent
     assert res.edit_log.edits[0].dx_units == 100.0
 
 
-def test_targets_only_with_allow_target_moves(scene):
+def test_targets_only_with_allow_target_moves(llm_scene):
     mock = Mock(move(oid="GarbageCan|0"), move(), verify(True))
-    res = _generate(scene, mock.backend())
+    res = _generate(llm_scene, mock.backend())
     assert "GarbageCan|0" not in mock.bodies[0]["tools"][0]["function"]["parameters"]["properties"]["object_id"]["enum"]
     assert res.steps[0].attempts == 2 and res.steps[0].edit.object_id == "CoffeeTable|2"
     allowed = Mock(move(oid="GarbageCan|0"), verify(True))
-    res = _generate(scene, allowed.backend(allow_target_moves=True))
+    res = _generate(llm_scene, allowed.backend(allow_target_moves=True))
     assert res.steps[0].edit.object_id == "GarbageCan|0" and res.steps[0].attempts == 1
 
 
-def test_paper_prompts_are_sent_verbatim(scene):
-    house, world, ep, traj, analysis = scene
+def test_paper_prompts_are_sent_verbatim(llm_scene):
+    house, world, ep, traj, analysis = llm_scene
     mock = Mock(move(), verify(True))
-    _generate(scene, mock.backend(prompts="paper"))
+    _generate(llm_scene, mock.backend(prompts="paper"))
     first = mock.bodies[0]["messages"]
     assert first[0]["role"] == "user", "the paper's G has no system message"
     assert first[0]["content"][0]["text"] == PAPER_G_PROMPT.format(analysis=analysis.to_text())

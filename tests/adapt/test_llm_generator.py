@@ -4,77 +4,31 @@ from __future__ import annotations
 
 import json
 
-import httpx2
 import numpy as np
-import pytest
 
-from adaptenv.adapt.analysis import LLMAnalyzer, analyze_trajectory
+from adaptenv.adapt.analysis import LLMAnalyzer
 from adaptenv.adapt.generators import GenerationContext
 from adaptenv.adapt.generators.llm import SYSTEM_PROMPT, LLMGenerator
-from adaptenv.adapt.llm import ChatCompletionsBackend, LLMConfig, move_tool
-from adaptenv.sim.rollout import expert_policy, run_episode
-from adaptenv.sim.task import Episode
-from adaptenv.sim.world import compile_world
+from adaptenv.adapt.llm import move_tool
 from tests.adapt import llm_server as srv
-from tests.sim import helpers as H
+from tests.adapt.llm_mock import Mock, move, poses, verify
 
 IDS = ["GarbageCan|0", "Desk|1", "CoffeeTable|2"]
 #: What G may move: the episode's target (a GarbageCan) is excluded by default.
 MOVABLE = ["Desk|1", "CoffeeTable|2"]
 
 
-class Mock:
-    """Scripted replies in order; records every request body."""
-
-    def __init__(self, *replies):
-        self.replies = list(replies)
-        self.bodies: list[dict] = []
-
-    def __call__(self, request: httpx2.Request) -> httpx2.Response:
-        self.bodies.append(json.loads(request.content))
-        status, body = self.replies.pop(0)
-        return httpx2.Response(status, json=body)
-
-    def backend(self, **cfg) -> ChatCompletionsBackend:
-        config = LLMConfig(provider="openai-compatible", base_url="http://127.0.0.1:9/v1", model="vlm", **cfg)
-        return ChatCompletionsBackend(config, http_client=httpx2.Client(transport=httpx2.MockTransport(self)),
-                                      sleep=lambda s: None)
-
-
-def move(oid="CoffeeTable|2", xd="right", xu=5.0, yd="up", yu=0.0, rot=0.0) -> tuple[int, dict]:
-    return 200, srv.chat_tool_reply("propose_move_instruction", {
-        "object_id": oid, "x_direction": xd, "x_units": xu, "y_direction": yd, "y_units": yu, "rotation": rot})
-
-
-def verify(ok: bool, revised: dict | None = None) -> tuple[int, dict]:
-    return 200, srv.chat_tool_reply("verify_move", {"matches_intent": ok, "reason": "looks right" if ok else "no",
-                                                    "revised_move": revised})
-
-
-@pytest.fixture(scope="module")
-def scene():
-    house = H.corridor_house()
-    world = compile_world(house, "corridor")
-    ep = Episode("GarbageCan", (1.0, 0.5, 0.0))
-    traj = run_episode(world, ep, expert_policy())
-    return house, world, ep, traj, analyze_trajectory(traj, world)
-
-
-def _run(scene, mock: Mock, steps: int = 1, **kw):
-    house, world, ep, traj, analysis = scene
+def _run(llm_scene, mock: Mock, steps: int = 1, **kw):
+    house, world, ep, traj, analysis = llm_scene
     ctx = GenerationContext(episode=ep, trajectory=traj, render_size=320)
     return LLMGenerator(mock.backend(), **kw).generate(house, analysis, steps=steps, context=ctx,
                                                        rng=np.random.default_rng(0))
 
 
-def _positions(house):
-    return {o.id: (round(o.position.x, 6), round(o.position.z, 6), round(o.rotation.y, 6)) for o in house.objects}
-
-
-def test_step_request_body_and_verification(scene):
-    house, world, ep, traj, analysis = scene
+def test_step_request_body_and_verification(llm_scene):
+    house, world, ep, traj, analysis = llm_scene
     mock = Mock(move(), verify(True))
-    res = _run(scene, mock)
+    res = _run(llm_scene, mock)
     first, second = mock.bodies
     assert first["messages"][0] == {"role": "system", "content": SYSTEM_PROMPT}
     user = first["messages"][1]
@@ -99,71 +53,71 @@ def test_step_request_body_and_verification(scene):
     assert step.edit.object_id == "CoffeeTable|2" and step.edit.achieved_dx_units > 0
     assert res.usage.calls == 2 and res.usage.total_tokens == 36
     assert [r.role for r in res.usage.records] == ["G", "verify"]
-    assert len(res.renders) == 1 and _positions(house) != _positions(res.house)
+    assert len(res.renders) == 1 and poses(house) != poses(res.house)
 
 
-def test_unknown_id_is_sent_back_and_the_retry_succeeds(scene):
+def test_unknown_id_is_sent_back_and_the_retry_succeeds(llm_scene):
     mock = Mock(move(oid="Sofa|9"), move(), verify(True))
-    res = _run(scene, mock)
+    res = _run(llm_scene, mock)
     retry = mock.bodies[1]["messages"]
     assert retry[-2]["role"] == "assistant" and "Sofa|9" in retry[-2]["content"]
     assert retry[-1]["role"] == "user" and "object_id 'Sofa|9' is not allowed" in retry[-1]["content"]
     assert res.steps[0].status == "applied" and res.steps[0].attempts == 2
 
 
-def test_three_bad_answers_skip_the_step_and_the_loop_goes_on(scene):
-    house = scene[0]
+def test_three_bad_answers_skip_the_step_and_the_loop_goes_on(llm_scene):
+    house = llm_scene[0]
     mock = Mock(move(oid="Nope"), move(xu="far"), (200, srv.chat_text_reply("I would move the sofa.")),
                 move(), verify(True))
-    res = _run(scene, mock, steps=2)
+    res = _run(llm_scene, mock, steps=2)
     skipped, applied = res.steps
     assert skipped.status == "skipped" and skipped.attempts == 3 and skipped.edit is None
     assert "no valid move after 3 answers" in skipped.reason
     assert applied.status == "applied" and len(res.edit_log) == 1
-    assert _positions(res.house) != _positions(house)
+    assert poses(res.house) != poses(house)
 
 
-def test_revise_replaces_the_move_from_the_scene_before_it(scene):
-    house = scene[0]
+def test_revise_replaces_the_move_from_the_scene_before_it(llm_scene):
+    house = llm_scene[0]
     revised = {"object_id": "Desk|1", "x_direction": "right", "x_units": 4.0, "y_direction": "up", "y_units": 0.0,
                "rotation": 90.0}
     mock = Mock(move(), verify(False, revised), verify(True))
-    res = _run(scene, mock)
+    res = _run(llm_scene, mock)
     (step,) = res.steps
     assert step.status == "applied" and step.revisions == 1 and step.verified is True
     assert [e.object_id for e in res.edit_log] == ["CoffeeTable|2", "Desk|1"]
-    before, after = _positions(house), _positions(res.house)
+    before, after = poses(house), poses(res.house)
     assert after["CoffeeTable|2"] == before["CoffeeTable|2"], "the first attempt must be undone"
     assert after["Desk|1"] != before["Desk|1"]
 
 
-def test_revise_without_a_revised_move_asks_for_a_new_one(scene):
+def test_revise_without_a_revised_move_asks_for_a_new_one(llm_scene):
     mock = Mock(move(), verify(False), move(oid="Desk|1", xu=3.0, rot=90.0), verify(True))
-    res = _run(scene, mock)
+    res = _run(llm_scene, mock)
     assert mock.bodies[2]["tool_choice"]["function"]["name"] == "propose_move_instruction"
     assert "replaces the previous one" in mock.bodies[2]["messages"][-1]["content"]
     assert res.steps[0].revisions == 1 and res.steps[0].edit.object_id == "Desk|1"
 
 
-def test_revisions_are_bounded(scene):
+def test_revisions_are_bounded(llm_scene):
     mock = Mock(move(), verify(False), move(xu=2.0), verify(False), move(xu=1.0), verify(False))
-    res = _run(scene, mock, max_revisions=2)
+    res = _run(llm_scene, mock, max_revisions=2)
     step = res.steps[0]
     assert step.revisions == 2 and step.verified is False and step.status == "applied"
     assert not mock.replies
 
 
-def test_malformed_json_never_raises(scene):
+def test_malformed_json_never_raises(llm_scene):
     bad = (200, srv.chat_tool_reply("propose_move_instruction", '{"object_id": "Desk|1", '))
     mock = Mock(bad, bad, bad)
-    res = _run(scene, mock)
+    res = _run(llm_scene, mock)
     assert res.steps[0].status == "skipped" and "not valid JSON" in res.steps[0].reason
     assert "were not valid JSON" in mock.bodies[1]["messages"][-1]["content"]
 
 
-def test_server_down_ends_the_run_with_a_reason(scene):
+def test_server_down_ends_the_run_with_a_reason(llm_scene):
     mock = Mock((500, srv.error_body("boom", "server_error")))
-    house, world, ep, traj, analysis = scene
+    house, world, ep, traj, analysis = llm_scene
     gen = LLMGenerator(mock.backend(max_retries=0))
     res = gen.generate(house, analysis, steps=3, context=GenerationContext(episode=ep, trajectory=traj, render_size=320),
                        rng=np.random.default_rng(0))
@@ -183,8 +137,8 @@ ANSWER = {"outcome": {"success": False, "failure_mode": "timeout", "summary": "k
                            "addresses": [1, 5], "priority": 0.9}]}
 
 
-def test_llm_analyzer_sends_the_render_and_converts_the_answer(scene):
-    house, world, ep, traj, _ = scene
+def test_llm_analyzer_sends_the_render_and_converts_the_answer(llm_scene):
+    house, world, ep, traj, _ = llm_scene
     mock = Mock((200, srv.chat_text_reply("not json")), (200, srv.chat_text_reply(json.dumps(ANSWER))))
     a = LLMAnalyzer(mock.backend(), image_size=320).analyze(traj, world)
     body = mock.bodies[0]
@@ -200,15 +154,15 @@ def test_llm_analyzer_sends_the_render_and_converts_the_answer(scene):
     assert a.suggestions[0].addresses == ["c1"] and a.suggestions[1].addresses == ["c2"]
 
 
-def test_llm_analyzer_falls_back_to_builtin(scene):
-    house, world, ep, traj, analysis = scene
+def test_llm_analyzer_falls_back_to_builtin(llm_scene):
+    house, world, ep, traj, analysis = llm_scene
     bad = (200, srv.chat_text_reply("{}"))
     a = LLMAnalyzer(Mock(bad, bad, bad).backend(), image_size=320).analyze(traj, world)
     assert a.source == "builtin-fallback" and a.concerns == analysis.concerns
 
 
-def test_invalid_verification_answers_leave_the_edit_unverified(scene):
+def test_invalid_verification_answers_leave_the_edit_unverified(llm_scene):
     bad = (200, srv.chat_tool_reply("verify_move", {"matches_intent": "yes"}))
-    res = _run(scene, Mock(move(), bad, bad, bad))
+    res = _run(llm_scene, Mock(move(), bad, bad, bad))
     step = res.steps[0]
     assert step.status == "applied" and step.verified is None and "verification skipped" in step.reason

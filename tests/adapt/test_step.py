@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import json
 
 import numpy as np
@@ -43,6 +44,10 @@ def test_adapt_scene_writes_a_valid_house_and_reports(house, tmp_path):
                       generator=make_generator("builtin", max_candidates=10), steps=2, rng=np.random.default_rng(1),
                       name="h")
     summary = summarize(res, analyzer=BuiltinAnalyzer(), seed=1)
+    # summarize reuses both compiled houses; compiling them afresh gives the same figures
+    assert res.original_world is not None and res.world is not None
+    fresh = summarize(dataclasses.replace(res, world=None, original_world=None), analyzer=BuiltinAnalyzer(), seed=1)
+    assert json.dumps(fresh, sort_keys=True, default=str) == json.dumps(summary, sort_keys=True, default=str)
     write_outputs(res, summary, tmp_path)
     names = {"house.json", "before.png", "after.png", "analysis.json", "edits.json", "summary.json",
              "trajectory_before.json", "trajectory_after.json"}

@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
+import pytest
 import torch
 from typer.testing import CliRunner
 
@@ -71,3 +72,31 @@ def test_cli_train_help_lists_every_config_field():
     assert res.exit_code == 0
     for flag in ("--houses", "--frames", "--output", "--init", "--seed", "--resume", "--chunk-len", "--beta-end"):
         assert flag in res.output
+
+
+def test_cli_train_starts_from_pretrained_and_says_when_no_final_evaluation_ran(tmp_path):
+    from adaptenv.agents.checkpoint import load_checkpoint
+    from adaptenv.agents.registry import pretrained_path
+
+    out = tmp_path / "p.pt"
+    res = CliRunner().invoke(app, [
+        "train", "--init", "pretrained", "--houses", "preset:tiny", "--frames", "64", "--num-envs", "4",
+        "--rollout-steps", "16", "--chunk-len", "8", "--batch-chunks", "2", "--updates-per-iter", "1",
+        "--buffer-frames", "64", "--calibrate-episodes", "0", "--eval-every", "0", "--final-eval-episodes", "0",
+        "--hidden", "32", "--feature-dim", "32", "--no-tensorboard", "--no-progress", "--no-overlap",
+        "-o", str(out), "--run-dir", str(tmp_path / "run")], env={"COLUMNS": "300"})
+    assert res.exit_code == 0, res.output
+    assert "no final evaluation was run" in res.output and "nan" not in res.output
+    # warm-started: the network is the shipped one's shape, not the fresh --hidden 32 one
+    assert load_checkpoint(out).net.config == load_checkpoint(pretrained_path()).net.config
+    assert load_checkpoint(out).net.config.hidden != 32
+
+
+def test_init_names_a_network_or_says_which_names_do():
+    from adaptenv.agents.registry import init_checkpoint, pretrained_path
+
+    assert init_checkpoint("pretrained") == pretrained_path()
+    assert init_checkpoint("runs/a.pt") == Path("runs/a.pt")
+    for spec in ("expert", "explorer", "random", "random:3", "examples/my_policy.py:policy"):
+        with pytest.raises(ConfigError, match=f"--init '{spec}': no network to start from; use pretrained"):
+            init_checkpoint(spec)

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import json
 
 import numpy as np
@@ -9,7 +10,8 @@ import pytest
 
 from adaptenv.agents.evaluate import EpisodeResult
 from adaptenv.curriculum import methods as M
-from adaptenv.curriculum.jobs import Rollout
+from adaptenv.curriculum.executor import InProcessExecutor
+from adaptenv.curriculum.jobs import Rollout, needs_policy, run_generate, run_rollout
 from adaptenv.curriculum.loop import LoopConfig, run_loop
 from adaptenv.sim.task import Episode
 
@@ -88,3 +90,36 @@ def test_a_new_method_is_one_class_and_one_registry_line(tiny_policy, tmp_path, 
     scenes = json.loads((tmp_path / "run" / "iter_0001" / "scenes.json").read_text())
     assert scenes["trained_on"] == scenes["rolled_out"] and len(scenes["rolled_out"]) == 2
     assert records[1].grad_updates > 0 and np.isfinite(records[1].heldout["tiny"].success)
+
+
+class RecordingExecutor(InProcessExecutor):
+    """In process, keeping every (function, item) the loop sends."""
+
+    def __init__(self) -> None:
+        self.calls: list[tuple] = []
+
+    def map(self, fn, items, *, desc=None):
+        items = list(items)
+        self.calls += [(fn, x) for x in items]
+        return super().map(fn, items, desc=desc)
+
+
+def test_only_generators_that_use_the_policy_get_it():
+    assert not needs_policy("random")
+    assert all(needs_policy(k) for k in ("builtin", "llm", "failure-modes", "regret-only"))
+
+
+@pytest.mark.slow
+def test_random_generate_jobs_carry_no_weights_and_make_the_same_child(tiny_policy, tmp_path):
+    ex = RecordingExecutor()
+    cfg = LoopConfig(method="random", policy=str(tiny_policy), houses="preset:tiny", heldout={"tiny": "preset:tiny"},
+                     iterations=1, scenes_per_iteration=2, edit_steps=2, finetune_frames=512, finetune_envs=16,
+                     heldout_episodes=2, gallery=1)
+    run_loop(cfg, tmp_path / "run", executor=ex)
+    jobs = [x for fn, x in ex.calls if fn is run_generate]
+    assert len(jobs) == 2 and all(j.kind == "random" and j.weights is None and j.rollout is None for j in jobs)
+    # pi_t would change nothing: the same job carrying the weights and rollout makes the identical child
+    rollouts = [x for fn, x in ex.calls if fn is run_rollout]
+    with_policy = dataclasses.replace(jobs[0], weights=rollouts[0].weights, rollout=run_rollout(rollouts[0]))
+    a, b = run_generate(jobs[0]), run_generate(with_policy)
+    assert a.edits > 0 and a.house.model_dump() == b.house.model_dump() and a.edit_log == b.edit_log

@@ -65,6 +65,8 @@ class AdaptResult:
     """F's multi-episode diagnosis of the original house (when ``adapt_scene`` was given ``episodes``)."""
     diagnosis_after: SceneDiagnosis | None = None
     """The same episodes diagnosed again in the edited house (its regret scores the child)."""
+    original_world: NavWorld | None = None
+    """The compiled original house e_t (reused by :func:`summarize` instead of compiling it again)."""
 
     @property
     def valid(self) -> bool:
@@ -121,16 +123,19 @@ def adapt_scene(house: House, episode: Episode, *, policy: Policy, analyzer: Ana
     new_world = compile_world(new, name)
     if diagnosed is None:
         after = rollout(new_world, episode, policy)
-        return AdaptResult(new, house, episode, analysis, generation, before, after, problems, new_world)
+        return AdaptResult(new, house, episode, analysis, generation, before, after, problems,
+                           world=new_world, original_world=world)
     again = diagnose_scene(new_world, diagnosed.episodes, policy)  # built-in F: the regret needs no model call
     return AdaptResult(new, house, episode, analysis, generation, before, again.trajectories[diagnosed.diagnosis.worst],
-                       problems, new_world, diagnosed.diagnosis, again.diagnosis)
+                       problems, world=new_world, diagnosis=diagnosed.diagnosis, diagnosis_after=again.diagnosis,
+                       original_world=world)
 
 
 def summarize(result: AdaptResult, *, analyzer: Analyzer, seed: int | None = None) -> dict[str, Any]:
     """The figures a person reads about one step: agent before/after, objectives, realism, expert check, LLM use."""
     ep = result.episode
-    world, new_world = compile_world(result.original, "before"), result.world or compile_world(result.house, "after")
+    world = result.original_world or compile_world(result.original, "before")
+    new_world = result.world or compile_world(result.house, "after")
     expert = rollout(new_world, ep, ExpertPolicy())
     route = RouteSpec.from_episode(ep.target_type, ep.start, result.before)
     gen = result.generation

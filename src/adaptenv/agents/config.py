@@ -18,7 +18,7 @@ class TrainConfig:
     output: str = "runs/policy.pt"
     """Policy checkpoint to write; its training card goes next to it with .json ('' writes none)."""
     init: str = ""
-    """Start from this checkpoint (fine-tuning) instead of random weights."""
+    """Start from this checkpoint (fine-tuning; 'pretrained' for the shipped one) instead of random weights."""
     seed: int = 0
     """Seed of torch, numpy and the episode sampler."""
     resume: bool = False

@@ -63,7 +63,7 @@ from adaptenv.agents.network import (
     count_parameters,
     obs_to_tensors,
 )
-from adaptenv.agents.registry import pretrained_path
+from adaptenv.agents.registry import init_checkpoint
 from adaptenv.agents.stop import calibrate_end_threshold
 from adaptenv.agents.train import RunLogger, TrainResult
 from adaptenv.errors import ConfigError
@@ -153,10 +153,8 @@ def _initial_net(cfg: PPOConfig, init_net: NavNet | None) -> NavNet:
         net = NavNet(init_net.config)
         net.load_state_dict(init_net.state_dict())
         return net
-    if cfg.init == "pretrained":
-        return load_checkpoint(pretrained_path()).net
     if cfg.init:
-        return load_checkpoint(cfg.init).net
+        return load_checkpoint(init_checkpoint(cfg.init)).net
     return NavNet(NetConfig(hidden=cfg.hidden, feature_dim=cfg.feature_dim))
 
 

@@ -49,6 +49,20 @@ def load_pretrained(*, greedy: bool = False, seed: int = 0) -> Policy:
     return policy
 
 
+def init_checkpoint(spec: str, *, flag: str = "--init") -> Path:
+    """The checkpoint a warm start (``--init``) names: ``pretrained`` for the shipped one, else a path.
+
+    The other ``--policy`` names (expert, explorer, random, module:attribute) have no network to
+    start from and raise ConfigError.
+    """
+    spec = spec.strip()
+    if spec == "pretrained":
+        return pretrained_path()
+    if spec in BUILTINS or spec.startswith("random:") or (":" in spec and Path(spec).suffix not in (".pt", ".pth")):
+        raise ConfigError(f"{flag} {spec!r}: no network to start from; use pretrained or a checkpoint path (.pt)")
+    return Path(spec)
+
+
 def resolve_policy(spec: str, *, seed: int = 0) -> Policy:
     """Build the policy named by ``spec`` (see the module docstring); unknown specs raise ConfigError."""
     spec = spec.strip()

@@ -65,6 +65,7 @@ from adaptenv.agents.network import (
     count_parameters,
     obs_to_tensors,
 )
+from adaptenv.agents.registry import init_checkpoint
 from adaptenv.agents.stop import calibrate_end_threshold
 from adaptenv.agents.teachers import make_teacher
 from adaptenv.errors import ConfigError
@@ -261,7 +262,7 @@ def train(cfg: TrainConfig, *, worlds: Sequence[NavWorld] | None = None, init_ne
         net = NavNet(init_net.config)
         net.load_state_dict(init_net.state_dict())
     elif cfg.init:
-        net = load_checkpoint(cfg.init).net
+        net = load_checkpoint(init_checkpoint(cfg.init)).net
     else:
         net = NavNet(NetConfig(hidden=cfg.hidden, feature_dim=cfg.feature_dim))
     hidden = net.config.hidden

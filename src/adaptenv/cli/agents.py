@@ -39,6 +39,14 @@ def _config_params(cls: type) -> list[inspect.Parameter]:
     return params
 
 
+def final_eval_text(card: dict) -> str:
+    """The training card's final evaluation in words ("no final evaluation" when it ran no episodes)."""
+    n = card["final_eval_episodes"]
+    if not n:
+        return "no final evaluation was run (--final-eval-episodes 0)"
+    return f"success on fresh training episodes {card['final_train_success']:.1%} (n={n})"
+
+
 def _train_command():
     """Build ``adaptenv train`` from TrainConfig: one option per field, its docstring as the help."""
     from adaptenv.agents.config import TrainConfig
@@ -58,8 +66,7 @@ def _train_command():
         card = result.card
         Console().print(
             f"trained on {card['n_houses']} houses ({card['houses']}): {card['frames']:,} frames in "
-            f"{card['wall_time_s']:.0f} s; success on fresh training episodes "
-            f"{card['final_train_success']:.1%} (n={card['final_eval_episodes']})"
+            f"{card['wall_time_s']:.0f} s; {final_eval_text(card)}"
             + (f"; wrote [bold]{cfg.output}[/]" if cfg.output else ""))
 
     train.__signature__ = inspect.Signature(params)  # type: ignore[attr-defined]
@@ -81,8 +88,7 @@ def _ppo_command():
         card = result.card
         Console().print(
             f"PPO on {card['n_houses']} houses ({card['houses']}): {card['frames']:,} frames in "
-            f"{card['wall_time_s']:.0f} s; end threshold {card['end_threshold']}; success on fresh training "
-            f"episodes {card['final_train_success']:.1%} (n={card['final_eval_episodes']})"
+            f"{card['wall_time_s']:.0f} s; end threshold {card['end_threshold']}; {final_eval_text(card)}"
             + (f"; wrote [bold]{cfg.output}[/]" if cfg.output else ""))
 
     ppo.__signature__ = inspect.Signature(_config_params(PPOConfig))  # type: ignore[attr-defined]

@@ -142,6 +142,11 @@ def run_rollout(job: RolloutJob) -> Rollout:
 GeneratorKind = Literal["random", "builtin", "llm", "failure-modes", "regret-only"]
 
 
+def needs_policy(kind: GeneratorKind) -> bool:
+    """Whether a generation job of this kind uses pi_t and its rollout (every G but ``random`` edits)."""
+    return kind != "random"
+
+
 @dataclass(frozen=True)
 class GenerateJob:
     """Make one new scene from a parent: ``random`` single-object edits, or the adaptation step with F and G."""
@@ -154,7 +159,7 @@ class GenerateJob:
     seed: tuple[int, ...]
     """Seed words of the job's generator (``np.random.default_rng(seed)``)."""
     weights: PolicyWeights | None = None
-    """pi_t: G checks its candidate edits against it and the child is rolled out with it."""
+    """pi_t: G checks its candidate edits against it and the child is rolled out with it (None for ``random``)."""
     rollout: Rollout | None = None
     """pi_t's episode in the parent (what F analyses); required for ``builtin`` and ``llm``."""
     llm: dict[str, Any] = field(default_factory=dict)

@@ -33,6 +33,7 @@ from adaptenv.curriculum.jobs import (
     GeneratorKind,
     PolicyWeights,
     Rollout,
+    needs_policy,
     run_generate,
 )
 from adaptenv.curriculum.records import GalleryItem, SceneStore
@@ -161,8 +162,10 @@ class EditingMethod(Method):
     replaces_parents = True
 
     def make_scenes(self, it: Iteration, rolled: list[str], rollouts: list[Rollout]) -> list[str]:
+        policy = needs_policy(self.generator)  # random edits ignore pi_t: no weights to pickle per job
         jobs = [GenerateJob(self.generator, it.store.house(name), name, it.cfg.edit_steps,
-                            (it.cfg.seed, it.t, Stream.GENERATE + k), weights=it.weights, rollout=ro, llm=it.cfg.llm)
+                            (it.cfg.seed, it.t, Stream.GENERATE + k), weights=it.weights if policy else None,
+                            rollout=ro if policy else None, llm=it.cfg.llm)
                 for k, (name, ro) in enumerate(zip(rolled, rollouts, strict=True))]
         new = []
         for k, (job, made) in enumerate(zip(jobs, it.executor.map(run_generate, jobs, desc="generation"), strict=True)):

@@ -144,32 +144,14 @@ def shortest_paths(nav: np.ndarray, sources: np.ndarray, res: float,
 
 
 @numba.njit(cache=True)
-def _region(clear, occ, lab, x0, z0, res, radius, pts, plab, max_d, out):
-    """Mark navigable cells whose centre sees some sample point within max_d (any yaw)."""
-    h, w = clear.shape
-    reach = int(math.ceil(max_d / res)) + 1
-    max_d2 = max_d * max_d
-    for p in range(pts.shape[0]):
-        px, pz = pts[p, 0], pts[p, 1]
-        pc = int(math.floor((px - x0) / res))
-        pr = int(math.floor((pz - z0) / res))
-        for row in range(max(0, pr - reach), min(h, pr + reach + 1)):
-            cz = z0 + (row + 0.5) * res
-            for col in range(max(0, pc - reach), min(w, pc + reach + 1)):
-                if out[row, col] or clear[row, col] < radius:
-                    continue
-                cx = x0 + (col + 0.5) * res
-                dx, dz = px - cx, pz - cz
-                if dx * dx + dz * dz > max_d2:
-                    continue
-                if los_clear(occ, lab, x0, z0, res, cx, cz, px, pz, plab[p]):
-                    out[row, col] = True
+def _scan_region(mask, occ, lab, x0, z0, res, pts, plab, max_d, out, first):
+    """Mark in ``out`` the cells of ``mask`` whose centre sees some sample point within max_d (any yaw).
 
-
-@numba.njit(cache=True)
-def _first_region_cell(mask, occ, lab, x0, z0, res, pts, plab, max_d):
-    """The first cell (flat index) of ``mask`` that sees a sample point within max_d, -1 if none:
-    :func:`_region` restricted to ``mask`` (instead of clearance >= radius), stopping there."""
+    With ``first`` it stops at the first such cell and returns its flat index (-1 when there is none);
+    otherwise it marks them all and returns -1. One kernel for both: beside the two former twin kernels
+    (CPU time, one process, shared machine) it took 0.995-1.002x their time for whole regions and
+    1.005-1.009x for first cells.
+    """
     h, w = mask.shape
     reach = int(math.ceil(max_d / res)) + 1
     max_d2 = max_d * max_d
@@ -180,14 +162,16 @@ def _first_region_cell(mask, occ, lab, x0, z0, res, pts, plab, max_d):
         for row in range(max(0, pr - reach), min(h, pr + reach + 1)):
             cz = z0 + (row + 0.5) * res
             for col in range(max(0, pc - reach), min(w, pc + reach + 1)):
-                if not mask[row, col]:
+                if not mask[row, col] or out[row, col]:
                     continue
                 cx = x0 + (col + 0.5) * res
                 dx, dz = px - cx, pz - cz
                 if dx * dx + dz * dz > max_d2:
                     continue
                 if los_clear(occ, lab, x0, z0, res, cx, cz, px, pz, plab[p]):
-                    return row * w + col
+                    if first:
+                        return row * w + col
+                    out[row, col] = True
     return -1
 
 
@@ -202,9 +186,11 @@ def first_region_cell(mask: np.ndarray, occluder: np.ndarray, label: np.ndarray,
     """
     if not len(points):
         return -1
-    return int(_first_region_cell(mask, occluder, label, float(x0), float(z0), float(res),
-                                  np.ascontiguousarray(points, dtype=np.float64),
-                                  np.ascontiguousarray(point_labels, dtype=np.int64), SUCCESS_DISTANCE))
+    mask = np.ascontiguousarray(mask, dtype=np.bool_)
+    return int(_scan_region(mask, occluder, label, float(x0), float(z0), float(res),
+                            np.ascontiguousarray(points, dtype=np.float64),
+                            np.ascontiguousarray(point_labels, dtype=np.int64), SUCCESS_DISTANCE,
+                            np.zeros(mask.shape, dtype=np.bool_), True))
 
 
 def success_region(world: NavWorld, target_type: str) -> np.ndarray:
@@ -229,8 +215,8 @@ def _compute_region(world: NavWorld, target_type: str) -> np.ndarray:
     out = np.zeros(g.shape, dtype=np.bool_)
     tp = target_points(world, target_type)
     if len(tp.points):
-        _region(g.clearance, world.occluder, g.label, g.x0, g.z0, g.resolution, AGENT_RADIUS,
-                tp.points, tp.label, SUCCESS_DISTANCE, out)
+        _scan_region(navigable(world), world.occluder, g.label, g.x0, g.z0, g.resolution,
+                     tp.points, tp.label, SUCCESS_DISTANCE, out, False)
     return out & enterable(world)
 
 

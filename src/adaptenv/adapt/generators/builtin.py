@@ -119,15 +119,8 @@ class BuiltinGenerator:
     # ----------------------------------------------------------------------------- the loop
     def generate(self, house: House, analysis: Analysis, *, steps: int, context: GenerationContext,
                  rng: np.random.Generator) -> GenerationResult:
-        ep = context.episode
-        route = RouteSpec.from_episode(ep.target_type, ep.start, context.trajectory)
-        v = EditValidator(house, episode_targets=[ep.target_type], start=ep.start[:2])
-        original = house
-        world = compile_world(v.house, "candidate")
-        values = measure(world, route)
-        realism = realism_score(v.house, original)
-        result = GenerationResult(house=v.house, steps=[], edit_log=v.log, generator=self.name,
-                                  objective_trace=[values.as_dict()])
+        ep, original = context.episode, house
+        route, v, world, values, realism, result = self._begin(house, context)
         suggestions = sorted(analysis.suggestions, key=lambda s: -s.priority)
         targets = {t.object_id for t in world.instances_of(ep.target_type)}
         for step in range(steps):
@@ -168,17 +161,34 @@ class BuiltinGenerator:
                 result.steps.append(record)
                 continue
             record.gain = gain(sug.kind, values, chosen.values)
-            world = compile_world(v.house, "candidate")
-            values, realism = chosen.values, chosen.realism
-            record.status, record.edit = "applied", edit
-            record.objective_after = values.as_dict()
-            result.objective_trace.append(values.as_dict())
-            if context.render:
-                record.render = keep_render(result, render_scene(v.house, context, highlight={edit.object_id: "gold"}),
-                                            context, step)
-            result.steps.append(record)
+            world, values, realism = self._applied(v, chosen, edit, record, result, context, step)
         result.house = v.house
         return result
+
+    def _begin(self, house: House, context: GenerationContext
+               ) -> tuple[RouteSpec, EditValidator, NavWorld, ObjectiveValues, float, GenerationResult]:
+        """The search's start: the route of pi_t's episode, a validator over ``house`` (the scene so far), its
+        compiled world, objective values and realism, and a result with the first objective trace entry."""
+        ep = context.episode
+        route = RouteSpec.from_episode(ep.target_type, ep.start, context.trajectory)
+        v = EditValidator(house, episode_targets=[ep.target_type], start=ep.start[:2])
+        world = compile_world(v.house, "candidate")
+        values = measure(world, route)
+        result = GenerationResult(house=v.house, steps=[], edit_log=v.log, generator=self.name,
+                                  objective_trace=[values.as_dict()])
+        return route, v, world, values, realism_score(v.house, house), result
+
+    def _applied(self, v: EditValidator, chosen: Candidate, edit: Edit, record: StepRecord, result: GenerationResult,
+                 context: GenerationContext, step: int) -> tuple[NavWorld, ObjectiveValues, float | None]:
+        """Record a committed edit (status, objectives, trace, render) and return the new scene's world,
+        objective values and realism for the next step."""
+        record.status, record.edit, record.objective_after = "applied", edit, chosen.values.as_dict()
+        result.objective_trace.append(chosen.values.as_dict())
+        if context.render:
+            record.render = keep_render(result, render_scene(v.house, context, highlight={edit.object_id: "gold"}),
+                                        context, step)
+        result.steps.append(record)
+        return compile_world(v.house, "candidate"), chosen.values, chosen.realism
 
     # ----------------------------------------------------------------------------- candidates
     def _candidates(self, v: EditValidator, world: NavWorld, route: RouteSpec, targets: set[str],

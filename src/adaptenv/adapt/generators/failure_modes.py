@@ -38,8 +38,6 @@ from adaptenv.adapt.generators import (
     GenerationContext,
     GenerationResult,
     StepRecord,
-    keep_render,
-    render_scene,
 )
 from adaptenv.adapt.generators.builtin import BuiltinGenerator, Candidate
 from adaptenv.adapt.objectives import (
@@ -47,8 +45,6 @@ from adaptenv.adapt.objectives import (
     MAX_VISIBILITY_POINTS,
     ObjectiveValues,
     RouteSpec,
-    measure,
-    realism_score,
     route_points,
     shortest_route,
     visibility_fraction,
@@ -63,7 +59,7 @@ from adaptenv.sim.metrics import episode_metrics
 from adaptenv.sim.spec import MAX_RANGE
 from adaptenv.sim.task import Episode, visible_points
 from adaptenv.sim.trajectory import Trajectory
-from adaptenv.sim.world import NavWorld, compile_world
+from adaptenv.sim.world import NavWorld
 
 #: Objects within this distance (m) of the route count as distractors (weight falls linearly to 0).
 DISTRACTOR_RANGE = 2.0
@@ -213,13 +209,7 @@ class FailureModeGenerator(BuiltinGenerator):
     def generate(self, house: House, analysis: Analysis, *, steps: int, context: GenerationContext,
                  rng: np.random.Generator) -> GenerationResult:
         ep = context.episode
-        route = RouteSpec.from_episode(ep.target_type, ep.start, context.trajectory)
-        v = EditValidator(house, episode_targets=[ep.target_type], start=ep.start[:2])
-        world = compile_world(v.house, "candidate")
-        values = measure(world, route)
-        realism = realism_score(v.house, house)
-        result = GenerationResult(house=v.house, steps=[], edit_log=v.log, generator=self.name,
-                                  objective_trace=[values.as_dict()])
+        route, v, world, values, realism, result = self._begin(house, context)
         plan = mode_plan(context.diagnosis, analysis)
         for step in range(steps):
             family = plan[step % len(plan)]
@@ -262,13 +252,7 @@ class FailureModeGenerator(BuiltinGenerator):
                 continue
             record.gain = chosen.mode_value - before
             record.policy_score_after = chosen.policy_score
-            world, values, realism = compile_world(v.house, "candidate"), chosen.values, chosen.realism
-            record.status, record.edit, record.objective_after = "applied", edit, values.as_dict()
-            result.objective_trace.append(values.as_dict())
-            if context.render:
-                record.render = keep_render(result, render_scene(v.house, context, highlight={edit.object_id: "gold"}),
-                                            context, step)
-            result.steps.append(record)
+            world, values, realism = self._applied(v, chosen, edit, record, result, context, step)
         result.house = v.house
         return result
 
