@@ -170,9 +170,10 @@ def test_shipped_pretrained_checkpoint_loads_with_its_card():
     from adaptenv.agents.registry import pretrained_path
 
     policy = resolve_policy("pretrained")
-    assert policy.name == "pretrained" and policy.end_threshold == 0.8
     card = json.loads(pretrained_path().with_suffix(".json").read_text())
+    # the threshold the policy acts with is the one its card says was calibrated
+    assert policy.name == "pretrained" and policy.end_threshold == card["end_threshold_calibration"]["threshold"]
     assert card["houses"] == "preset:pretrain-train" and card["final_train_success"] >= 0.8
-    assert card["wall_time_s"] < 20 * 60 and card["command"].startswith("adaptenv train")
+    assert card["command"].startswith("adaptenv train") and "selection" in card
     actions = rollout_actions(policy)
     assert actions.min() >= 0 and actions.max() < N_ACTIONS
