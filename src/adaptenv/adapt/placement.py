@@ -115,6 +115,13 @@ def _convex_arrays(verts: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarra
     return normals, proj.min(axis=2), proj.max(axis=2), aabb
 
 
+def _selected(obstacles: ConvexSet, idx: np.ndarray | None) -> tuple[np.ndarray, ...]:
+    """(normals, lo, hi, verts) of the obstacles ``idx`` selects (all of them when None)."""
+    if idx is None:
+        return obstacles.normals, obstacles.lo, obstacles.hi, obstacles.verts
+    return obstacles.normals[idx], obstacles.lo[idx], obstacles.hi[idx], obstacles.verts[idx]
+
+
 def rect_depth(centers: np.ndarray, half: tuple[float, float], yaw: float, obstacles: ConvexSet,
                idx: np.ndarray | None = None) -> np.ndarray:
     """Separating-axis penetration depth (K, C) of a rectangle at K centres against C convex polygons.
@@ -124,10 +131,7 @@ def rect_depth(centers: np.ndarray, half: tuple[float, float], yaw: float, obsta
     < 0). Segments (degenerate polygons) get their crossing depth: how far the rectangle sticks
     through the segment's line.
     """
-    if idx is not None:
-        normals, lo, hi, verts = obstacles.normals[idx], obstacles.lo[idx], obstacles.hi[idx], obstacles.verts[idx]
-    else:
-        normals, lo, hi, verts = obstacles.normals, obstacles.lo, obstacles.hi, obstacles.verts
+    normals, lo, hi, verts = _selected(obstacles, idx)
     centers = np.asarray(centers, dtype=float).reshape(-1, 2)
     n_obs, n_pts = lo.shape
     if n_obs == 0:
@@ -154,10 +158,7 @@ def poly_depth(centers: np.ndarray, offsets: np.ndarray, obstacles: ConvexSet,
 
     Degenerate polygons (repeated vertices, e.g. triangles padded to 4 vertices) are fine.
     """
-    if idx is not None:
-        normals, lo, hi, verts = obstacles.normals[idx], obstacles.lo[idx], obstacles.hi[idx], obstacles.verts[idx]
-    else:
-        normals, lo, hi, verts = obstacles.normals, obstacles.lo, obstacles.hi, obstacles.verts
+    normals, lo, hi, verts = _selected(obstacles, idx)
     centers = np.asarray(centers, dtype=float).reshape(-1, 2)
     n_obs, n_pts = lo.shape
     if n_obs == 0:
