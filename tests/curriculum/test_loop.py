@@ -12,7 +12,7 @@ from pathlib import Path
 
 import pytest
 
-from adaptenv.curriculum.loop import METHODS, LoopConfig, run_loop
+from adaptenv.curriculum.loop import METHODS, LoopConfig, finetune_config, run_loop
 from adaptenv.curriculum.records import STATE, read_iterations
 from adaptenv.errors import ConfigError
 
@@ -38,6 +38,14 @@ def test_config_errors_name_the_field():
         LoopConfig(method="ours-llm").check()
     with pytest.raises(ConfigError, match="iterations must be at least 1"):
         LoopConfig(iterations=0).check()
+    with pytest.raises(ConfigError, match="finetune_teacher 'oracle' is unknown"):
+        LoopConfig(finetune_teacher="oracle").check()
+
+
+def test_the_fine_tuning_recipe_carries_the_loop_settings():
+    cfg = LoopConfig(finetune_frames=4096, finetune_envs=16, finetune_lr=3e-4, finetune_teacher="explorer").check()
+    ft = finetune_config(cfg, end_threshold=0.7)
+    assert (ft.frames, ft.num_envs, ft.learning_rate, ft.teacher, ft.end_threshold) == (4096, 16, 3e-4, "explorer", 0.7)
 
 
 @pytest.mark.slow
