@@ -168,9 +168,11 @@ def paired_effect(a: list[float], b: list[float]) -> dict[str, float] | None:
     if len(a) < 2 or len(a) != len(b):
         return None
     diff = np.asarray(a, dtype=float) - np.asarray(b, dtype=float)
-    half = float(stats.t.ppf(0.975, diff.size - 1) * diff.std(ddof=1) / math.sqrt(diff.size))
     mean = float(diff.mean())
-    return {"diff": mean, "low": mean - half, "high": mean + half}
+    if np.allclose(diff, diff[0]):  # no spread: scipy's interval is undefined, the difference is exact
+        return {"diff": mean, "low": mean, "high": mean}
+    ci = stats.ttest_rel(a, b).confidence_interval(0.95)
+    return {"diff": mean, "low": float(ci.low), "high": float(ci.high)}
 
 
 def holm(pvalues: dict[str, float | None]) -> dict[str, float | None]:
