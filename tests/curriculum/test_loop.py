@@ -43,9 +43,13 @@ def test_config_errors_name_the_field():
 
 
 def test_the_fine_tuning_recipe_carries_the_loop_settings():
-    cfg = LoopConfig(finetune_frames=4096, finetune_envs=16, finetune_lr=3e-4, finetune_teacher="explorer").check()
+    cfg = LoopConfig(finetune_frames=4096, finetune_envs=16, finetune_lr=3e-4, finetune_teacher="explorer",
+                     finetune_min_start=6.0).check()
     ft = finetune_config(cfg, end_threshold=0.7)
-    assert (ft.frames, ft.num_envs, ft.learning_rate, ft.teacher, ft.end_threshold) == (4096, 16, 3e-4, "explorer", 0.7)
+    assert (ft.frames, ft.num_envs, ft.learning_rate, ft.teacher, ft.end_threshold, ft.min_start_distance) == (
+        4096, 16, 3e-4, "explorer", 0.7, 6.0)
+    with pytest.raises(ConfigError, match="finetune_min_start"):
+        LoopConfig(finetune_min_start=-1.0).check()
 
 
 @pytest.mark.slow

@@ -252,3 +252,21 @@ def test_episode_sampler_draws_solvable_seeded_episodes(real_world, small_world)
     assert {ep.target_type for ep in fixed} == {"GarbageCan"}
     with pytest.raises(AdaptenvError, match="no episode can be drawn"):
         EpisodeSampler([small_world], target_types=["Bed"]).draw(np.random.default_rng(0), 1)
+
+
+def test_episode_sampler_floor_keeps_far_starts_and_falls_back_to_the_farthest(real_world, small_world):
+    from adaptenv.sim.vector import EpisodeSampler
+
+    def distances(sampler, world_idx, worlds):
+        eps, envs = sampler.draw(np.random.default_rng(1), 60, np.full(60, world_idx, dtype=np.int64))
+        return np.array([geodesic.geodesic_distance(worlds[e], ep.target_type, ep.start[0], ep.start[1])
+                         for ep, e in zip(eps, envs.tolist(), strict=True)])
+
+    worlds = [real_world]
+    uniform = distances(EpisodeSampler(worlds), 0, worlds)
+    floored = distances(EpisodeSampler(worlds, min_distance=4.0), 0, worlds)
+    assert uniform.min() < 4.0 <= floored.min()
+    # a floor no start reaches: the farthest quarter of each target's starts, never an error
+    huge = distances(EpisodeSampler([small_world], min_distance=1e6), 0, [small_world])
+    assert np.isfinite(huge).all() and np.median(huge) > np.median(distances(EpisodeSampler([small_world]), 0,
+                                                                              [small_world]))

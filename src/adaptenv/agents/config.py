@@ -83,6 +83,8 @@ class TrainConfig:
     """Who labels DAgger's states: expert (shortest path), explorer (searches its own map) or mix."""
     teacher_mix: float = 0.5
     """With --teacher mix: probability that an episode is labelled by the explorer."""
+    min_start_distance: float = 0.0
+    """Training episodes start at least this geodesic distance (m) from the target where the house has such starts (0: uniform starts, as evaluation draws them)."""
 
 
 @dataclass
@@ -151,6 +153,8 @@ class PPOConfig:
     """Episodes per periodic evaluation."""
     final_eval_episodes: int = 200
     """Episodes of the final evaluation on the training houses (recorded in the card)."""
+    min_start_distance: float = 0.0
+    """Training episodes start at least this geodesic distance (m) from the target where the house has such starts (0: uniform starts)."""
     threads: int = 0
     """Torch threads (0: half the cores; see configure_torch)."""
     progress: bool = True
@@ -187,6 +191,8 @@ class FinetuneConfig:
     """Fresh episodes in the training houses on which the returned card's end threshold is chosen (0: keep end_threshold)."""
     final_eval_episodes: int = 0
     """Episodes of the final evaluation on the training houses (0: one per house)."""
+    min_start_distance: float = 0.0
+    """Training episodes start at least this geodesic distance (m) from the target where the house allows (0: uniform)."""
 
 
 def field_docs(cls: type) -> dict[str, str]:

@@ -189,7 +189,7 @@ def train_ppo(cfg: PPOConfig, *, worlds: Sequence[Any] | None = None, init_net: 
     labels_buf = np.zeros((T, B), np.int64)
     h0_buf = torch.zeros(T // L, B, H)
 
-    sampler = EpisodeSampler(worlds)
+    sampler = EpisodeSampler(worlds, min_distance=cfg.min_start_distance)
     sim = BatchSim(worlds, max_steps=cfg.max_episode_steps)
     expert = ShortestPathExpert() if cfg.bc_coef > 0 else None
     obs, _ = sim.reset(*sampler.draw(rng, B))

@@ -357,7 +357,7 @@ def train(cfg: TrainConfig, *, worlds: Sequence[NavWorld] | None = None, init_ne
                 "losses/accuracy": float(np.mean(accs)),
                 "charts/train_fps": cfg.updates_per_iter * cfg.batch_chunks * L / (time.perf_counter() - t0)}
 
-    sampler = EpisodeSampler(worlds)
+    sampler = EpisodeSampler(worlds, min_distance=cfg.min_start_distance)
     # with overlap the learner thread takes the second core, so the simulator kernel runs serially
     sim = BatchSim(worlds, max_steps=cfg.max_episode_steps, threads=1 if cfg.overlap else None)
     teacher = make_teacher(cfg.teacher, sim, mix=cfg.teacher_mix, seed=cfg.seed)  # agents/teachers.py
@@ -487,7 +487,7 @@ def finetune(net: NavNet, worlds: Sequence[NavWorld], cfg: FinetuneConfig, seed:
                        rollout_steps=cfg.rollout_steps, chunk_len=cfg.rollout_steps,
                        learning_rate=cfg.learning_rate, end_threshold=cfg.end_threshold,
                        calibrate_episodes=cfg.calibrate_episodes, eval_every=0, final_eval_episodes=evals,
-                       progress=False, tensorboard=False)
+                       min_start_distance=cfg.min_start_distance, progress=False, tensorboard=False)
         result = train_ppo(pc, worlds=worlds, init_net=net)
         return result.net, result.card
     steps = cfg.rollout_steps
@@ -496,7 +496,8 @@ def finetune(net: NavNet, worlds: Sequence[NavWorld], cfg: FinetuneConfig, seed:
                      updates_per_iter=cfg.updates_per_iter, buffer_frames=max(cfg.frames, steps * cfg.num_envs),
                      beta_start=cfg.beta, beta_end=cfg.beta, end_threshold=cfg.end_threshold, teacher=cfg.teacher,
                      calibrate_episodes=cfg.calibrate_episodes, eval_every=0, final_eval_episodes=evals,
-                     progress=False, tensorboard=False, learning_rate=cfg.learning_rate, save_every=10**9)
+                     min_start_distance=cfg.min_start_distance, progress=False, tensorboard=False,
+                     learning_rate=cfg.learning_rate, save_every=10**9)
     result = train(tc, worlds=worlds, init_net=net)
     return result.net, result.card
 

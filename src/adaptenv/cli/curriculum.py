@@ -87,6 +87,8 @@ def loop(
     finetune_lr: float = typer.Option(1e-4, "--finetune-lr", min=0.0, help="Adam learning rate of fine-tuning."),
     finetune_teacher: str = typer.Option("expert", "--finetune-teacher", help="Who labels fine-tuning's states: "
                                          "expert, explorer (searches) or mix."),
+    finetune_min_start: float = typer.Option(0.0, "--finetune-min-start", min=0.0, help="Fine-tuning episodes start "
+                                             "at least this geodesic distance (m) from the target (0: uniform)."),
     heldout_episodes: int = typer.Option(100, "--heldout-episodes", min=1, help="Episodes per held-out set."),
     heldout: list[str] = typer.Option(None, "--heldout", help="Held-out set NAME=HOUSES (repeatable); default: "
                                       "rearranged=preset:pretrain-rearranged and unseen=preset:pretrain-unseen."),
@@ -125,6 +127,7 @@ def loop(
     cfg = LoopConfig(method=method, policy=policy, houses=houses, iterations=iterations, seed=seed,
                      scenes_per_iteration=scenes, edit_steps=edit_steps, finetune_frames=finetune_frames,
                      finetune_lr=finetune_lr, finetune_teacher=finetune_teacher,
+                     finetune_min_start=finetune_min_start,
                      heldout_episodes=heldout_episodes, llm=llm, **({"heldout": h} if (h := _heldout(heldout)) else {}))
     check_house_sets([cfg.houses, *cfg.heldout.values()], strict, console.print)
     with ExecutorOptions(executor, workers, address).make() as ex:

@@ -106,6 +106,9 @@ class LoopConfig:
     the two rates compared in docs/RESULTS.md)."""
     finetune_teacher: str = "expert"
     """Who labels fine-tuning's DAgger states: expert (shortest path), explorer (searches, docs/agent.md) or mix."""
+    finetune_min_start: float = 0.0
+    """Fine-tuning episodes start at least this geodesic distance (m) from the target where a house allows
+    (0: uniform starts; the long suites use 6 m)."""
     replay_fraction: float = 0.5
     """Share of the fine-tuning scenes drawn from earlier scenes so the policy does not forget."""
     heldout_episodes: int = 100
@@ -130,6 +133,8 @@ class LoopConfig:
         if self.edit_steps < 0 or self.diagnose_episodes < 1 or not 0.0 <= self.replay_fraction < 1.0:
             raise ConfigError("loop config: edit_steps must be >= 0, diagnose_episodes >= 1 and replay_fraction "
                               "in [0, 1)")
+        if self.finetune_min_start < 0:
+            raise ConfigError(f"loop config: finetune_min_start must be >= 0 metres, got {self.finetune_min_start}")
         if self.finetune_teacher not in TEACHERS:
             raise ConfigError(f"loop config: finetune_teacher {self.finetune_teacher!r} is unknown; use one of "
                               f"{', '.join(TEACHERS)}")
@@ -194,9 +199,11 @@ def evaluate_sets(weights: PolicyWeights, specs: dict[str, str], episodes: int, 
 
 
 def finetune_config(cfg: LoopConfig, end_threshold: float) -> FinetuneConfig:
-    """The loop's fine-tuning recipe (identical for every method): DAgger at beta 0.8 with ``finetune_teacher``'s labels."""
+    """The loop's fine-tuning recipe (identical for every method): DAgger at beta 0.8 with ``finetune_teacher``'s
+    labels, episodes starting ``finetune_min_start`` or more from the target."""
     return FinetuneConfig(frames=cfg.finetune_frames, num_envs=cfg.finetune_envs, learning_rate=cfg.finetune_lr,
-                          end_threshold=end_threshold, teacher=cfg.finetune_teacher)
+                          end_threshold=end_threshold, teacher=cfg.finetune_teacher,
+                          min_start_distance=cfg.finetune_min_start)
 
 
 def run_loop(cfg: LoopConfig, run_dir: str | Path, *, resume: bool = False, executor: Executor | None = None,

@@ -474,11 +474,16 @@ class EpisodeSampler:
     ``task.available_targets`` or the given types, the start at the centre of an enterable cell drawn
     uniformly among those with finite positive geodesic distance, yaw a multiple of 30 degrees), but the
     candidate cells are computed once per (house, target) pair, so a draw costs microseconds.
+
+    ``min_distance`` > 0 keeps only starts at least that geodesic distance from the target (training on
+    the long episodes the hard suites test); a (house, target) pair with no such start keeps its
+    farthest quarter of starts instead, so small houses still contribute episodes.
     """
 
-    def __init__(self, worlds: Sequence, target_types: Sequence[str] | None = None) -> None:
+    def __init__(self, worlds: Sequence, target_types: Sequence[str] | None = None, min_distance: float = 0.0) -> None:
         self.worlds = list(worlds)
         self.target_types = tuple(target_types) if target_types is not None else None
+        self.min_distance = float(min_distance)
         self._types: dict[int, list[str]] = {}
         self._cells: dict[tuple[int, str], np.ndarray] = {}
 
@@ -503,6 +508,10 @@ class EpisodeSampler:
             if cells.size == 0:
                 raise AdaptenvError(f"{self.worlds[e].name}: the {target_type} cannot be reached from any free "
                                     "floor; choose other target types or houses")
+            if self.min_distance > 0:
+                d = field.reshape(-1)[cells]
+                far = d >= self.min_distance
+                cells = cells[far] if far.any() else cells[d >= np.quantile(d, 0.75)]
             self._cells[key] = cells
         return self._cells[key]
 
