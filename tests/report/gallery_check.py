@@ -1,4 +1,4 @@
-"""A real adaptation (without the loop) written as a run folder, and a pixel check of "after" renders.
+"""A real adaptation (without the loop) and a pixel check of "after" renders (run_folders.py writes its run).
 
 The scene: the expert finds its target in a procedural house (pi_t in e_t); the floor object nearest
 the middle of its path is moved onto that path (e_{t+1}); the expert runs again from the same start
@@ -10,26 +10,13 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from pathlib import Path
 
 import numpy as np
 from PIL import Image, ImageDraw, ImageFilter
 
-from adaptenv.adapt.analysis import analyze_trajectory
-from adaptenv.curriculum.records import (
-    RUN_INFO,
-    GalleryItem,
-    IterationRecord,
-    RunInfo,
-    SetMetrics,
-    atomic_write_text,
-    iteration_dir,
-    write_iterations,
-)
-from adaptenv.render.compare import render_before_after
 from adaptenv.render.topdown import END_FILL, START_FILL, MapLayout
 from adaptenv.scene.geometry import SceneGeometry
-from adaptenv.scene.house import House, move_object, save_house
+from adaptenv.scene.house import House, move_object
 from adaptenv.scene.procedural import generate_house
 from adaptenv.sim.rollout import expert_policy, run_episode
 from adaptenv.sim.task import sample_episode
@@ -64,33 +51,6 @@ def adapted_scene(seed: int = SEED) -> AdaptedScene:
     move_object(moved, mid.x - moved.position.x, mid.z - moved.position.z)
     after = run_episode(compile_world(edited, "e_t+1"), episode, expert_policy(), policy_name="expert")
     return AdaptedScene(house, edited, before, after, obj.id)
-
-
-def write_adapted_run(run_dir: Path, scene: AdaptedScene) -> Path:
-    """A one-iteration run folder whose gallery item records both houses and both trajectories."""
-    run_dir.mkdir(parents=True, exist_ok=True)
-    atomic_write_text(run_dir / RUN_INFO, RunInfo(method="ours", seed=0).model_dump_json())
-    rel = Path(iteration_dir(run_dir, 1).name) / "gallery" / "house_04~t01a00"
-    folder = run_dir / rel
-    folder.mkdir(parents=True, exist_ok=True)
-    save_house(scene.original, folder / "house_before.json")
-    save_house(scene.edited, folder / "house_after.json")
-    scene.before.save(folder / "trajectory_before.json")
-    scene.after.save(folder / "trajectory_after.json")
-    world = compile_world(scene.original, "e_t")
-    (folder / "analysis.json").write_text(analyze_trajectory(scene.before, world).model_dump_json(), encoding="utf-8")
-    pair = render_before_after(scene.original, scene.edited, scene.before, scene.after, [scene.moved], size=448)
-    pair.before.save(folder / "before.png")
-    pair.after.save(folder / "after.png")
-    item = GalleryItem(scene="house_04~t01a00", before_png=str(rel / "before.png"), after_png=str(rel / "after.png"),
-                       analysis_json=str(rel / "analysis.json"), before_house_json=str(rel / "house_before.json"),
-                       after_house_json=str(rel / "house_after.json"),
-                       before_trajectory_json=str(rel / "trajectory_before.json"),
-                       after_trajectory_json=str(rel / "trajectory_after.json"), summary="1 edit")
-    metrics = SetMetrics(success=0.5, spl=0.4, collisions=1.0, episodes=10)
-    write_iterations(run_dir, [IterationRecord(iteration=1, env_steps=1000, grad_updates=10, edits=1, train=metrics,
-                                               heldout={"unseen": metrics}, gallery=[item], wall_time_s=5.0)])
-    return run_dir
 
 
 def _is_path_colour(rgb: np.ndarray) -> np.ndarray:

@@ -136,7 +136,8 @@ def test_gallery_after_render_in_chromium_draws_no_path_through_moved_objects(tm
     from adaptenv.render.compare import MOVED_COLOUR, render_before_after
     from adaptenv.render.topdown import render_map
     from adaptenv.report.html import GALLERY_SIZE
-    from tests.report.gallery_check import path_pixels_in, write_adapted_run
+    from tests.report.gallery_check import path_pixels_in
+    from tests.report.run_folders import write_adapted_run
 
     index = build_report(write_adapted_run(tmp_path / "run", adapted))
     text = index.read_text(encoding="utf-8")

@@ -14,7 +14,8 @@ from adaptenv.render.compare import MOVED_COLOUR, moved_objects, render_before_a
 from adaptenv.render.topdown import render_map
 from adaptenv.report import build_report
 from adaptenv.report.html import GALLERY_SIZE
-from tests.report.gallery_check import path_pixels_in, write_adapted_run
+from tests.report.gallery_check import path_pixels_in
+from tests.report.run_folders import write_adapted_run
 
 
 def after_images(index: Path) -> list[Path]:

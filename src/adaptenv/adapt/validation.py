@@ -70,7 +70,7 @@ from adaptenv.scene.occupancy import (
 from adaptenv.sim.geodesic import first_region_cell, geodesic_distance, success_region
 from adaptenv.sim.spec import AGENT_RADIUS, SUCCESS_DISTANCE, TARGET_TYPES
 from adaptenv.sim.task import sample_points
-from adaptenv.sim.world import NavWorld, compile_world
+from adaptenv.sim.world import NavWorld, compile_world, occluding_labels
 from adaptenv.vocabulary import SEAT_TYPES, TABLE_TYPES
 
 #: Overlaps smaller than this (m^2) are touching, not overlapping.
@@ -227,9 +227,7 @@ class LabelRaster:
         self.x0, self.z0, self.res, self.shape = occ.x0, occ.z0, occ.resolution, occ.shape
         self.static = np.isin(occ.label, (LABEL_WALL, LABEL_DOOR, LABEL_WINDOW))
         self.base = np.where(self.static, occ.label, np.where(occ.room < 0, LABEL_OUTSIDE, LABEL_FREE)).astype(np.int16)
-        self.tall = np.zeros(LABEL_OBJECT0 + len(floor) + 1, dtype=bool)  # the last entry: LABEL_FREE (-1)
-        self.tall[[LABEL_OUTSIDE, LABEL_WALL, LABEL_DOOR, LABEL_WINDOW]] = True
-        self.tall[LABEL_OBJECT0:LABEL_OBJECT0 + len(floor)] = [f.occludes for f in floor]
+        self.tall = occluding_labels(floor)  # as compile_world's occluder grid
         self.label = occ.label.copy()
         self.occluder = self.tall[self.label]
         self.masks = [self.footprint(f.outline) for f in floor]  # true outlines, as rasterize draws them

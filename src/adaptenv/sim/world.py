@@ -10,12 +10,11 @@ from dataclasses import dataclass, field, fields, is_dataclass
 
 import numpy as np
 
-from adaptenv.scene.geometry import SceneGeometry
+from adaptenv.scene.geometry import Footprint, SceneGeometry
 from adaptenv.scene.house import House
 from adaptenv.scene.occupancy import (
     DEFAULT_RESOLUTION,
     LABEL_DOOR,
-    LABEL_FREE,
     LABEL_OBJECT0,
     LABEL_OUTSIDE,
     LABEL_WALL,
@@ -91,6 +90,20 @@ def _collect_arrays(value, out: list[np.ndarray]) -> None:
             _collect_arrays(v, out)
 
 
+def occluding_labels(floor: list[Footprint]) -> np.ndarray:
+    """Which occupancy labels block sight, indexed by label: ``occluding_labels(floor)[grid.label]``
+    is the occluder grid.
+
+    Outside, walls, doors and windows block it, a floor object when it is tall enough
+    (``Footprint.occludes``), a free cell never: bool (LABEL_OBJECT0 + len(floor) + 1,), whose last
+    entry is LABEL_FREE's (-1).
+    """
+    tall = np.zeros(LABEL_OBJECT0 + len(floor) + 1, dtype=bool)
+    tall[[LABEL_OUTSIDE, LABEL_WALL, LABEL_DOOR, LABEL_WINDOW]] = True
+    tall[LABEL_OBJECT0:LABEL_OBJECT0 + len(floor)] = [fp.occludes for fp in floor]
+    return tall
+
+
 def compile_world(house: House, name: str = "house", resolution: float = DEFAULT_RESOLUTION,
                   geometry: SceneGeometry | None = None) -> NavWorld:
     """Rasterize a house and derive the semantic and occluder grids and the target instances."""
@@ -108,11 +121,7 @@ def compile_world(house: House, name: str = "house", resolution: float = DEFAULT
     # nearest_label is never LABEL_FREE (-1) while any obstacle exists; guard anyway.
     semantic = np.where(grid.nearest_label >= 0, lut[np.maximum(grid.nearest_label, 0)], CLASS_NONE).astype(np.int16)
 
-    tall = np.zeros(LABEL_OBJECT0 + len(floor), dtype=bool)
-    tall[[LABEL_OUTSIDE, LABEL_WALL, LABEL_DOOR, LABEL_WINDOW]] = True
-    for k, fp in enumerate(floor):
-        tall[LABEL_OBJECT0 + k] = fp.occludes
-    occluder = np.where(grid.label != LABEL_FREE, tall[np.maximum(grid.label, 0)], False)
+    occluder = occluding_labels(floor)[grid.label]
 
     instances = [TargetInstance(fp.object_id, fp.object_type, fp.center, fp.corners, LABEL_OBJECT0 + k)
                  for k, fp in enumerate(floor)]
