@@ -97,11 +97,11 @@ class LoopConfig:
     """Scenes rolled out (analysed or scored) and new scenes made per iteration."""
     edit_steps: int = 5
     """Single-object edits per adapted scene (editing methods)."""
-    finetune_frames: int = 16_384
+    finetune_frames: int = FinetuneConfig.frames
     """Labelled frames of DAgger fine-tuning per iteration (identical for every method)."""
-    finetune_envs: int = 64
+    finetune_envs: int = FinetuneConfig.num_envs
     """Parallel agents while fine-tuning."""
-    finetune_lr: float = 1e-4
+    finetune_lr: float = FinetuneConfig.learning_rate
     """Adam learning rate of fine-tuning, annealed to zero over each iteration's frames (the gentler of
     the two rates compared in docs/RESULTS.md)."""
     finetune_teacher: str = "expert"
