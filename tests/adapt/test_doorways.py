@@ -59,3 +59,20 @@ def test_edit_validator_rejects_parking_across_a_doorway():
     edit = v.try_edit("Dresser|0", 4.0, 0.0)  # face at 3.51 m: across the zone, the way still open
     assert not edit.accepted
     assert edit.problems == ["Dresser|0 would cover 1.60 of the 1.60 m in front of doorway door|0|1|0"]
+
+
+def test_edit_validator_counts_an_object_moved_into_the_approach_earlier():
+    """Two chairs beside the doorway cover more than half of it together; the first one's committed move counts."""
+    h = H.make_house([(0.0, 0.0, 4.0, 4.0), (4.0, 0.0, 8.0, 4.0)], doors=[H.Door(0, 1, 2.0, 1.6)],
+                     objects=[H.Obj(DRESSER, 1.5, 0.3), H.Obj(H.LOW_TARGET, 7.0, 1.0), H.Obj(CHAIR, 1.0, 3.4),
+                              H.Obj(CHAIR, 2.5, 3.4)], agent=(0.5, 2.0, 0.0))
+    v = EditValidator(h)
+    assert v.propose("Chair|3", 13.75, -11.25).valid  # to (3.6, 2.5): the door's upper third, alone below the limit
+    first = v.try_edit("Chair|2", 32.5, -25.0)  # to (3.6, 1.4): the door's lower third, alone below the limit
+    assert first.accepted and first.stop_reason == "reached"
+    second = v.propose("Chair|3", 13.75, -11.25)
+    assert second.result.stop_reason == "reached"
+    assert kinds(second.problems) == {"doorway_approach"}
+    assert second.problems[0].object_ids == ("door|0|1|0", "Chair|2", "Chair|3")
+    both = apply_edit(v.house, Edit(object_id="Chair|3", achieved_dx=1.1, achieved_dz=-0.9))
+    assert kinds(validate_scene(both, original=h)) == {"doorway_approach"}

@@ -268,6 +268,8 @@ class PlacementContext:
     """Per object: ``Footprint.local_outline``."""
     boxes: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=bool))
     """(N,) whether each footprint is its bounding rectangle (``Footprint.shape is None``)."""
+    reaches: dict[int, float] = field(default_factory=dict, repr=False)
+    """:meth:`reach` of each object asked about so far (its local pieces never change)."""
 
     @classmethod
     def from_house(cls, house: House, *, original: House | None = None, catalog: AssetCatalog | None = None,
@@ -350,7 +352,10 @@ class PlacementContext:
 
     def reach(self, i: int) -> float:
         """Largest distance (m) from object i's centre to its footprint (bounds the swept box of a path)."""
-        return float(np.linalg.norm(self.local_pieces[i].reshape(-1, 2), axis=1).max())
+        r = self.reaches.get(i)
+        if r is None:
+            r = self.reaches[i] = float(np.linalg.norm(self.local_pieces[i].reshape(-1, 2), axis=1).max())
+        return r
 
     def depth(self, i: int, centers: np.ndarray, yaw: float, obstacles: ConvexSet,
               idx: np.ndarray | None = None) -> np.ndarray:
@@ -360,14 +365,17 @@ class PlacementContext:
         pieces = pose_outline(self.local_pieces[i], 0.0, 0.0, yaw)
         return np.max([poly_depth(centers, p, obstacles, idx) for p in pieces], axis=0)
 
-    def commit(self, i: int, center: np.ndarray, yaw: float) -> None:
-        """Record that object i now stands at ``center`` with ``yaw`` (after an accepted edit)."""
+    def commit(self, i: int, center: np.ndarray, yaw: float, outline: np.ndarray | None = None) -> None:
+        """Record that object i now stands at ``center`` with ``yaw`` (after an accepted edit).
+
+        ``outline``: ``self.outline(i, center, yaw)`` when the caller already has it.
+        """
         self.centers[i] = center
         self.yaws[i] = yaw % 360.0
         world = pose_outline(self.local_pieces[i], float(center[0]), float(center[1]), yaw)
         for k, piece in zip(range(self.first[i], self.first[i + 1]), world, strict=True):
             self.objects.update(k, piece)
-        self.outlines[i] = self.outline(i, center, yaw)
+        self.outlines[i] = self.outline(i, center, yaw) if outline is None else outline
 
 
 def _room_index(fp: Footprint, geometry: SceneGeometry, room_ids: list[str]) -> int:

@@ -542,6 +542,9 @@ class Proposal:
     """The moved object's new centre, footprint corners and inflated raster footprint (when it moved)."""
     drawn: _Inflated | None = None
     """The moved object's new footprint cells (when it moved)."""
+    footprint: Footprint | None = None
+    outline: np.ndarray | None = None
+    """The moved object's new footprint (as ``SceneGeometry.from_house`` has it) and true outline (when it moved)."""
     labels: LabelWindow | None = None
     """The label and occluder grids around the moved object's old and new footprints (when they were needed)."""
     exact_targets: frozenset[str] = frozenset()
@@ -590,6 +593,8 @@ class EditValidator:
         self.need_rooms = need.rooms
         self.need_doors = need.doors & set(self.doors)
         self.approach = approach_zones(self.geometry)
+        self._approach_bounds = np.array([z.zone.bounds for z in self.approach], dtype=float).reshape(-1, 4)
+        self._polygons: list[shapely.Polygon | None] = [None] * len(self.ctx.ids)  # of ctx.outlines, built when asked
         base = SceneGeometry.from_house(original, self.catalog) if original is not None else self.geometry
         self.approach_before = {z.door_id: covered_width(z, [f.polygon for f in base.floor_objects])
                                 for z in approach_zones(base)}
@@ -685,15 +690,26 @@ class EditValidator:
     def _approach_check(self, moved: int, corners: np.ndarray) -> list[ValidationProblem]:
         """Doorway approach zones the moved object (true outline ``corners``) would cover past the limit."""
         lo, hi = corners.min(axis=0), corners.max(axis=0)
-        zones = [z for z in self.approach if shapely.intersects(z.zone, shapely.box(lo[0], lo[1], hi[0], hi[1]))]
+        zb = self._approach_bounds  # a zone whose bounds miss the outline's box cannot meet it
+        near = np.flatnonzero((zb[:, 0] <= hi[0]) & (zb[:, 2] >= lo[0]) & (zb[:, 1] <= hi[1]) & (zb[:, 3] >= lo[1]))
+        if not len(near):
+            return []
+        box = shapely.box(lo[0], lo[1], hi[0], hi[1])
+        zones = [z for z in (self.approach[k] for k in near) if shapely.intersects(z.zone, box)]
         if not zones:
             return []
-        polys = {oid: shapely.Polygon(corners if k == moved else self.ctx.outlines[k])
-                 for k, oid in enumerate(self.ctx.ids)}
+        polys = {oid: shapely.Polygon(corners) if k == moved else self._polygon(k) for k, oid in enumerate(self.ctx.ids)}
         return [ValidationProblem("doorway_approach", f"{', '.join(ids)} would cover {cover:.2f} of the {width:.2f} m "
                                   f"in front of doorway {d}", (d, *ids))
                 for d, cover, width, ids in blocked_approaches(zones, polys, self.approach_before)
                 if self.ctx.ids[moved] in ids]
+
+    def _polygon(self, k: int) -> shapely.Polygon:
+        """Object k's true footprint where it stands (``ctx.outlines[k]``) as a polygon, built once per pose."""
+        poly = self._polygons[k]
+        if poly is None:
+            poly = self._polygons[k] = shapely.Polygon(self.ctx.outlines[k])
+        return poly
 
     def _proven(self, t: str, flat: np.ndarray, comp: int, moved: int, changed: np.ndarray | None) -> bool:
         """Whether t's cached success region, still valid after the move, has a cell in the start's component.
@@ -776,7 +792,8 @@ class EditValidator:
         i = self.ctx.index[object_id]
         center = self.ctx.centers[i] + np.array(res.achieved)
         corners = self.ctx.corners(i, center, res.yaw_after)
-        outline = self.ctx.outline(i, center, res.yaw_after)  # the true footprint (its corners for a box)
+        # the true footprint (its corners for a box)
+        outline = corners if self.ctx.is_box(i) else self.ctx.outline(i, center, res.yaw_after)
         inf = self.raster.inflate(outline)
         exact_fp = self._footprint(i, center, res.yaw_after)
         exact = exact_fp.corners  # target sample points come from the corners, as in sim.task
@@ -799,7 +816,8 @@ class EditValidator:
             found = {}
         problems += self._approach_check(i, outline)
         return Proposal(**request, problems=tuple(problems), center=center, corners=corners, inflated=inf,
-                        drawn=drawn, labels=win, exact_targets=frozenset(unproven),
+                        drawn=drawn, footprint=exact_fp, outline=outline, labels=win,
+                        exact_targets=frozenset(unproven),
                         witnesses=tuple((t, c) for t, c in found.items() if c >= 0))
 
     def commit(self, proposal: Proposal, *, source: str = "manual", intent: str = "") -> Edit:
@@ -842,14 +860,15 @@ class EditValidator:
             w = self._target_witness.get(t)
             if w is not None and not self._still_valid(w, i, t, changed).shape[1]:
                 del self._target_witness[t]  # it left the cache
-        fp = self._footprint(i, center, res.yaw_after)
+        fp = proposal.footprint if proposal.footprint is not None else self._footprint(i, center, res.yaw_after)
         self.geometry.footprints[self._slot[res.object_id]] = fp
         self._points.pop(i, None)
         key = (i, fp.corners.tobytes())
         if key in self._candidate_points:
             self._points[i] = self._candidate_points[key]
         self._candidate_points.clear()
-        self.ctx.commit(i, center, res.yaw_after)
+        self.ctx.commit(i, center, res.yaw_after, proposal.outline)
+        self._polygons[i] = None
         self.raster.commit(i, proposal.inflated)
         self.labels.commit(i, win)
         move_object(self.objects[res.object_id], res.achieved[0], res.achieved[1], res.yaw_after - res.yaw_before)
