@@ -84,7 +84,7 @@ class TrainConfig:
     teacher_mix: float = 0.5
     """With --teacher mix: probability that an episode is labelled by the explorer."""
     min_start_distance: float = 0.0
-    """Training episodes start at least this geodesic distance (m) from the target where the house has such starts (0: uniform starts, as evaluation draws them)."""
+    """Min geodesic start-to-target distance (m) of training episodes (0: uniform starts)."""
 
 
 @dataclass
@@ -154,7 +154,7 @@ class PPOConfig:
     final_eval_episodes: int = 200
     """Episodes of the final evaluation on the training houses (recorded in the card)."""
     min_start_distance: float = 0.0
-    """Training episodes start at least this geodesic distance (m) from the target where the house has such starts (0: uniform starts)."""
+    """Min geodesic start-to-target distance (m) of training episodes (0: uniform starts)."""
     threads: int = 0
     """Torch threads (0: half the cores; see configure_torch)."""
     progress: bool = True
