@@ -82,9 +82,9 @@ class TrainConfig:
     teacher: str = "expert"
     """Who labels DAgger's states: expert (shortest path), explorer (searches its own map) or mix."""
     teacher_mix: float = 0.5
-    """With --teacher mix: probability that an episode is labelled by the explorer."""
+    """With --teacher mix: share of episodes the explorer labels."""
     min_start_distance: float = 0.0
-    """Min geodesic start-to-target distance (m) of training episodes (0: uniform starts)."""
+    """Episodes start this geodesic distance (m) or more from the target (0: any)."""
 
 
 @dataclass
@@ -154,7 +154,7 @@ class PPOConfig:
     final_eval_episodes: int = 200
     """Episodes of the final evaluation on the training houses (recorded in the card)."""
     min_start_distance: float = 0.0
-    """Min geodesic start-to-target distance (m) of training episodes (0: uniform starts)."""
+    """Episodes start this geodesic distance (m) or more from the target (0: any)."""
     threads: int = 0
     """Torch threads (0: half the cores; see configure_torch)."""
     progress: bool = True
