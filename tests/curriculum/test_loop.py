@@ -55,7 +55,8 @@ def test_the_fine_tuning_recipe_carries_the_loop_settings():
 @pytest.mark.slow
 @pytest.mark.parametrize("method", [m for m in METHODS if m != "ours-llm"])
 def test_every_method_runs_and_counts_its_budget(method, tiny_policy, tmp_path):
-    cfg = tiny_config(tiny_policy, method)
+    roomy = method in ("ours", "ours-randomscene", "ours-nof")  # a buffer no level is evicted from, to check them all
+    cfg = tiny_config(tiny_policy, method, **({"buffer_capacity": 16} if roomy else {}))
     records = run_loop(cfg, tmp_path / method)
     assert [r.iteration for r in records] == [0, 1, 2]
     assert records[0].env_steps == 0 and records[0].heldout["tiny"].episodes == 3
@@ -78,12 +79,16 @@ def test_every_method_runs_and_counts_its_budget(method, tiny_policy, tmp_path):
     failed = json.loads((heldout / "summary.json").read_text())["success"] < 1.0
     assert (heldout / "failures.png").is_file() == failed, "failed held-out episodes are drawn for the report"
     if method in ("plr", "accel"):
+        assert any(x.startswith("dr") for x in scenes["rolled_out"]), "fresh houses are scored each iteration"
         state = json.loads((tmp_path / method / STATE).read_text())["state"]
         buffered = set(state["buffer"]["level_ids"])
         assert set(scenes["trained_on"]) <= buffered, "robust PLR/ACCEL train on replayed buffer levels only"
     if method in ("ours", "ours-randomscene", "ours-nof"):
         state = json.loads((tmp_path / method / STATE).read_text())["state"]
-        assert set(scenes["rolled_out"]) <= set(state["buffer"]["level_ids"]), "adapted scenes come from the buffer"
+        assert any(x.startswith("dr") for x in scenes["rolled_out"]), "fresh houses are scored each iteration"
+        assert set(scenes["rolled_out"]) <= set(state["buffer"]["level_ids"]), "scored scenes go into the buffer"
+        assert scenes["replayed"] and set(scenes["replayed"]) <= set(state["buffer"]["level_ids"]), \
+            "adapted scenes come from the buffer"
         assert any("~t02" in x for x in scenes["trained_on"]), "fine-tuning uses this iteration's children"
         assert any(p is not None for p in state["buffer"]["parent_ids"]), "children are scored into the buffer"
     if method.startswith("ours"):

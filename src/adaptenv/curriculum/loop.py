@@ -10,8 +10,9 @@ methods lives in their strategy classes (:mod:`adaptenv.curriculum.methods`):
 - ``plr``: Robust PLR; fresh procedural houses are only scored (regret against the expert's
   measured success), gradient steps are taken on levels replayed from a prioritized buffer.
 - ``accel``: ACCEL; replayed high-regret levels get ``edit_steps`` random edits each, the children
-  are scored and inserted; gradient steps on replayed levels only.
-- ``ours``: regret-based scene selection (a level buffer, as PLR/ACCEL) plus the paper's adaptation
+  and fresh procedural houses are scored and inserted; gradient steps on replayed levels only.
+- ``ours``: regret-based scene selection (a level buffer fed with fresh procedural houses, as
+  PLR/ACCEL) plus the paper's adaptation
   step (:func:`~adaptenv.adapt.step.adapt_scene`) with F's diagnosis over ``diagnose_episodes``
   hard episodes and G aimed at the dominant failure modes; ablations ``ours-noselect`` (the plain
   step, one episode, round robin), ``ours-randomscene`` (uniform scene choice), ``ours-nof``
@@ -298,7 +299,8 @@ def run_loop(cfg: LoopConfig, run_dir: str | Path, *, resume: bool = False, exec
                                        wall_time_s=round(time.perf_counter() - start, 2),
                                        stage_seconds=stages.seconds, llm_usage=llm_usage))
         (iteration_dir(run_dir, t) / "scenes.json").write_text(json.dumps(
-            {"rolled_out": rolled, "trained_on": train_names, "edits_this_iteration": state.edits - edits_before}),
+            {"rolled_out": rolled, "replayed": it.replayed, "trained_on": train_names,
+             "edits_this_iteration": state.edits - edits_before}),
             encoding="utf-8")
         _checkpoint(run_dir, cfg, state, records)
     return records

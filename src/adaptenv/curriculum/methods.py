@@ -51,7 +51,7 @@ class Stream(IntEnum):
     ACCEL_PARENTS = 2
     """ACCEL: the seeds of the children's random edits."""
     FRESH_HOUSES = 3
-    """DR and PLR: seeds of fresh procedural houses."""
+    """DR, PLR, ACCEL and ``ours``: seeds of fresh procedural houses."""
     ROLLOUT_EPISODES = 4
     """The episodes pi_t plays in the rolled-out scenes."""
     REPLAY = 5
@@ -225,10 +225,11 @@ class PLR(Method):
 
 
 class ACCEL(PLR):
-    """``accel``: replayed high-regret levels get random edits; the children are scored and inserted.
+    """``accel``: replayed high-regret levels get random edits; the children and fresh houses are scored and inserted.
 
-    Gradient steps go to the replayed parents (the children were only scored); the first
-    iteration seeds the buffer with the training scenes and trains on a replay of them.
+    Gradient steps go to the replayed parents (children and fresh houses were only scored, the
+    generator's new levels of the UED loop); the first iteration seeds the buffer with the training
+    scenes and trains on a replay of them.
     """
 
     name = "accel"
@@ -252,19 +253,19 @@ class ACCEL(PLR):
             children.append(name)
             if len(it.gallery) < it.cfg.gallery:
                 it.gallery.append(gallery_item(it.run_dir, it.t, name, jobs[k].house, made, None))
-        return children
+        return children + fresh_houses(it, it.cfg.scenes_per_iteration)
 
 
 class Ours(Method):
     """``ours``: regret-based selection (as PLR/ACCEL) plus F's multi-episode diagnosis and G aimed at its failure modes.
 
-    A level buffer holds scenes scored by the regret their diagnosis measured (expert success
-    minus pi_t's over ``diagnose_episodes`` hard episodes). Each iteration ``scenes_per_iteration``
-    buffer scenes are picked (rank and staleness; the first iteration scores the training scenes
-    once and picks among them), each is diagnosed and adapted (:class:`GenerateJob` with
-    ``diagnose_episodes``), the parent's score becomes its measured regret, and the child goes in
-    scored by pi_t's regret on it. Fine-tuning uses the children plus high-regret buffer levels
-    (``replay_fraction`` of the mix).
+    A level buffer holds scenes scored by regret (expert success minus pi_t's). Each iteration
+    ``scenes_per_iteration`` fresh procedural houses are scored by one episode and inserted (the
+    UED loop's new levels; the first iteration also scores every training scene), then as many
+    buffer scenes are picked (rank and staleness), each is diagnosed on ``diagnose_episodes`` hard
+    episodes and adapted (:class:`GenerateJob`), the parent's score becomes its measured regret,
+    and the child goes in scored by pi_t's regret on it. Fine-tuning uses the children plus
+    high-regret buffer levels (``replay_fraction`` of the mix).
     """
 
     name = "ours"
@@ -274,10 +275,8 @@ class Ours(Method):
     """Pick scenes uniformly from the buffer instead of by regret (``ours-randomscene``)."""
 
     def scenes_to_roll_out(self, it: Iteration) -> list[str]:
-        if it.buffer.size == 0:
-            return list(it.state.pool)  # seed the buffer: one scored episode per training scene
-        it.replayed = self._pick(it, it.cfg.scenes_per_iteration, Stream.REPLAY)
-        return list(it.replayed)
+        seed = list(it.state.pool) if it.buffer.size == 0 else []  # t=1: score every training scene once
+        return seed + fresh_houses(it, it.cfg.scenes_per_iteration)
 
     def update_buffer(self, it: Iteration, rolled: list[str], rollouts: list[Rollout]) -> None:
         for name, ro in zip(rolled, rollouts, strict=True):
@@ -285,7 +284,7 @@ class Ours(Method):
                 it.buffer = lb.insert(it.buffer, it.buffer_cfg, name, regret(ro), it.t)
 
     def make_scenes(self, it: Iteration, rolled: list[str], rollouts: list[Rollout]) -> list[str]:
-        parents = it.replayed or self._pick(it, it.cfg.scenes_per_iteration, Stream.REPLAY)
+        parents = it.replayed = self._pick(it, it.cfg.scenes_per_iteration, Stream.REPLAY)
         jobs = [GenerateJob(self.generator, it.store.house(p), p, it.cfg.edit_steps,
                             (it.cfg.seed, it.t, Stream.GENERATE + k), weights=it.weights,
                             diagnose_episodes=it.cfg.diagnose_episodes)
