@@ -48,7 +48,7 @@ def server(monkeypatch):
 def llm_loop(policy: Path, server, **llm) -> dict:
     return dict(method="ours-llm", policy=str(policy), houses="preset:tiny", heldout={"tiny": "preset:tiny"},
                 iterations=2, scenes_per_iteration=2, edit_steps=1, finetune_frames=256, finetune_envs=8,
-                heldout_episodes=1, gallery=1,
+                heldout_episodes=1, gallery=1, diagnose_episodes=1,
                 llm={"provider": "openai-compatible", "base_url": server.url, "model": "vlm",
                      "api_key_env": "MY_LLM_KEY", "price_in": 0.4, "price_out": 1.6, **llm})
 

@@ -194,14 +194,6 @@ class OursNoSelect(EditingMethod):
     tag = "a"
 
 
-class OursLLM(OursNoSelect):
-    """``ours-llm``: the same step with LLM-backed F and G (needs the config's ``llm`` section)."""
-
-    name = "ours-llm"
-    generator = "llm"
-    uses_llm = True
-
-
 class PLR(Method):
     """``plr``: Robust PLR. Fresh houses are only scored by regret; training replays high-regret buffer levels."""
 
@@ -287,11 +279,12 @@ class Ours(Method):
         parents = it.replayed = self._pick(it, it.cfg.scenes_per_iteration, Stream.REPLAY)
         jobs = [GenerateJob(self.generator, it.store.house(p), p, it.cfg.edit_steps,
                             (it.cfg.seed, it.t, Stream.GENERATE + k), weights=it.weights,
-                            diagnose_episodes=it.cfg.diagnose_episodes)
+                            diagnose_episodes=it.cfg.diagnose_episodes, llm=it.cfg.llm)
                 for k, p in enumerate(parents)]
         children = []
         for k, (job, made) in enumerate(zip(jobs, it.executor.map(run_generate, jobs, desc="diagnosis and generation"),
                                             strict=True)):
+            it.made.append((job.name, made))
             it.state.edits += made.edits
             it.state.env_steps += made.rollout_steps
             it.buffer = lb.insert(it.buffer, it.buffer_cfg, job.name, made.regret_before, it.t)
@@ -331,6 +324,15 @@ class OursNoF(Ours):
     name = "ours-nof"
     generator = "regret-only"
     tag = "n"
+
+
+class OursLLM(Ours):
+    """``ours-llm``: ``ours`` with LLM-backed F and G (needs the config's ``llm`` section)."""
+
+    name = "ours-llm"
+    generator = "llm"
+    tag = "l"
+    uses_llm = True
 
 
 def regret(ro: Rollout) -> float:
