@@ -12,9 +12,9 @@ methods lives in their strategy classes (:mod:`adaptenv.curriculum.methods`):
 - ``accel``: ACCEL; replayed high-regret levels get ``edit_steps`` random edits each, the children
   and fresh procedural houses are scored and inserted; gradient steps on replayed levels only.
 - ``ours``: regret-based scene selection (a level buffer fed with fresh procedural houses, as
-  PLR/ACCEL) plus the paper's adaptation
-  step (:func:`~adaptenv.adapt.step.adapt_scene`) with F's diagnosis over ``diagnose_episodes``
-  hard episodes and G aimed at the dominant failure modes; ablations ``ours-noselect`` (the plain
+  PLR/ACCEL) plus the paper's adaptation step (:func:`~adaptenv.adapt.step.adapt_scene`) with F's
+  diagnosis over ``diagnose_episodes`` hard episodes and G aimed at the dominant failure modes;
+  ablations ``ours-noselect`` (the plain
   step, one episode, round robin), ``ours-randomscene`` (uniform scene choice), ``ours-nof``
   (G on regret alone, no F analysis).
 - ``ours-llm``: the same with LLM F and G (needs an LLM config).
