@@ -22,6 +22,9 @@ PINNED = {
     ("doors", "1"): "bbdf09112176db82",
     # version 2: starts are drawn from enterable cells only (success regions the agent can stop in)
     ("clutter", "2"): "e631480a08add0f4",
+    ("val-long", "1"): "966b4329d142589d",
+    ("val-far", "1"): "dd4955735fac6603",
+    ("val-clutter", "1"): "b7795bea5494c8cb",
     ("doors", "2"): "e844b9008745a676",
     ("far", "2"): "51cde8452977e5f2",
     ("large", "2"): "95f58d46b1bb77f6",

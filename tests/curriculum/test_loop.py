@@ -97,6 +97,21 @@ def test_every_method_runs_and_counts_its_budget(method, tiny_policy, tmp_path):
             assert (tmp_path / method / rel).is_file()
 
 
+@pytest.mark.slow
+@pytest.mark.parametrize("method", ["ours", "plr", "accel"])
+def test_an_unseeded_buffer_never_holds_the_training_scenes(method, tiny_policy, tmp_path):
+    cfg = tiny_config(tiny_policy, method, seed_buffer=False, buffer_capacity=16)
+    run_loop(cfg, tmp_path / method)
+    state = json.loads((tmp_path / method / STATE).read_text())["state"]
+    training = set(state["pool"])
+    buffered = set(state["buffer"]["level_ids"])
+    assert buffered and not buffered & training, "the buffer holds generated scenes only"
+    assert all(x.split("~")[0].startswith("dr") for x in buffered), "fresh houses and their children"
+    for t in (1, 2):
+        scenes = json.loads((tmp_path / method / f"iter_{t:04d}" / "scenes.json").read_text())
+        assert not set(scenes["rolled_out"]) & training and not set(scenes["trained_on"]) & training
+
+
 def test_same_seed_same_results(tiny_policy, tmp_path):
     cfg = tiny_config(tiny_policy, "ours", iterations=1)
     a = run_loop(cfg, tmp_path / "a")

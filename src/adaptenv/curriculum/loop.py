@@ -121,6 +121,9 @@ class LoopConfig:
     max_tokens, max_cost, ...; docs/llm.md). Never an API key: name its variable in api_key_env."""
     buffer_capacity: int = 64
     """Level buffer size (plr, accel, ours)."""
+    seed_buffer: bool = True
+    """The first iteration scores the training scenes into the level buffer (plr, accel, ours); false keeps
+    them out, so the buffer holds only generated scenes (fresh houses and their children)."""
     diagnose_episodes: int = 4
     """Hard episodes F diagnoses per adapted scene (ours, ours-randomscene, ours-nof)."""
 

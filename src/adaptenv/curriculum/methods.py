@@ -200,7 +200,7 @@ class PLR(Method):
     name = "plr"
 
     def scenes_to_roll_out(self, it: Iteration) -> list[str]:
-        if it.buffer.size == 0:
+        if seeds_buffer(it):
             return list(it.state.pool)  # seed the buffer with the original training scenes
         return fresh_houses(it, it.cfg.scenes_per_iteration)
 
@@ -227,8 +227,10 @@ class ACCEL(PLR):
     name = "accel"
 
     def scenes_to_roll_out(self, it: Iteration) -> list[str]:
-        if it.buffer.size == 0:
+        if seeds_buffer(it):
             return list(it.state.pool)
+        if it.buffer.size == 0:
+            return fresh_houses(it, it.cfg.scenes_per_iteration)
         idx = lb.sample_replay(it.buffer, it.buffer_cfg, it.rng(Stream.ACCEL_REPLAY), it.t,
                                k=it.cfg.scenes_per_iteration)
         it.replayed = [it.buffer.level_ids[i] for i in idx]
@@ -267,7 +269,7 @@ class Ours(Method):
     """Pick scenes uniformly from the buffer instead of by regret (``ours-randomscene``)."""
 
     def scenes_to_roll_out(self, it: Iteration) -> list[str]:
-        seed = list(it.state.pool) if it.buffer.size == 0 else []  # t=1: score every training scene once
+        seed = list(it.state.pool) if seeds_buffer(it) else []  # t=1: score every training scene once
         return seed + fresh_houses(it, it.cfg.scenes_per_iteration)
 
     def update_buffer(self, it: Iteration, rolled: list[str], rollouts: list[Rollout]) -> None:
@@ -338,6 +340,11 @@ class OursLLM(Ours):
 def regret(ro: Rollout) -> float:
     """A level's score: the expert's measured success on pi_t's episode minus pi_t's (0 where the expert fails too)."""
     return lb.regret_score(float(ro.result.success), ro.result.spl, float(ro.expert_success))
+
+
+def seeds_buffer(it: Iteration) -> bool:
+    """Whether this iteration scores the training scenes into the (still empty) level buffer."""
+    return it.buffer.size == 0 and it.cfg.seed_buffer
 
 
 def fresh_houses(it: Iteration, k: int) -> list[str]:

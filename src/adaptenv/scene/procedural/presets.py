@@ -38,6 +38,9 @@ class PresetSpec:
                        split=self.split, **dict(self.overrides))
 
 
+#: Generation overrides of the cluttered presets: three times the filler furniture, tighter margins.
+CLUTTER = (("furniture_density", 3.0), ("edge_margin", 0.3), ("middle_margin", 0.2), ("passage", 0.45))
+
 PRESETS: dict[str, PresetSpec] = {
     "pretrain-train": PresetSpec(24, 1000, description="houses the agent is pre-trained on"),
     "pretrain-rearranged": PresetSpec(24, 2000, rearrange_of="pretrain-train",
@@ -46,12 +49,16 @@ PRESETS: dict[str, PresetSpec] = {
     "tiny": PresetSpec(3, 7, room_range=(1, 3), description="three small houses for tests and CI"),
     # Held-out suite houses (agents/suites.py): root seeds no training preset or generator uses.
     "suite-large": PresetSpec(30, 5101, room_range=(7, 10), description="7-10 room houses for the held-out suites"),
-    "suite-clutter": PresetSpec(30, 5201, room_range=(3, 6), overrides=(
-        ("furniture_density", 3.0), ("edge_margin", 0.3), ("middle_margin", 0.2), ("passage", 0.45)),
+    "suite-clutter": PresetSpec(30, 5201, room_range=(3, 6), overrides=CLUTTER,
         description="3-6 room houses with three times the filler furniture and tighter margins"),
     "suite-doors": PresetSpec(30, 5301, room_range=(5, 8), overrides=(
         ("open_kitchen_prob", 0.0), ("doorframe_prob", 0.0), ("extra_door_prob", 0.0)),
         description="5-8 room houses where every connection is a door (no open walls, frames or loops)"),
+    # Validation houses (agents/suites.py, val-*): for choosing settings; never trained on, never reported as held-out.
+    "validation": PresetSpec(50, 4000, description="validation houses of the training distribution"),
+    "validation-large": PresetSpec(30, 5401, room_range=(7, 10), description="7-10 room validation houses"),
+    "validation-clutter": PresetSpec(30, 5501, room_range=(3, 6), overrides=CLUTTER,
+        description="cluttered 3-6 room validation houses (suite-clutter's settings)"),
 }
 
 
