@@ -9,6 +9,7 @@ Figures (median of repeated timings, houses of the ``pretrain-train`` preset, wa
 - end to end (``train`` itself: collection with the policy in the loop plus the gradient steps, default
   TrainConfig, periodic evaluation off): frames/s with the learner thread (``--overlap``, the default)
   and without it, timed alternately in this one process, and their ratio (target >= 10,000/s);
+- ``--resume``: frames/s of a fresh run and of its resumed continuation (same iterations), and their ratio;
 - with ``--algo ppo``: PPO end to end (``adaptenv ppo`` with PPOConfig's defaults), frames/s.
 
 Each throughput is given per wall-clock second and per CPU-second of this process (all threads,
@@ -69,7 +70,30 @@ def end_to_end(worlds: list, iterations: int, repeats: int) -> dict:
     return {"dagger_end_to_end_frames_per_s": statistics.median(fps[True]),
             "dagger_end_to_end_serial_frames_per_s": statistics.median(fps[False]),
             "dagger_overlap_speedup": statistics.median(ratios),
-            "end_to_end_target_met": bool(statistics.median(fps[True]) >= END_TO_END_TARGET)}
+            "end_to_end_target_met": bool(statistics.median(fps[True]) >= END_TO_END_TARGET),
+            **fresh_and_resumed(worlds, iterations)}
+
+
+def fresh_and_resumed(worlds: list, iterations: int) -> dict:
+    """``train`` frames/s of a fresh run and of its ``--resume`` continuation by as many iterations."""
+    import tempfile
+
+    from adaptenv.agents.config import TrainConfig
+    from adaptenv.agents.train import train
+
+    block = TrainConfig().num_envs * TrainConfig().rollout_steps
+    with tempfile.TemporaryDirectory() as tmp:
+        def one(n: int, resume: bool) -> float:
+            cfg = TrainConfig(frames=n * block, output="", run_dir=tmp, eval_every=0, final_eval_episodes=1,
+                              calibrate_episodes=0, progress=False, tensorboard=False, resume=resume)
+            t = time.perf_counter()
+            train(cfg, worlds=worlds)
+            return iterations * block / (time.perf_counter() - t)
+
+        fresh = one(iterations, False)
+        resumed = one(2 * iterations, True)
+    return {"dagger_fresh_frames_per_s": fresh, "dagger_resumed_frames_per_s": resumed,
+            "dagger_resume_speed_ratio": resumed / fresh}
 
 
 def run_ppo(*, as_json: bool = False, iterations: int = 3, houses: str = "preset:pretrain-train") -> dict:
