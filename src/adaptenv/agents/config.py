@@ -63,6 +63,8 @@ class TrainConfig:
     """GRU memory size."""
     feature_dim: int = 128
     """Size of the per-step feature vector fed to the GRU."""
+    conv_channels: int = 32
+    """Channels of the two ray convolutions."""
     eval_every: int = 20
     """Evaluate the greedy policy on fresh training episodes every this many iterations (0: never)."""
     eval_episodes: int = 96
@@ -147,6 +149,8 @@ class PPOConfig:
     """GRU memory size (with init '')."""
     feature_dim: int = 128
     """Size of the per-step feature vector (with init '')."""
+    conv_channels: int = 32
+    """Channels of the two ray convolutions (with init '')."""
     eval_every: int = 10
     """Evaluate the policy on fresh training episodes every this many iterations (0: never)."""
     eval_episodes: int = 96

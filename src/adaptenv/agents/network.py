@@ -39,6 +39,12 @@ class NetConfig:
             return self
         return NetConfig(**{**asdict(self), "n_classes": n_classes()})
 
+    @classmethod
+    def of(cls, settings: object) -> NetConfig:
+        """The sizes named by a run config (``hidden``, ``feature_dim``, ``conv_channels``) for fresh weights."""
+        return cls(hidden=settings.hidden, feature_dim=settings.feature_dim,  # type: ignore[attr-defined]
+                   conv_channels=settings.conv_channels)  # type: ignore[attr-defined]
+
 
 def obs_to_tensors(obs: dict[str, np.ndarray], device: torch.device | str = "cpu") -> dict[str, torch.Tensor]:
     """Convert a (batched) numpy observation to tensors: depth float32, the rest int64."""

@@ -84,7 +84,7 @@ PPO_LOG_KEYS = ("iteration", "frames", "updates", "wall_time", "charts/learning_
 def check_ppo_config(cfg: PPOConfig) -> None:
     """Raise one ConfigError for the first inconsistent setting (naming the flag and the fix)."""
     for name in ("frames", "num_envs", "rollout_steps", "chunk_len", "num_minibatches", "update_epochs",
-                 "max_episode_steps", "hidden", "feature_dim"):
+                 "max_episode_steps", "hidden", "feature_dim", "conv_channels"):
         if getattr(cfg, name) <= 0:
             raise ConfigError(f"--{name.replace('_', '-')} must be positive, got {getattr(cfg, name)}")
     if cfg.rollout_steps % cfg.chunk_len:
@@ -155,7 +155,7 @@ def _initial_net(cfg: PPOConfig, init_net: NavNet | None) -> NavNet:
         return net
     if cfg.init:
         return load_checkpoint(init_checkpoint(cfg.init)).net
-    return NavNet(NetConfig(hidden=cfg.hidden, feature_dim=cfg.feature_dim))
+    return NavNet(NetConfig.of(cfg))
 
 
 def train_ppo(cfg: PPOConfig, *, worlds: Sequence[Any] | None = None, init_net: NavNet | None = None,

@@ -80,7 +80,7 @@ __all__ = ["TrainConfig", "FinetuneConfig", "field_docs", "train", "finetune", "
 
 def check_config(cfg: TrainConfig) -> None:
     """Raise one ConfigError for the first inconsistent setting (naming the field and the fix)."""
-    positive = ("frames", "num_envs", "rollout_steps", "chunk_len", "batch_chunks", "hidden", "feature_dim",
+    positive = ("frames", "num_envs", "rollout_steps", "chunk_len", "batch_chunks", "hidden", "feature_dim", "conv_channels",
                 "max_episode_steps", "buffer_frames", "save_every")
     for name in positive:
         if getattr(cfg, name) <= 0:
@@ -264,7 +264,7 @@ def train(cfg: TrainConfig, *, worlds: Sequence[NavWorld] | None = None, init_ne
     elif cfg.init:
         net = load_checkpoint(init_checkpoint(cfg.init)).net
     else:
-        net = NavNet(NetConfig(hidden=cfg.hidden, feature_dim=cfg.feature_dim))
+        net = NavNet(NetConfig.of(cfg))
     hidden = net.config.hidden
     optimizer = torch.optim.Adam(net.parameters(), lr=cfg.learning_rate, eps=1e-5)
     class_weight = torch.ones(net.config.n_actions)

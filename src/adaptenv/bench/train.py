@@ -151,7 +151,7 @@ def run(*, as_json: bool = False, envs: int = 256, steps: int = 200, houses: str
     rng = np.random.default_rng(0)
     expert = ShortestPathExpert()
     sim = BatchSim(worlds, max_steps=cfg.max_episode_steps)
-    net = NavNet(NetConfig(hidden=cfg.hidden, feature_dim=cfg.feature_dim)).eval()
+    net = NavNet(NetConfig.of(cfg)).eval()
 
     def new(n: int):
         envs_ = rng.integers(0, len(worlds), n)
@@ -188,7 +188,7 @@ def run(*, as_json: bool = False, envs: int = 256, steps: int = 200, houses: str
     seq = obs_to_tensors({k: v.numpy() for k, v in seq.items()})
     labels = torch.randint(0, 7, (L, N))
     done = torch.zeros(L, N, dtype=torch.bool)
-    train_net = NavNet(NetConfig(hidden=cfg.hidden, feature_dim=cfg.feature_dim))
+    train_net = NavNet(NetConfig.of(cfg))
     opt = torch.optim.Adam(train_net.parameters(), lr=1e-4)
 
     def grad_step() -> None:
