@@ -37,6 +37,8 @@ def test_config_checks_name_the_flag(tmp_path):
         check_ppo_config(tiny_ppo(tmp_path, num_minibatches=3))
     with pytest.raises(ConfigError, match="--stop-rule"):
         check_ppo_config(tiny_ppo(tmp_path, stop_rule="never"))
+    with pytest.raises(ConfigError, match="--bc-teacher"):
+        check_ppo_config(tiny_ppo(tmp_path, bc_teacher="oracle"))
 
 
 def test_threshold_rule_log_probs_are_the_motion_distribution():
@@ -71,8 +73,9 @@ def test_value_warmup_leaves_the_policy_untouched(tmp_path):
 
 
 @pytest.mark.slow
-def test_tiny_ppo_run_writes_checkpoint_card_and_metrics(tmp_path):
-    result = train_ppo(tiny_ppo(tmp_path, bc_coef=0.5, calibrate_episodes=4), command="test")
+@pytest.mark.parametrize("bc_teacher", ["expert", "explorer"])
+def test_tiny_ppo_run_writes_checkpoint_card_and_metrics(tmp_path, bc_teacher):
+    result = train_ppo(tiny_ppo(tmp_path, bc_coef=0.5, bc_teacher=bc_teacher, calibrate_episodes=4), command="test")
     card = json.loads((tmp_path / "ppo.json").read_text())
     assert card["algo"] == "ppo" and card["frames"] == 1024 and card["command"] == "test"
     assert card["end_threshold"] == card["end_threshold_calibration"]["threshold"]

@@ -134,7 +134,9 @@ class PPOConfig:
     target_kl: float = 0.0
     """Stop an iteration's epochs early when the approximate KL exceeds this (0: never)."""
     bc_coef: float = 0.0
-    """Weight of an auxiliary cross-entropy to the shortest-path expert's labels (a DAgger regulariser; 0: pure RL)."""
+    """Weight of an auxiliary cross-entropy to bc_teacher's labels of the visited states (a DAgger regulariser; 0: pure RL)."""
+    bc_teacher: str = "expert"
+    """Who labels the states for bc_coef: expert (shortest path, knows the target), explorer (searches) or mix."""
     value_warmup_iters: int = 4
     """First iterations train only the value head, so a warm-started policy is not moved by a random critic."""
     stop_rule: str = "threshold"

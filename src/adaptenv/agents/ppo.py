@@ -25,7 +25,8 @@ Each iteration:
 3. **Learn**: ``update_epochs`` passes over the rollout in ``num_minibatches`` minibatches of
    ``chunk_len``-step sequences (GRU memory at a sequence start: the stored one, reset where an
    episode starts), with PPO's clipped surrogate, a value loss, an entropy bonus and, when
-   ``bc_coef`` > 0, cross-entropy to the shortest-path expert's labels of the visited states.
+   ``bc_coef`` > 0, cross-entropy to ``bc_teacher``'s labels of the visited states
+   (:mod:`adaptenv.agents.teachers`).
    For the first ``value_warmup_iters`` iterations only the value head learns (it reads the
    policy's memory and features, detached), so a random critic cannot move a warm-started policy.
 
@@ -65,10 +66,10 @@ from adaptenv.agents.network import (
 )
 from adaptenv.agents.registry import init_checkpoint
 from adaptenv.agents.stop import calibrate_end_threshold
+from adaptenv.agents.teachers import TEACHERS, make_teacher
 from adaptenv.agents.train import RunLogger, TrainResult
 from adaptenv.errors import ConfigError
 from adaptenv.progress import ProgressBar
-from adaptenv.sim.expert import ShortestPathExpert
 from adaptenv.sim.spec import END, N_RAYS
 from adaptenv.sim.vector import BatchSim, EpisodeSampler
 
@@ -93,6 +94,8 @@ def check_ppo_config(cfg: PPOConfig) -> None:
     if sequences % cfg.num_minibatches:
         raise ConfigError(f"--num-minibatches ({cfg.num_minibatches}) must divide the rollout's {sequences} "
                           "sequences (num_envs * rollout_steps / chunk_len)")
+    if cfg.bc_teacher not in TEACHERS:
+        raise ConfigError(f"--bc-teacher {cfg.bc_teacher!r}: unknown teacher; choose one of {', '.join(TEACHERS)}")
     if cfg.stop_rule not in ("threshold", "sample"):
         raise ConfigError(f"--stop-rule must be 'threshold' or 'sample', got {cfg.stop_rule!r}")
 
@@ -191,7 +194,7 @@ def train_ppo(cfg: PPOConfig, *, worlds: Sequence[Any] | None = None, init_net: 
 
     sampler = EpisodeSampler(worlds, min_distance=cfg.min_start_distance)
     sim = BatchSim(worlds, max_steps=cfg.max_episode_steps)
-    expert = ShortestPathExpert() if cfg.bc_coef > 0 else None
+    teacher = make_teacher(cfg.bc_teacher, sim, seed=cfg.seed) if cfg.bc_coef > 0 else None
     obs, _ = sim.reset(*sampler.draw(rng, B))
     first = np.ones(B, dtype=bool)
     h = net.initial_state(B)
@@ -215,8 +218,8 @@ def train_ppo(cfg: PPOConfig, *, worlds: Sequence[Any] | None = None, init_net: 
             for k in obs_buf:
                 obs_buf[k][t] = obs[k]
             first_buf[t] = first
-            if expert is not None:
-                labels_buf[t] = expert.act_batch(sim.worlds, sim.env, sim.target_types, sim.x, sim.z, sim.yaw)
+            if teacher is not None:
+                labels_buf[t] = teacher.label(obs, first)
             with torch.no_grad():
                 seq = {k: v[None] for k, v in obs_to_tensors(obs).items()}
                 logits, value, h = agent(seq, torch.from_numpy(first)[None], h)
@@ -288,7 +291,7 @@ def train_ppo(cfg: PPOConfig, *, worlds: Sequence[Any] | None = None, init_net: 
                 v_loss = 0.5 * ((new_value - b_returns[idx]) ** 2).mean()
                 ent = entropy.mean()
                 bc_loss = (F.cross_entropy(logits.reshape(-1, logits.shape[-1]), b_labels[idx].reshape(-1))
-                           if expert is not None else torch.zeros(()))
+                           if teacher is not None else torch.zeros(()))
                 if warmup:
                     loss = cfg.vf_coef * v_loss
                 else:

@@ -13,6 +13,7 @@ must see every step). ``TrainConfig.teacher`` picks one:
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from typing import Any, Literal, Protocol
 
 import numpy as np
@@ -101,3 +102,60 @@ def make_teacher(kind: str, sim: Any, *, mix: float = 0.5, seed: int = 0) -> Tea
     if kind == "mix":
         return MixTeacher(sim, mix, seed)
     raise ConfigError(f"--teacher {kind!r}: unknown teacher; choose one of {', '.join(TEACHERS)}")
+
+
+@dataclass(frozen=True)
+class LabelAgreement:
+    """How a network's action distribution matches a teacher's labels on a set of visited states."""
+
+    cross_entropy: float
+    accuracy: float
+    episodes: int
+    """Episodes finished while collecting (the states' trajectories)."""
+    label_share: list[float]
+    """Fraction of the states with each action as the label (``spec.ACTIONS`` order)."""
+    argmax_share: list[float]
+    """Fraction of the states with each action as the network's most likely one."""
+
+
+def label_agreement(net: Any, worlds: list, beta: float, *, teacher: str = "expert", envs: int = 64,
+                    steps: int = 256, seed: int = 0) -> LabelAgreement:
+    """The network's agreement with ``teacher`` on states reached when the teacher acts with probability ``beta``.
+
+    beta 1 gives the teacher's own trajectories, 0 the network's (``choose_actions`` with sampled
+    motions, as NeuralPolicy acts): the gap between the two says how far DAgger's data is from
+    the states the policy meets (docs/agent.md, "PPO").
+    """
+    import torch
+    import torch.nn.functional as F
+
+    from adaptenv.agents.network import choose_actions, obs_to_tensors
+    from adaptenv.sim.spec import N_ACTIONS
+    from adaptenv.sim.vector import BatchSim, EpisodeSampler
+
+    rng = np.random.default_rng(seed)
+    sampler = EpisodeSampler(worlds)
+    sim = BatchSim(worlds, max_steps=300)
+    labeller = make_teacher(teacher, sim, seed=seed)
+    obs, _ = sim.reset(*sampler.draw(rng, envs))
+    first, h = np.ones(envs, dtype=bool), net.initial_state(envs)
+    logits_all, labels_all, episodes = [], [], 0
+    for _ in range(steps):
+        labels = labeller.label(obs, first)
+        with torch.no_grad():
+            logits, h = net.step(obs_to_tensors(obs), torch.from_numpy(first), h)
+        actions = np.where(rng.random(envs) < beta, labels, choose_actions(logits, rng.random(envs)))
+        logits_all.append(logits)
+        labels_all.append(torch.from_numpy(labels))
+        obs, _, terminated, truncated, _ = sim.step(actions)
+        done = np.flatnonzero(terminated | truncated)
+        first = np.zeros(envs, dtype=bool)
+        if done.size:
+            episodes += done.size
+            obs = sim.reset_at(done, *sampler.draw(rng, done.size))
+            first[done] = True
+    logits, labels = torch.cat(logits_all), torch.cat(labels_all)
+    share = lambda a: (np.bincount(a.numpy(), minlength=N_ACTIONS) / len(a)).tolist()  # noqa: E731
+    return LabelAgreement(cross_entropy=F.cross_entropy(logits, labels).item(),
+                          accuracy=(logits.argmax(-1) == labels).float().mean().item(), episodes=episodes,
+                          label_share=share(labels), argmax_share=share(logits.argmax(-1)))
