@@ -141,3 +141,15 @@ def test_resumed_run_is_about_as_fast_as_a_fresh_one(tmp_path):
     t_resumed = float(np.median(_iteration_seconds(resumed.rows, first=10)))
     assert len(_iteration_seconds(resumed.rows, first=10)) >= 5
     assert t_resumed < 2.5 * t_fresh, (t_fresh, t_resumed)
+
+
+@pytest.mark.slow
+def test_bench_train_measures_the_recipe_it_is_given(capsys):
+    from adaptenv.bench.train import run
+
+    small = run(as_json=True, envs=8, steps=4, houses="preset:tiny", iterations=0,
+                recipe={"hidden": 32, "feature_dim": 32, "conv_channels": 8, "updates_per_iter": 4})
+    default = run(as_json=True, envs=8, steps=4, houses="preset:tiny", iterations=0)
+    assert small["recipe"]["hidden"] == 32 and small["parameters"] < default["parameters"] / 4
+    assert small["replay_ratio"] == default["replay_ratio"] / 2 == 1.0
+    assert '"benchmark": "imitation-learning throughput"' in capsys.readouterr().out

@@ -47,16 +47,20 @@ def wall_and_cpu(fn: Callable[[], object], repeats: int, warmup: int = 1) -> tup
     return statistics.median(walls), statistics.median(cpus)
 
 
-def end_to_end(worlds: list, iterations: int, repeats: int) -> dict:
-    """``train`` frames/s with and without the learner thread, alternately (median of ``repeats`` each)."""
+def end_to_end(worlds: list, iterations: int, repeats: int, recipe: dict | None = None) -> dict:
+    """``train`` frames/s with and without the learner thread, alternately (median of ``repeats`` each).
+
+    ``recipe``: TrainConfig fields that differ from the defaults (network sizes, replay ratio).
+    """
     from adaptenv.agents.config import TrainConfig
     from adaptenv.agents.train import train
 
+    recipe = recipe or {}
     block = TrainConfig().num_envs * TrainConfig().rollout_steps
 
     def one(overlap: bool, n: int) -> float:
         cfg = TrainConfig(frames=n * block, output="", run_dir="", eval_every=0, final_eval_episodes=1,
-                          calibrate_episodes=0, progress=False, tensorboard=False, overlap=overlap)
+                          calibrate_episodes=0, progress=False, tensorboard=False, overlap=overlap, **recipe)
         t = time.perf_counter()
         train(cfg, worlds=worlds)
         return n * block / (time.perf_counter() - t)
@@ -71,10 +75,10 @@ def end_to_end(worlds: list, iterations: int, repeats: int) -> dict:
             "dagger_end_to_end_serial_frames_per_s": statistics.median(fps[False]),
             "dagger_overlap_speedup": statistics.median(ratios),
             "end_to_end_target_met": bool(statistics.median(fps[True]) >= END_TO_END_TARGET),
-            **fresh_and_resumed(worlds, iterations)}
+            **fresh_and_resumed(worlds, iterations, recipe)}
 
 
-def fresh_and_resumed(worlds: list, iterations: int) -> dict:
+def fresh_and_resumed(worlds: list, iterations: int, recipe: dict | None = None) -> dict:
     """``train`` frames/s of a fresh run and of its ``--resume`` continuation by as many iterations."""
     import tempfile
 
@@ -85,7 +89,8 @@ def fresh_and_resumed(worlds: list, iterations: int) -> dict:
     with tempfile.TemporaryDirectory() as tmp:
         def one(n: int, resume: bool) -> float:
             cfg = TrainConfig(frames=n * block, output="", run_dir=tmp, eval_every=0, final_eval_episodes=1,
-                              calibrate_episodes=0, progress=False, tensorboard=False, resume=resume)
+                              calibrate_episodes=0, progress=False, tensorboard=False, resume=resume,
+                              **(recipe or {}))
             t = time.perf_counter()
             train(cfg, worlds=worlds)
             return iterations * block / (time.perf_counter() - t)
@@ -126,8 +131,12 @@ def run_ppo(*, as_json: bool = False, iterations: int = 3, houses: str = "preset
 
 
 def run(*, as_json: bool = False, envs: int = 256, steps: int = 200, houses: str = "preset:pretrain-train",
-        iterations: int = 3, repeats: int = 2) -> dict:
-    """Measure and print the figures (table or JSON); returns them."""
+        iterations: int = 3, repeats: int = 2, recipe: dict | None = None) -> dict:
+    """Measure and print the figures (table or JSON); returns them.
+
+    ``recipe``: TrainConfig fields that differ from the defaults, for every figure (for example
+    ``{"hidden": 128, "updates_per_iter": 4}``); they are reported with the figures.
+    """
     import torch
     import torch.nn.functional as F
 
@@ -146,7 +155,7 @@ def run(*, as_json: bool = False, envs: int = 256, steps: int = 200, houses: str
     from adaptenv.sim.vector import BatchSim
 
     threads = configure_torch()
-    cfg = TrainConfig()
+    cfg = TrainConfig(**(recipe or {}))
     worlds = load_house_set(houses).worlds
     rng = np.random.default_rng(0)
     expert = ShortestPathExpert()
@@ -184,8 +193,8 @@ def run(*, as_json: bool = False, envs: int = 256, steps: int = 200, houses: str
 
     L, N = cfg.chunk_len, cfg.batch_chunks
     obs = sim.observe()
-    seq = {k: torch.as_tensor(np.broadcast_to(v, (L, *v.shape))[:, :N].copy()) for k, v in obs.items()}
-    seq = obs_to_tensors({k: v.numpy() for k, v in seq.items()})
+    seq = obs_to_tensors({k: np.broadcast_to(np.resize(v, (N, *v.shape[1:])), (L, N, *v.shape[1:])).copy()
+                          for k, v in obs.items()})
     labels = torch.randint(0, 7, (L, N))
     done = torch.zeros(L, N, dtype=torch.bool)
     train_net = NavNet(NetConfig.of(cfg))
@@ -224,7 +233,9 @@ def run(*, as_json: bool = False, envs: int = 256, steps: int = 200, houses: str
         "gradient_target_met": bool(L * N / t_grad >= GRAD_TARGET),
     }
     if iterations > 0:
-        figures.update(end_to_end(worlds, iterations, repeats))
+        figures.update(end_to_end(worlds, iterations, repeats, recipe))
+    figures["recipe"] = dict(recipe or {})
+    figures["replay_ratio"] = cfg.updates_per_iter * cfg.batch_chunks * cfg.chunk_len / (cfg.num_envs * cfg.rollout_steps)
     figures["load_average_1min_before"] = load_before
     figures["load_average_1min_after"] = os.getloadavg()[0]
     emit("imitation-learning throughput", figures, as_json,

@@ -231,15 +231,25 @@ def bench_train(as_json: bool = JSON_OPTION,
                 steps: int = typer.Option(200, "--steps", help="Steps timed per measurement."),
                 algo: str = typer.Option("dagger", "--algo", help="dagger (imitation figures and end to end) or ppo."),
                 iterations: int = typer.Option(3, "--iterations", min=0,
-                                               help="Training iterations timed end to end (0: skip that figure).")
+                                               help="Training iterations timed end to end (0: skip that figure)."),
+                hidden: int | None = typer.Option(None, "--hidden", min=1, help="GRU memory size (default: TrainConfig's)."),
+                feature_dim: int | None = typer.Option(None, "--feature-dim", min=1,
+                                                       help="Per-step feature size (default: TrainConfig's)."),
+                conv_channels: int | None = typer.Option(None, "--conv-channels", min=1,
+                                                         help="Ray convolution channels (default: TrainConfig's)."),
+                updates_per_iter: int | None = typer.Option(None, "--updates-per-iter", min=1,
+                                                            help="Gradient steps per collection, i.e. the replay ratio "
+                                                                 "(default: TrainConfig's).")
                 ) -> None:
     """Training throughput: labelled, gradient and end-to-end frames/s, inference steps/s, parameter count."""
     from adaptenv.bench.train import run, run_ppo
 
+    recipe = {k: v for k, v in (("hidden", hidden), ("feature_dim", feature_dim), ("conv_channels", conv_channels),
+                                ("updates_per_iter", updates_per_iter)) if v is not None}
     if algo == "ppo":
         run_ppo(as_json=as_json, iterations=max(1, iterations))
     elif algo == "dagger":
-        run(as_json=as_json, envs=envs, steps=steps, iterations=iterations)
+        run(as_json=as_json, envs=envs, steps=steps, iterations=iterations, recipe=recipe)
     else:
         raise typer.BadParameter(f"expected dagger or ppo, got {algo!r}", param_hint="--algo")
 
