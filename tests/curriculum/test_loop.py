@@ -55,7 +55,7 @@ def test_the_fine_tuning_recipe_carries_the_loop_settings():
 @pytest.mark.slow
 @pytest.mark.parametrize("method", [m for m in METHODS if m != "ours-llm"])
 def test_every_method_runs_and_counts_its_budget(method, tiny_policy, tmp_path):
-    roomy = method in ("ours", "ours-randomscene", "ours-nof")  # a buffer no level is evicted from, to check them all
+    roomy = method in ("ours", "ours-randomscene", "ours-nof", "ours-dr")  # a buffer no level is evicted from, to check them all
     cfg = tiny_config(tiny_policy, method, **({"buffer_capacity": 16} if roomy else {}))
     records = run_loop(cfg, tmp_path / method)
     assert [r.iteration for r in records] == [0, 1, 2]
@@ -83,7 +83,10 @@ def test_every_method_runs_and_counts_its_budget(method, tiny_policy, tmp_path):
         state = json.loads((tmp_path / method / STATE).read_text())["state"]
         buffered = set(state["buffer"]["level_ids"])
         assert set(scenes["trained_on"]) <= buffered, "robust PLR/ACCEL train on replayed buffer levels only"
-    if method in ("ours", "ours-randomscene", "ours-nof"):
+    if method == "ours-dr":
+        fresh = [x for x in scenes["rolled_out"] if x.startswith("dr")]
+        assert fresh and set(fresh) <= set(scenes["trained_on"]), "ours-dr trains on every fresh house, as dr does"
+    if method in ("ours", "ours-randomscene", "ours-nof", "ours-dr"):
         state = json.loads((tmp_path / method / STATE).read_text())["state"]
         assert any(x.startswith("dr") for x in scenes["rolled_out"]), "fresh houses are scored each iteration"
         assert set(scenes["rolled_out"]) <= set(state["buffer"]["level_ids"]), "scored scenes go into the buffer"

@@ -77,7 +77,7 @@ def loop(
     houses: str = typer.Option("preset:pretrain-train", "--houses", help="Training scenes: a folder or preset:NAME."),
     iterations: int = typer.Option(3, "--iterations", "-T", min=1, help="Loop iterations."),
     method: str = typer.Option("ours", "--method", help="none, random, dr, plr, accel, ours, ours-noselect, "
-                                "ours-randomscene, ours-nof or ours-llm."),
+                                "ours-randomscene, ours-nof, ours-dr or ours-llm."),
     seed: int = typer.Option(0, "--seed", help="Root seed."),
     out: Path = typer.Option(Path("runs/loop"), "-o", "--out", help="Run folder."),
     resume: bool = typer.Option(False, "--resume", help="Continue the run in --out from its last iteration."),

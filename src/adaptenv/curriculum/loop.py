@@ -16,7 +16,8 @@ methods lives in their strategy classes (:mod:`adaptenv.curriculum.methods`):
   diagnosis over ``diagnose_episodes`` hard episodes and G aimed at the dominant failure modes;
   ablations ``ours-noselect`` (the plain
   step, one episode, round robin), ``ours-randomscene`` (uniform scene choice), ``ours-nof``
-  (G on regret alone, no F analysis).
+  (G on regret alone, no F analysis); variant ``ours-dr`` (trained on the children plus DR's
+  fresh houses instead of the buffer replay).
 - ``ours-llm``: the same with LLM F and G (needs an LLM config).
 
 Per iteration every method rolls out the same number of analysis/scoring episodes and spends the
@@ -82,7 +83,7 @@ class LoopConfig:
     """Settings of one closed-loop run (one method, one seed); saved as run.json."""
 
     method: str = "ours"
-    """One of none, random, dr, plr, accel, ours, ours-noselect, ours-randomscene, ours-nof, ours-llm."""
+    """One of none, random, dr, plr, accel, ours, ours-noselect, ours-randomscene, ours-nof, ours-dr, ours-llm."""
     policy: str = "pretrained"
     """Starting policy pi_0: pretrained or a checkpoint path (it must be a neural policy to fine-tune)."""
     houses: str = "preset:pretrain-train"
@@ -125,7 +126,7 @@ class LoopConfig:
     """The first iteration scores the training scenes into the level buffer (plr, accel, ours); false keeps
     them out, so the buffer holds only generated scenes (fresh houses and their children)."""
     diagnose_episodes: int = 4
-    """Hard episodes F diagnoses per adapted scene (ours, ours-randomscene, ours-nof)."""
+    """Hard episodes F diagnoses per adapted scene (ours, ours-randomscene, ours-nof, ours-dr)."""
 
     def check(self) -> LoopConfig:
         """Return self or raise one ConfigError naming the field and the fix."""
