@@ -1,0 +1,44 @@
+"""tools/evaluate_runs.py: the validation table that chooses between loop variants."""
+
+from __future__ import annotations
+
+import importlib.util
+import json
+from pathlib import Path
+
+import pytest
+
+TOOL = Path(__file__).resolve().parents[1] / "tools" / "evaluate_runs.py"
+
+
+def _tool():
+    spec = importlib.util.spec_from_file_location("evaluate_runs", TOOL)
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    return mod
+
+
+def _write(folder: Path, seed: int, success: dict[str, float]) -> None:
+    run = folder / f"seed_{seed}"
+    run.mkdir(parents=True)
+    doc = {"episodes": 100, "seed": seed, "iteration": 4, "final": {k: {"success": v} for k, v in success.items()}}
+    (run / "val.json").write_text(json.dumps(doc))
+
+
+def test_compare_pairs_by_seed_and_averages_the_suites(tmp_path, capsys):
+    a, b = tmp_path / "a", tmp_path / "b"
+    for seed, (x, y) in enumerate([(0.6, 0.5), (0.7, 0.5), (0.5, 0.45)]):
+        _write(a, seed, {"long": x, "far": x - 0.2})
+        _write(b, seed, {"long": y, "far": y - 0.1})
+    _tool().compare("val", [0, 1, 2], a, b)
+    out = capsys.readouterr().out
+    assert "| long | 0.600 | 0.483 | +0.117 | +0.10, +0.20, +0.05 |" in out
+    assert "| far | 0.400 | 0.383 | +0.017 | +0.00, +0.10, -0.05 |" in out
+    assert "| mean of the suites | 0.500 | 0.433 | +0.067 | paired t p = " in out
+
+
+def test_compare_names_a_missing_seed(tmp_path):
+    _write(tmp_path / "a", 0, {"long": 0.5})
+    _write(tmp_path / "b", 1, {"long": 0.5})
+    with pytest.raises(FileNotFoundError, match="seed_1"):
+        _tool().compare("val", [0, 1], tmp_path / "a", tmp_path / "b")

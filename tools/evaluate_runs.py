@@ -1,0 +1,84 @@
+"""Choose between loop variants on validation suites: evaluate runs' final policies, then compare two methods.
+
+    python tools/evaluate_runs.py evaluate --name val --suites val-long,val-far,val-clutter [--episodes 100] RUN...
+    python tools/evaluate_runs.py compare --name val --seeds 0,1,2,3 METHOD_A_FOLDER METHOD_B_FOLDER
+
+``evaluate`` writes ``RUN/<name>.json`` with the last iteration's policy on each suite, on the
+episodes of the run's seed (as ``adaptenv experiment --final-episodes`` draws them, so two methods'
+runs of one seed are paired); runs that have the file are skipped. ``compare`` prints, per suite
+and for the mean of the suites, the difference A - B averaged over the seeds and scipy's paired t
+test. docs/RESULTS.md's validation tables are this script's output.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+
+import numpy as np
+
+
+def evaluate(name: str, suites: list[str], episodes: int, runs: list[Path]) -> None:
+    """Evaluate each run's final policy on ``suites`` into ``run/<name>.json``."""
+    from adaptenv.agents.checkpoint import load_checkpoint
+    from adaptenv.curriculum.executor import InProcessExecutor
+    from adaptenv.curriculum.jobs import PolicyWeights
+    from adaptenv.curriculum.loop import evaluate_sets
+    from adaptenv.curriculum.records import read_iterations
+
+    specs = {s: f"suite:{s}" for s in suites}
+    for run in runs:
+        out = run / f"{name}.json"
+        if out.is_file():
+            continue
+        seed = json.loads((run / "run.json").read_text())["seed"]
+        last = read_iterations(run)[-1].iteration
+        weights = PolicyWeights.of(load_checkpoint(run / f"iter_{last:04d}" / "policy.pt").policy())
+        final = evaluate_sets(weights, specs, episodes, seed, InProcessExecutor())
+        doc = {"episodes": episodes, "seed": seed, "iteration": last, "final": {k: v.model_dump() for k, v in final.items()}}
+        out.write_text(json.dumps(doc, indent=1), encoding="utf-8")
+        print(run, {k: round(v.success, 3) for k, v in final.items()}, flush=True)
+
+
+def compare(name: str, seeds: list[int], a: Path, b: Path) -> None:
+    """Print A - B per suite and for the mean of the suites, paired by seed."""
+    from scipy import stats
+
+    def load(folder: Path) -> dict[str, np.ndarray]:
+        docs = [json.loads((folder / f"seed_{k}" / f"{name}.json").read_text()) for k in seeds]
+        return {s: np.array([d["final"][s]["success"] for d in docs]) for s in docs[0]["final"]}
+
+    sa, sb = load(a), load(b)
+    print(f"A = {a}, B = {b}, seeds {seeds}")
+    print("| suite | A | B | A - B | per seed |\n|---|---|---|---|---|")
+    for s in sa:
+        d = sa[s] - sb[s]
+        print(f"| {s} | {sa[s].mean():.3f} | {sb[s].mean():.3f} | {d.mean():+.3f} | {', '.join(f'{round(x, 2) + 0.0:+.2f}' for x in d)} |")
+    ma, mb = np.mean(list(sa.values()), 0), np.mean(list(sb.values()), 0)
+    p = stats.ttest_rel(ma, mb).pvalue if len(seeds) > 1 else float("nan")
+    print(f"| mean of the suites | {ma.mean():.3f} | {mb.mean():.3f} | {(ma - mb).mean():+.3f} | paired t p = {p:.3f} |")
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    sub = parser.add_subparsers(dest="command", required=True)
+    ev = sub.add_parser("evaluate")
+    ev.add_argument("--name", required=True)
+    ev.add_argument("--suites", required=True)
+    ev.add_argument("--episodes", type=int, default=100)
+    ev.add_argument("runs", nargs="+", type=Path)
+    cmp = sub.add_parser("compare")
+    cmp.add_argument("--name", required=True)
+    cmp.add_argument("--seeds", required=True)
+    cmp.add_argument("a", type=Path)
+    cmp.add_argument("b", type=Path)
+    args = parser.parse_args()
+    if args.command == "evaluate":
+        evaluate(args.name, args.suites.split(","), args.episodes, args.runs)
+    else:
+        compare(args.name, [int(s) for s in args.seeds.split(",")], args.a, args.b)
+
+
+if __name__ == "__main__":
+    main()
