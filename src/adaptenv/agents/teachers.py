@@ -155,7 +155,12 @@ def label_agreement(net: Any, worlds: list, beta: float, *, teacher: str = "expe
             obs = sim.reset_at(done, *sampler.draw(rng, done.size))
             first[done] = True
     logits, labels = torch.cat(logits_all), torch.cat(labels_all)
-    share = lambda a: (np.bincount(a.numpy(), minlength=N_ACTIONS) / len(a)).tolist()  # noqa: E731
+    argmax = logits.argmax(-1)
     return LabelAgreement(cross_entropy=F.cross_entropy(logits, labels).item(),
-                          accuracy=(logits.argmax(-1) == labels).float().mean().item(), episodes=episodes,
-                          label_share=share(labels), argmax_share=share(logits.argmax(-1)))
+                          accuracy=(argmax == labels).float().mean().item(), episodes=episodes,
+                          label_share=_shares(labels.numpy(), N_ACTIONS), argmax_share=_shares(argmax.numpy(), N_ACTIONS))
+
+
+def _shares(actions: np.ndarray, n: int) -> list[float]:
+    """Fraction of each of ``n`` actions in ``actions``."""
+    return (np.bincount(actions, minlength=n) / len(actions)).tolist()
