@@ -3,7 +3,8 @@
     python tools/evaluate_runs.py evaluate --name val --suites val-long,val-far,val-clutter [--episodes 100] RUN...
     python tools/evaluate_runs.py compare --name val --seeds 0,1,2,3 METHOD_A_FOLDER METHOD_B_FOLDER
 
-``evaluate`` writes ``RUN/<name>.json`` with the last iteration's policy on each suite, on the
+``evaluate`` writes ``RUN/<name>.json`` with the last iteration's policy on each suite (a suite name,
+or any house-set spec with a colon such as ``preset:NAME``), on the
 episodes of the run's seed (as ``adaptenv experiment --final-episodes`` draws them, so two methods'
 runs of one seed are paired); runs that have the file are skipped. ``compare`` prints, per suite
 and for the mean of the suites, the difference A - B averaged over the seeds and scipy's paired t
@@ -27,7 +28,7 @@ def evaluate(name: str, suites: list[str], episodes: int, runs: list[Path]) -> N
     from adaptenv.curriculum.loop import evaluate_sets
     from adaptenv.curriculum.records import read_iterations
 
-    specs = {s: f"suite:{s}" for s in suites}
+    specs = {s: s if ":" in s else f"suite:{s}" for s in suites}
     for run in runs:
         out = run / f"{name}.json"
         if out.is_file():

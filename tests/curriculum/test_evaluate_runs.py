@@ -8,7 +8,7 @@ from pathlib import Path
 
 import pytest
 
-TOOL = Path(__file__).resolve().parents[1] / "tools" / "evaluate_runs.py"
+TOOL = Path(__file__).resolve().parents[2] / "tools" / "evaluate_runs.py"
 
 
 def _tool():
@@ -42,3 +42,20 @@ def test_compare_names_a_missing_seed(tmp_path):
     _write(tmp_path / "b", 1, {"long": 0.5})
     with pytest.raises(FileNotFoundError, match="seed_1"):
         _tool().compare("val", [0, 1], tmp_path / "a", tmp_path / "b")
+
+
+def test_evaluate_reproduces_the_loops_own_evaluation_and_skips_finished_runs(tiny_policy, tmp_path, capsys):
+    from adaptenv.curriculum.loop import LoopConfig, run_loop
+
+    cfg = LoopConfig(method="none", policy=str(tiny_policy), houses="preset:tiny", heldout={"preset:tiny": "preset:tiny"},
+                     iterations=1, scenes_per_iteration=2, finetune_frames=512, finetune_envs=16, heldout_episodes=4,
+                     gallery=0, seed=3)
+    last = run_loop(cfg, tmp_path / "run")[-1]
+    tool = _tool()
+    tool.evaluate("val", ["preset:tiny"], 4, [tmp_path / "run"])
+    doc = json.loads((tmp_path / "run" / "val.json").read_text())
+    assert (doc["seed"], doc["iteration"], doc["episodes"]) == (3, 1, 4)
+    assert doc["final"]["preset:tiny"] == last.heldout["preset:tiny"].model_dump()
+    capsys.readouterr()
+    tool.evaluate("val", ["preset:tiny"], 4, [tmp_path / "run"])
+    assert capsys.readouterr().out == "", "a run with the file is skipped"
