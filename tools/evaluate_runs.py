@@ -2,13 +2,16 @@
 
     python tools/evaluate_runs.py evaluate --name val --suites val-long,val-far,val-clutter [--episodes 100] RUN...
     python tools/evaluate_runs.py compare --name val --seeds 0,1,2,3 METHOD_A_FOLDER METHOD_B_FOLDER
+    python tools/evaluate_runs.py layouts --seeds 0,1,2,3 METHOD_FOLDER...
 
 ``evaluate`` writes ``RUN/<name>.json`` with the last iteration's policy on each suite (a suite name,
 or any house-set spec with a colon such as ``preset:NAME``), on the
 episodes of the run's seed (as ``adaptenv experiment --final-episodes`` draws them, so two methods'
 runs of one seed are paired); runs that have the file are skipped. ``compare`` prints, per suite
 and for the mean of the suites, the difference A - B averaged over the seeds and scipy's paired t
-test. docs/RESULTS.md's validation tables are this script's output.
+test. ``layouts`` counts, per run, the distinct house layouts fine-tuned on over all iterations
+(a child ``house~t02f03`` has its parent's layout) and the scenes by kind. docs/RESULTS.md's
+validation tables are this script's output.
 """
 
 from __future__ import annotations
@@ -61,6 +64,20 @@ def compare(name: str, seeds: list[int], a: Path, b: Path) -> None:
     print(f"| mean of the suites | {ma.mean():.3f} | {mb.mean():.3f} | {(ma - mb).mean():+.3f} | paired t p = {p:.3f} |")
 
 
+def layouts(seeds: list[int], folders: list[Path]) -> None:
+    """Print, per method folder and seed, the distinct layouts trained on and the trained scenes by kind."""
+    print("| method | seed | distinct layouts | fresh houses | children | training houses |\n|---|---|---|---|---|---|")
+    for folder in folders:
+        for seed in seeds:
+            run = folder / f"seed_{seed}"
+            names = [x for it in sorted(run.glob("iter_*")) if it.name != "iter_0000"
+                     for x in json.loads((it / "scenes.json").read_text())["trained_on"]]
+            children = sum("~" in x for x in names)
+            fresh = sum("~" not in x and x.startswith("dr") for x in names)
+            distinct = len({x.split("~")[0] for x in names})
+            print(f"| {folder.name} | {seed} | {distinct} | {fresh} | {children} | {len(names) - children - fresh} |")
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     sub = parser.add_subparsers(dest="command", required=True)
@@ -74,11 +91,16 @@ def main() -> None:
     cmp.add_argument("--seeds", required=True)
     cmp.add_argument("a", type=Path)
     cmp.add_argument("b", type=Path)
+    lay = sub.add_parser("layouts")
+    lay.add_argument("--seeds", required=True)
+    lay.add_argument("folders", nargs="+", type=Path)
     args = parser.parse_args()
     if args.command == "evaluate":
         evaluate(args.name, args.suites.split(","), args.episodes, args.runs)
-    else:
+    elif args.command == "compare":
         compare(args.name, [int(s) for s in args.seeds.split(",")], args.a, args.b)
+    else:
+        layouts([int(s) for s in args.seeds.split(",")], args.folders)
 
 
 if __name__ == "__main__":

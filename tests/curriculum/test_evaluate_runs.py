@@ -59,3 +59,12 @@ def test_evaluate_reproduces_the_loops_own_evaluation_and_skips_finished_runs(ti
     capsys.readouterr()
     tool.evaluate("val", ["preset:tiny"], 4, [tmp_path / "run"])
     assert capsys.readouterr().out == "", "a run with the file is skipped"
+
+
+def test_layouts_counts_a_child_as_its_parents_layout(tmp_path, capsys):
+    run = tmp_path / "ours" / "seed_0"
+    for t, names in ((0, []), (1, ["dr0001", "pretrain-train_0003"]), (2, ["dr0001~t02f00", "dr0002", "dr0001"])):
+        (run / f"iter_{t:04d}").mkdir(parents=True)
+        (run / f"iter_{t:04d}" / "scenes.json").write_text(json.dumps({"trained_on": names}))
+    _tool().layouts([0], [tmp_path / "ours"])
+    assert "| ours | 0 | 3 | 3 | 1 | 1 |" in capsys.readouterr().out
