@@ -8,8 +8,8 @@
 or any house-set spec with a colon such as ``preset:NAME``), on the
 episodes of the run's seed (as ``adaptenv experiment --final-episodes`` draws them, so two methods'
 runs of one seed are paired); runs that have the file are skipped. ``compare`` prints, per suite
-and for the mean of the suites, the difference A - B averaged over the seeds and scipy's paired t
-test. ``layouts`` counts, per run, the distinct house layouts fine-tuned on over all iterations
+and for the mean of the suites, the difference A - B averaged over the seeds, its 95% interval and
+the paired t test (scipy). ``layouts`` counts, per run, the distinct house layouts fine-tuned on over all iterations
 (a child ``house~t02f03`` has its parent's layout) and the scenes by kind. docs/RESULTS.md's
 validation tables are this script's output.
 """
@@ -45,23 +45,33 @@ def evaluate(name: str, suites: list[str], episodes: int, runs: list[Path]) -> N
         print(run, {k: round(v.success, 3) for k, v in final.items()}, flush=True)
 
 
-def compare(name: str, seeds: list[int], a: Path, b: Path) -> None:
-    """Print A - B per suite and for the mean of the suites, paired by seed."""
+def compare(name: str, seeds: list[int], a: Path, b: Path, name_b: str | None = None) -> None:
+    """Print A - B per suite (with its 95% interval and paired t test) and for the mean of the suites, paired by seed.
+
+    ``name_b``: B's file name when it differs (``final_eval`` for an experiment's own final evaluation).
+    """
     from scipy import stats
 
-    def load(folder: Path) -> dict[str, np.ndarray]:
-        docs = [json.loads((folder / f"seed_{k}" / f"{name}.json").read_text()) for k in seeds]
+    def load(folder: Path, file: str) -> dict[str, np.ndarray]:
+        docs = [json.loads((folder / f"seed_{k}" / f"{file}.json").read_text()) for k in seeds]
         return {s: np.array([d["final"][s]["success"] for d in docs]) for s in docs[0]["final"]}
 
-    sa, sb = load(a), load(b)
+    def test(d: np.ndarray) -> str:
+        if len(d) < 2:
+            return "n/a"
+        half = stats.t.ppf(0.975, len(d) - 1) * d.std(ddof=1) / np.sqrt(len(d))
+        return f"[{d.mean() - half:+.3f}, {d.mean() + half:+.3f}] | {stats.ttest_1samp(d, 0.0).pvalue:.3f}"
+
+    sa, sb = load(a, name), load(b, name_b or name)
     print(f"A = {a}, B = {b}, seeds {seeds}")
-    print("| suite | A | B | A - B | per seed |\n|---|---|---|---|---|")
+    print("| suite | A | B | A - B | 95% interval | p (paired t) | per seed |\n|---|---|---|---|---|---|---|")
     for s in sa:
         d = sa[s] - sb[s]
-        print(f"| {s} | {sa[s].mean():.3f} | {sb[s].mean():.3f} | {d.mean():+.3f} | {', '.join(f'{round(x, 2) + 0.0:+.2f}' for x in d)} |")
-    ma, mb = np.mean(list(sa.values()), 0), np.mean(list(sb.values()), 0)
-    p = stats.ttest_rel(ma, mb).pvalue if len(seeds) > 1 else float("nan")
-    print(f"| mean of the suites | {ma.mean():.3f} | {mb.mean():.3f} | {(ma - mb).mean():+.3f} | paired t p = {p:.3f} |")
+        per_seed = ", ".join(f"{round(x, 2) + 0.0:+.2f}" for x in d)
+        print(f"| {s} | {sa[s].mean():.3f} | {sb[s].mean():.3f} | {d.mean():+.3f} | {test(d)} | {per_seed} |")
+    d = np.mean([sa[s] for s in sa], 0) - np.mean([sb[s] for s in sa], 0)
+    print(f"| mean of the suites | {np.mean(list(sa.values())):.3f} | {np.mean([sb[s] for s in sa]):.3f} "
+          f"| {d.mean():+.3f} | {test(d)} | |")
 
 
 def layouts(seeds: list[int], folders: list[Path]) -> None:
@@ -89,6 +99,7 @@ def main() -> None:
     cmp = sub.add_parser("compare")
     cmp.add_argument("--name", required=True)
     cmp.add_argument("--seeds", required=True)
+    cmp.add_argument("--name-b", default=None, help="B's file name when it differs (e.g. final_eval)")
     cmp.add_argument("a", type=Path)
     cmp.add_argument("b", type=Path)
     lay = sub.add_parser("layouts")
@@ -98,7 +109,7 @@ def main() -> None:
     if args.command == "evaluate":
         evaluate(args.name, args.suites.split(","), args.episodes, args.runs)
     elif args.command == "compare":
-        compare(args.name, [int(s) for s in args.seeds.split(",")], args.a, args.b)
+        compare(args.name, [int(s) for s in args.seeds.split(",")], args.a, args.b, args.name_b)
     else:
         layouts([int(s) for s in args.seeds.split(",")], args.folders)
 
