@@ -24,7 +24,7 @@ def _rollout(success: bool, spl: float, expert: bool) -> Rollout:
 
 def test_every_method_is_registered_by_its_name():
     assert set(M.METHODS) == {"none", "random", "dr", "plr", "accel", "ours", "ours-noselect", "ours-randomscene",
-                              "ours-nof", "ours-llm"}
+                              "ours-nof", "ours-dr", "ours-llm"}
     assert all(cls.name == name for name, cls in M.METHODS.items())
     assert M.METHODS["ours"].generator == "failure-modes" and M.METHODS["ours-nof"].generator == "regret-only"
     assert M.METHODS["ours-noselect"].generator == "builtin" and M.METHODS["ours-llm"].generator == "llm"
