@@ -55,12 +55,12 @@ def end_to_end(worlds: list, iterations: int, repeats: int, recipe: dict | None 
     from adaptenv.agents.config import TrainConfig
     from adaptenv.agents.train import train
 
-    recipe = recipe or {}
     block = TrainConfig().num_envs * TrainConfig().rollout_steps
 
     def one(overlap: bool, n: int) -> float:
         cfg = TrainConfig(frames=n * block, output="", run_dir="", eval_every=0, final_eval_episodes=1,
-                          calibrate_episodes=0, progress=False, tensorboard=False, overlap=overlap, **recipe)
+                          calibrate_episodes=0, progress=False, tensorboard=False, overlap=overlap,
+                          **(recipe or {}))
         t = time.perf_counter()
         train(cfg, worlds=worlds)
         return n * block / (time.perf_counter() - t)
