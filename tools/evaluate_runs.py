@@ -8,9 +8,10 @@
 or any house-set spec with a colon such as ``preset:NAME``), on the
 episodes of the run's seed (as ``adaptenv experiment --final-episodes`` draws them, so two methods'
 runs of one seed are paired); runs that have the file are skipped. ``compare`` prints, per suite
-and for the mean of the suites, the difference A - B averaged over the seeds, its 95% interval and
-the paired t test (scipy). ``layouts`` counts, per run, the distinct house layouts fine-tuned on over all iterations
-(a child ``house~t02f03`` has its parent's layout) and the scenes by kind. docs/RESULTS.md's
+and for the mean of the suites, the difference A - B averaged over the seeds, its 95% interval,
+the paired t test (scipy) and, per suite, Holm's adjusted p over the suites. ``layouts`` counts,
+per run, the distinct house layouts fine-tuned on over all iterations (a child ``house~t02f03``
+has its parent's layout) and the scenes by kind. docs/RESULTS.md's
 validation tables are this script's output.
 """
 
@@ -46,32 +47,44 @@ def evaluate(name: str, suites: list[str], episodes: int, runs: list[Path]) -> N
 
 
 def compare(name: str, seeds: list[int], a: Path, b: Path, name_b: str | None = None) -> None:
-    """Print A - B per suite (with its 95% interval and paired t test) and for the mean of the suites, paired by seed.
+    """Print A - B per suite (95% interval, paired t test, Holm's p over the suites) and for the mean of the suites,
+    paired by seed.
 
     ``name_b``: B's file name when it differs (``final_eval`` for an experiment's own final evaluation).
     """
     from scipy import stats
 
+    from adaptenv.curriculum.experiment import holm
+
     def load(folder: Path, file: str) -> dict[str, np.ndarray]:
         docs = [json.loads((folder / f"seed_{k}" / f"{file}.json").read_text()) for k in seeds]
         return {s: np.array([d["final"][s]["success"] for d in docs]) for s in docs[0]["final"]}
 
-    def test(d: np.ndarray) -> str:
+    def test(d: np.ndarray) -> tuple[str, float | None]:
         if len(d) < 2:
-            return "n/a"
+            return "n/a", None
         half = stats.t.ppf(0.975, len(d) - 1) * d.std(ddof=1) / np.sqrt(len(d))
-        return f"[{d.mean() - half:+.3f}, {d.mean() + half:+.3f}] | {stats.ttest_1samp(d, 0.0).pvalue:.3f}"
+        return f"[{d.mean() - half:+.3f}, {d.mean() + half:+.3f}]", float(stats.ttest_1samp(d, 0.0).pvalue)
+
+    def fmt(p: float | None) -> str:
+        return "n/a" if p is None else f"{p:.3f}"
 
     sa, sb = load(a, name), load(b, name_b or name)
+    diffs = {s: sa[s] - sb[s] for s in sa}
+    tests = {s: test(d) for s, d in diffs.items()}
+    adjusted = holm({s: p for s, (_, p) in tests.items()})
     print(f"A = {a}, B = {b}, seeds {seeds}")
-    print("| suite | A | B | A - B | 95% interval | p (paired t) | per seed |\n|---|---|---|---|---|---|---|")
-    for s in sa:
-        d = sa[s] - sb[s]
+    print("| suite | A | B | A - B | 95% interval | p (paired t) | p (Holm over the suites) | per seed |\n"
+          "|---|---|---|---|---|---|---|---|")
+    for s, d in diffs.items():
         per_seed = ", ".join(f"{round(x, 2) + 0.0:+.2f}" for x in d)
-        print(f"| {s} | {sa[s].mean():.3f} | {sb[s].mean():.3f} | {d.mean():+.3f} | {test(d)} | {per_seed} |")
+        interval, p = tests[s]
+        print(f"| {s} | {sa[s].mean():.3f} | {sb[s].mean():.3f} | {d.mean():+.3f} | {interval} | {fmt(p)} "
+              f"| {fmt(adjusted[s])} | {per_seed} |")
     d = np.mean([sa[s] for s in sa], 0) - np.mean([sb[s] for s in sa], 0)
+    interval, p = test(d)
     print(f"| mean of the suites | {np.mean(list(sa.values())):.3f} | {np.mean([sb[s] for s in sa]):.3f} "
-          f"| {d.mean():+.3f} | {test(d)} | |")
+          f"| {d.mean():+.3f} | {interval} | {fmt(p)} | | |")
 
 
 def layouts(seeds: list[int], folders: list[Path]) -> None:

@@ -7,7 +7,7 @@ import pytest
 import shapely
 
 from adaptenv.adapt.edits import Edit, apply_edit
-from adaptenv.adapt.realism import realism
+from adaptenv.adapt.realism import RealismReference, realism
 from adaptenv.scene.geometry import SceneGeometry
 
 
@@ -76,3 +76,15 @@ def test_terms_are_in_unit_interval(seed, real_house):
     r = realism(house, original=real_house)
     assert all(v is None or 0.0 <= v <= 1.0 for v in r.terms().values()) and 0.0 <= r.total <= 1.0
     assert r.total < realism(real_house, original=real_house).total
+
+
+def test_a_reference_built_once_scores_edits_as_the_original_house_does(real_house):
+    chair = real_house.object_by_id("Chair|3|0|1")
+    edited = [_move_to(real_house, "Chair|3|0|1", chair.position.x + 1.5, chair.position.z),
+              _move_to(real_house, "Bed|8|0", *SceneGeometry.from_house(real_house).rooms["room|8"].centroid.coords[0],
+                       yaw=37.0)]
+    reference = RealismReference.of(real_house)
+    assert "Bed|8|0" in reference.anchored and any(m == "Chair|3|0|1" for m, _, _ in reference.groups)
+    for house in edited:
+        assert realism(house, original=reference) == realism(house, original=real_house)
+    assert realism(edited[1], original=reference).total < realism(real_house, original=reference).total

@@ -127,3 +127,13 @@ def test_real_house_graph(real_house):
     assert g.has("against_wall", "Sofa|3|3", "wall|3|8.77|5.26|15.78|5.26")
     assert g.has("next_to", "Chair|3|0|1", "DiningTable|3|0|0")
     assert g.nodes["Painting|4|4"].room == "room|4"
+
+
+def test_a_subset_of_relation_kinds_gives_the_same_relations(real_house):
+    full = build_scene_graph(real_house)
+    part = build_scene_graph(real_house, kinds=("against_wall", "on"))
+    assert part.nodes == full.nodes
+    assert part.relations == [r for r in full.relations if r.kind in ("against_wall", "on")]
+    assert part.relations_of("against_wall") and not part.relations_of("next_to")
+    with pytest.raises(ValueError, match="unknown relation kinds"):
+        build_scene_graph(real_house, kinds=("beside",))

@@ -24,6 +24,7 @@ can use it as a regularizer; the benchmark compares built-in and random edits wi
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -82,21 +83,41 @@ def _mean(xs: list[float]) -> float | None:
     return float(np.mean(xs)) if xs else None
 
 
-def realism(house: House, *, original: House | None = None, catalog: AssetCatalog | None = None,
+@dataclass(frozen=True)
+class RealismReference:
+    """What :func:`realism` reads from the scene before editing: the objects against a wall and the groups.
+
+    A generator scores many candidates against one original; building this once saves a scene graph per candidate.
+    """
+
+    anchored: frozenset[str]
+    groups: tuple[tuple[str, str, tuple[str, ...]], ...]
+
+    @classmethod
+    def of(cls, original: House, catalog: AssetCatalog | None = None) -> RealismReference:
+        catalog = catalog or load_catalog()
+        geometry = SceneGeometry.from_house(original, catalog)
+        graph = build_scene_graph(original, geometry, catalog, kinds=("against_wall",))
+        pairs = _group_pairs(geometry, {n.id: n.room for n in graph.nodes.values()})
+        return cls(frozenset(r.subject for r in graph.relations_of("against_wall")),
+                   tuple((m, kind, tuple(ps)) for m, kind, ps in pairs))
+
+
+def realism(house: House, *, original: House | RealismReference | None = None, catalog: AssetCatalog | None = None,
             geometry: SceneGeometry | None = None) -> RealismReport:
-    """Score a scene's realism; ``original`` adds the objects that stood against a wall before editing."""
+    """Score a scene's realism; ``original`` (the house before editing, or its :class:`RealismReference`) adds the
+    objects that stood against a wall before editing and keeps the groups it had."""
     catalog = catalog or load_catalog()
     geometry = geometry or SceneGeometry.from_house(house, catalog)
-    graph = build_scene_graph(house, geometry, catalog)
+    graph = build_scene_graph(house, geometry, catalog, kinds=("against_wall",))
     floor = [f for f in geometry.floor_objects]
     room_of = {f.object_id: graph.nodes[f.object_id].room for f in geometry.footprints}
     against = {r.subject for r in graph.relations_of("against_wall")}
     offenders: dict[str, list[str]] = {k: [] for k in WEIGHTS}
 
-    anchored_before: set[str] = set()
-    if original is not None:
-        g0 = build_scene_graph(original, catalog=catalog)
-        anchored_before = {r.subject for r in g0.relations_of("against_wall")}
+    if isinstance(original, House):
+        original = RealismReference.of(original, catalog)
+    anchored_before = original.anchored if original is not None else frozenset()
     anchored = [f for f in floor if f.movable and (_edge_type(catalog, f.object_type) or f.object_id in anchored_before)]
 
     wall_scores, angle_scores = [], []
@@ -122,11 +143,7 @@ def realism(house: House, *, original: House | None = None, catalog: AssetCatalo
         if not ok:
             offenders["room_fit"].append(f.object_id)
 
-    if original is not None:
-        geo0 = SceneGeometry.from_house(original, catalog)
-        pairs = _group_pairs(geo0, {n.id: n.room for n in g0.nodes.values()})
-    else:
-        pairs = _group_pairs(geometry, room_of)
+    pairs = list(original.groups) if original is not None else _group_pairs(geometry, room_of)
     group_scores = _group_scores(geometry, pairs, offenders["groups"])
     door_scores = _door_scores(geometry, floor, offenders["door_zones"])
 
@@ -173,7 +190,7 @@ def _group_pairs(geometry: SceneGeometry, room_of: dict[str, str | None]) -> lis
     return out
 
 
-def _group_scores(geometry: SceneGeometry, pairs: list[tuple[str, str, list[str]]],
+def _group_scores(geometry: SceneGeometry, pairs: list[tuple[str, str, Sequence[str]]],
                   offenders: list[str]) -> list[float]:
     """Score each group member against its partners (from the original scene when there is one)."""
     fps = {f.object_id: f for f in geometry.footprints}

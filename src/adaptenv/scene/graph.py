@@ -128,8 +128,15 @@ class SceneGraph:
 
 
 def build_scene_graph(house: House, geometry: SceneGeometry | None = None,
-                      catalog: AssetCatalog | None = None) -> SceneGraph:
-    """Build the scene graph of a (valid) house; pass ``geometry`` if you already have it."""
+                      catalog: AssetCatalog | None = None, kinds: tuple[str, ...] = RELATION_KINDS) -> SceneGraph:
+    """Build the scene graph of a (valid) house; pass ``geometry`` if you already have it.
+
+    ``kinds`` limits the relations computed (all nodes are always built): scoring loops that read
+    one relation skip the cost of the others.
+    """
+    unknown = set(kinds) - set(RELATION_KINDS)
+    if unknown:
+        raise ValueError(f"build_scene_graph: unknown relation kinds {sorted(unknown)}; use {RELATION_KINDS}")
     catalog = catalog or load_catalog()
     geometry = geometry or SceneGeometry.from_house(house, catalog)
     grid = geometry.grid
@@ -152,15 +159,18 @@ def build_scene_graph(house: House, geometry: SceneGeometry | None = None,
                                    (obj.position.x, obj.position.y, obj.position.z), fp.yaw,
                                    catalog.asset(obj.assetId).size, fp.role, fp.movable, room, (gx, gy),
                                    parent.id if parent is not None else None)
-        if room is not None:
+        if room is not None and "in_room" in kinds:
             relations.append(Relation("in_room", obj.id, room))
-        if parent is not None:
+        if parent is not None and "on" in kinds:
             relations.append(Relation("on", obj.id, parent.id))
 
     placed = [f for f in geometry.footprints if f.role in ("floor", "wall")]
-    relations += _next_to(geometry.floor_objects, blocking_tree, blocking)
-    relations += _against_wall(placed, nodes, geometry.walls, blocking)
-    relations += _faces(placed, blocking_tree, blocking)
+    if "next_to" in kinds:
+        relations += _next_to(geometry.floor_objects, blocking_tree, blocking)
+    if "against_wall" in kinds:
+        relations += _against_wall(placed, nodes, geometry.walls, blocking)
+    if "faces" in kinds:
+        relations += _faces(placed, blocking_tree, blocking)
     return SceneGraph(nodes, dict(geometry.room_types), relations)
 
 

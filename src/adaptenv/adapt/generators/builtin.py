@@ -50,6 +50,7 @@ from adaptenv.adapt.objectives import (
     realism_score,
     route_points,
 )
+from adaptenv.adapt.realism import RealismReference
 from adaptenv.adapt.validation import EditValidator, Proposal
 from adaptenv.adapt.verification import Check, check_objective, revise_until_verified
 from adaptenv.agents.rollout import checking_episodes, policy_score
@@ -119,7 +120,7 @@ class BuiltinGenerator:
     # ----------------------------------------------------------------------------- the loop
     def generate(self, house: House, analysis: Analysis, *, steps: int, context: GenerationContext,
                  rng: np.random.Generator) -> GenerationResult:
-        ep, original = context.episode, house
+        ep, original = context.episode, RealismReference.of(house)
         route, v, world, values, realism, result = self._begin(house, context)
         suggestions = sorted(analysis.suggestions, key=lambda s: -s.priority)
         targets = {t.object_id for t in world.instances_of(ep.target_type)}
@@ -252,7 +253,7 @@ class BuiltinGenerator:
         return out
 
     def _evaluate(self, v: EditValidator, geometry: SceneGeometry, cand: Candidate, route: RouteSpec,
-                  original: House, episode: Episode) -> Candidate | None:
+                  original: RealismReference, episode: Episode) -> Candidate | None:
         """Dry-run one proposal; None when placement or validation rejects it, it changes nothing, or
         (with ``require_expert``) the shortest-path expert no longer solves the episode."""
         proposal = v.propose(cand.object_id, cand.dx_units, cand.dy_units, cand.rotation)

@@ -49,6 +49,7 @@ from adaptenv.adapt.objectives import (
     shortest_route,
     visibility_fraction,
 )
+from adaptenv.adapt.realism import RealismReference
 from adaptenv.adapt.validation import EditValidator
 from adaptenv.agents.evaluate import run_episodes, trajectory_of
 from adaptenv.agents.policy import policy_name
@@ -208,7 +209,7 @@ class FailureModeGenerator(BuiltinGenerator):
 
     def generate(self, house: House, analysis: Analysis, *, steps: int, context: GenerationContext,
                  rng: np.random.Generator) -> GenerationResult:
-        ep = context.episode
+        ep, reference = context.episode, RealismReference.of(house)
         route, v, world, values, realism, result = self._begin(house, context)
         plan = mode_plan(context.diagnosis, analysis)
         for step in range(steps):
@@ -220,7 +221,7 @@ class FailureModeGenerator(BuiltinGenerator):
                       if not any(c.object_id == o.object_id and (c.dx_units, c.dy_units, c.rotation) ==
                                  (o.dx_units, o.dy_units, o.rotation) for o in cands)]
             geometry = SceneGeometry.from_house(v.house)
-            tried = [c for c in (self._evaluate(v, geometry, c, route, house, ep) for c in cands) if c is not None]
+            tried = [c for c in (self._evaluate(v, geometry, c, route, reference, ep) for c in cands) if c is not None]
             record = StepRecord(step=step, status="skipped", suggestion_kind=family, failure_mode=family,
                                 candidates=len(cands), objective_before=values.as_dict())
             if not tried:
