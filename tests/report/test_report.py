@@ -117,6 +117,24 @@ def test_experiment_summary_with_several_methods(tmp_path, make_experiment):
     assert 'href="../../../index.html"' in nested
 
 
+def test_experiment_report_shows_the_final_evaluation(tmp_path, make_experiment):
+    from adaptenv.curriculum.experiment import ExperimentConfig, write_summary
+
+    exp = make_experiment(tmp_path / "exp", methods=("ours", "dr"), seeds=(0, 1, 2))
+    ours, dr = (0.70, 0.75, 0.65), (0.60, 0.62, 0.61)  # differences +0.10, +0.13, +0.04
+    table = {m: {s: {"success:unseen": v[s], "spl:unseen": v[s] / 2} for s in range(3)}
+             for m, v in (("ours", ours), ("dr", dr))}
+    write_summary(exp, ExperimentConfig(methods=["ours", "dr"], seeds=[0, 1, 2], reference="ours"), table,
+                  suffix="_final", episodes=300)
+    text = build_report(exp).read_text(encoding="utf-8")
+    final = text.split('id="final"')[1].split("</section>")[0]
+    assert "on 300 episodes per held-out set" in final and "<strong>dr</strong>" in final
+    assert "70.0%" in final and "61.0%" in final  # the means, from summary_final.json, not the runs' records
+    # ours - dr: mean +0.090, s.d. 0.0458, t(2) = 3.40, p = 0.077; one comparison, so Holm's p is the same
+    assert "<td>+9.0</td><td>[-2.4, +20.4]</td><td>0.0766</td><td>0.0766</td>" in final
+    assert 'href="#final"' in text
+
+
 def test_experiment_without_summary_has_no_significance_column(tmp_path, make_experiment):
     exp = make_experiment(tmp_path / "exp", methods=("a", "b"), seeds=(0,), iterations=1, summary=False)
     text = build_report(exp, tmp_path / "out").read_text(encoding="utf-8")

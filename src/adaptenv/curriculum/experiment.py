@@ -196,8 +196,11 @@ def summarize(out: str | Path, cfg: ExperimentConfig | None = None) -> dict[str,
 
 
 def write_summary(out: Path, cfg: ExperimentConfig, table: dict[str, dict[int, dict[str, float]]],
-                  suffix: str = "") -> dict[str, Any]:
-    """From method -> seed -> figures: ``<method>/per_seed{suffix}.csv`` and ``summary{suffix}.json/md``."""
+                  suffix: str = "", episodes: int | None = None) -> dict[str, Any]:
+    """From method -> seed -> figures: ``<method>/per_seed{suffix}.csv`` and ``summary{suffix}.json/md``.
+
+    ``episodes``: episodes per held-out set behind each figure (the final evaluation's), recorded when given.
+    """
     metrics = sorted({k for seeds in table.values() for row in seeds.values() for k in row})
     for m, seeds in table.items():
         cols = sorted(seeds)
@@ -208,6 +211,8 @@ def write_summary(out: Path, cfg: ExperimentConfig, table: dict[str, dict[int, d
 
     summary: dict[str, Any] = {"methods": {}, "tests": {}, "effects": {}, "holm": {}, "reference": cfg.reference,
                                "seeds": cfg.seeds}
+    if episodes is not None:
+        summary["episodes"] = episodes
     for m, seeds in table.items():
         summary["methods"][m] = {key: dict(zip(("mean", "se"), _mean_se([row[key] for row in seeds.values()
                                                                           if key in row]), strict=True))
@@ -284,7 +289,7 @@ def final_evaluation(out: str | Path, cfg: ExperimentConfig, episodes: int, *, e
                         for name, v in doc["final"].items()})
             row.update(_budget(recs[-1]))
             table.setdefault(m, {})[s] = row
-    return write_summary(out, cfg, table, suffix="_final")
+    return write_summary(out, cfg, table, suffix="_final", episodes=episodes)
 
 
 def summary_markdown(summary: dict[str, Any]) -> str:

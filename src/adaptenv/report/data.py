@@ -31,6 +31,7 @@ from adaptenv.curriculum.records import (
 from adaptenv.errors import AdaptenvError
 
 SUMMARY = "summary.json"
+FINAL_SUMMARY = "summary_final.json"
 DATA_SUFFIXES = (".json", ".csv", ".md")
 """Experiment files copied into the report and linked (summary.json, summary.md, per-seed CSVs)."""
 METRICS = ("success", "spl")
@@ -130,6 +131,8 @@ class ExperimentData:
     reference: str | None = None
     """summary.json's ``reference``: this method was compared with every other (runner's layout)."""
     test: str | None = None
+    final: dict[str, Any] | None = None
+    """summary_final.json: the final evaluation of every run's last policy (``adaptenv experiment --final-episodes``)."""
     files: list[Path] = field(default_factory=list)
     """Top-level data files to copy into the report (summary.json, CSVs)."""
     warnings: list[str] = field(default_factory=list)
@@ -367,6 +370,16 @@ def load_experiment(path: Path) -> ExperimentData:
                 for key in ("test", "significance_test"):
                     if isinstance(exp.summary.get(key), str):
                         exp.test = exp.summary[key]
+    if (path / FINAL_SUMMARY).is_file():
+        try:
+            final = json.loads((path / FINAL_SUMMARY).read_text(encoding="utf-8"))
+        except (ValueError, OSError) as exc:
+            exp.warnings.append(f"{FINAL_SUMMARY} is unreadable ({_first_line(exc)}); no final evaluation shown")
+        else:
+            if isinstance(final, dict) and isinstance(final.get("methods"), dict):
+                exp.final = final
+            else:
+                exp.warnings.append(f"{FINAL_SUMMARY} has no 'methods' table; no final evaluation shown")
     return exp
 
 
@@ -374,7 +387,8 @@ def _text(x: Any) -> str | None:
     return x if isinstance(x, str) else None
 
 
-def _number(x: Any) -> bool:
+def is_number(x: Any) -> bool:
+    """A finite int or float (not a bool): what a figure in a summary file must be."""
     return isinstance(x, (int, float)) and not isinstance(x, bool) and math.isfinite(x)
 
 
@@ -413,7 +427,7 @@ def find_pvalues(doc: Any, methods: list[str], sets: list[str]) -> dict[tuple[st
         elif isinstance(node, list):
             for v in node:
                 walk(v, ctx, is_p)
-        elif is_p and _number(node) and ctx.get("method") in known_m and ctx.get("set") in known_s:
+        elif is_p and is_number(node) and ctx.get("method") in known_m and ctx.get("set") in known_s:
             metric = ctx.get("metric", "").lower()
             if metric in METRICS or not metric:
                 out[(ctx["method"], ctx["set"], metric)] = float(node)

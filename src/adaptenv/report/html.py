@@ -44,6 +44,7 @@ from adaptenv.report.data import (
     final_stat,
     heldout_files,
     house_sets,
+    is_number,
     last_with,
     load_experiment,
     load_gallery,
@@ -640,6 +641,62 @@ def summary_table(exp: ExperimentData) -> str:
     return table(head, rows) + "".join(f'<p class="note">{n}</p>' for n in notes)
 
 
+def final_tables(exp: ExperimentData) -> str:
+    """The final evaluation (summary_final.json): success and SPL per method and set, then the reference minus each
+    method on success with its 95% interval, p and Holm's p (what docs/RESULTS.md quotes)."""
+    final = exp.final or {}
+    methods: dict[str, dict] = final.get("methods", {})
+    sets = sorted({k.split(":", 1)[1] for figs in methods.values() for k in figs if k.startswith("success:")})
+    if not methods or not sets:
+        return '<p class="note">summary_final.json holds no held-out figures.</p>'
+
+    def cell(metric: str, fig: dict | None) -> str:
+        if not isinstance(fig, dict) or not is_number(fig.get("mean")):
+            return "<td>–</td>"
+        return stat_cell(metric, Stat(fig["mean"], fig["se"] if is_number(fig.get("se")) else None, fig.get("n", 0)))
+
+    head = ('<tr><th class=l rowspan=2>method</th><th rowspan=2>seeds</th>'
+            + "".join(f"<th colspan=2 class=group>{esc(s)}</th>" for s in sets) + "</tr><tr>"
+            + "<th>success</th><th>SPL</th>" * len(sets) + "</tr>")
+    rows = [f"<tr><td class=l><strong>{esc(m)}</strong></td><td>{esc(_seeds(figs))}</td>"
+            + "".join(cell("success", figs.get(f"success:{s}")) + cell("spl", figs.get(f"spl:{s}")) for s in sets)
+            + "</tr>" for m, figs in methods.items()]
+    ref = final.get("reference")
+    effects, tests, holm = final.get("effects", {}), final.get("tests", {}), final.get("holm", {})
+    diff_rows = []
+    for m in effects:
+        for s in sets:
+            e, key = effects[m].get(f"success:{s}"), f"success:{s}"
+            if not isinstance(e, dict) or not is_number(e.get("diff")):
+                continue
+            p, ph = tests.get(m, {}).get(key), holm.get(m, {}).get(key)
+            interval = (f"[{100 * e['low']:+.1f}, {100 * e['high']:+.1f}]"
+                        if is_number(e.get("low")) and is_number(e.get("high")) else "–")
+            diff_rows.append(f"<tr><td class=l>{esc(m)}</td><td class=l>{esc(s)}</td><td>{100 * e['diff']:+.1f}</td>"
+                             f"<td>{interval}</td><td>{_p(p)}</td><td>{_p(ph)}</td></tr>")
+    episodes = final.get("episodes")
+    what = f"on {episodes:,} episodes per held-out set" if isinstance(episodes, int) else "on its held-out sets"
+    out = table(head, rows) + (
+        f'<p class="note">Each run\'s last policy evaluated {what} (the same episodes for every method of a seed), '
+        "averaged over seeds; ± is the standard error over seeds.</p>")
+    if diff_rows:
+        out += (f"<h3>{esc(ref)} minus each method: held-out success (points)</h3>"
+                + table("<tr><th class=l>method</th><th class=l>set</th><th>difference</th><th>95% interval</th>"
+                        "<th>p (paired t)</th><th>p (Holm)</th></tr>", diff_rows)
+                + f'<p class="note">Paired by seed. Holm\'s correction runs over all {len(diff_rows)} comparisons '
+                  "of this table. * p &lt; 0.05, ** p &lt; 0.01, *** p &lt; 0.001.</p>")
+    return out
+
+
+def _p(p: object) -> str:
+    return f"{p:.3g}{stars(p)}" if is_number(p) else "–"
+
+
+def _seeds(figs: dict) -> str:
+    ns = {f.get("n") for f in figs.values() if isinstance(f, dict)}
+    return str(max(n for n in ns if isinstance(n, int))) if any(isinstance(n, int) for n in ns) else "–"
+
+
 def mean_text(values: list[float], digits: int) -> str:
     if not values:
         return "–"
@@ -707,6 +764,9 @@ def write_experiment_report(exp: ExperimentData, out: Path) -> Path:
         for s in exp.sets:
             plot = experiment_curves(exp.runs, s, out / "plots" / f"curves_{safe_name(s)}.png")
             curves.append(f"<h3>{esc(s)}</h3>" + plot_img(plot, out, f"{s}: success and SPL per method"))
+        if exp.final is not None:
+            body.append(block("final", "Final evaluation", final_tables(exp)))
+            nav.append(("Final evaluation", "#final"))
         body += [block("summary", "Summary", summary_table(exp)),
                  block("curves", "Learning curves", ("".join(curves) or '<p class="note">No held-out evaluations yet.</p>')
                        + f'<p class="note">{esc(CURVES_NOTE)}</p>')]
