@@ -3,6 +3,7 @@
     python tools/evaluate_runs.py evaluate --name val --suites val-long,val-far,val-clutter [--episodes 100] RUN...
     python tools/evaluate_runs.py compare --name val --seeds 0,1,2,3 METHOD_A_FOLDER METHOD_B_FOLDER
     python tools/evaluate_runs.py layouts --seeds 0,1,2,3 METHOD_FOLDER...
+    python tools/evaluate_runs.py assemble --config EXPERIMENT.json --out FOLDER METHOD=FOLDER[:NAME]...
 
 ``evaluate`` writes ``RUN/<name>.json`` with the last iteration's policy on each suite (a suite name,
 or any house-set spec with a colon such as ``preset:NAME``), on the
@@ -11,7 +12,8 @@ runs of one seed are paired); runs that have the file are skipped. ``compare`` p
 and for the mean of the suites, the difference A - B averaged over the seeds, its 95% interval,
 the paired t test (scipy) and, per suite, Holm's adjusted p over the suites. ``layouts`` counts,
 per run, the distinct house layouts fine-tuned on over all iterations (a child ``house~t02f03``
-has its parent's layout) and the scenes by kind. docs/RESULTS.md's
+has its parent's layout) and the scenes by kind. ``assemble`` gathers methods run in different
+experiment folders (or sessions) into one, with the experiment's own summaries and HTML report. docs/RESULTS.md's
 validation tables are this script's output.
 """
 
@@ -19,6 +21,7 @@ from __future__ import annotations
 
 import argparse
 import json
+from dataclasses import asdict
 from pathlib import Path
 
 import numpy as np
@@ -87,6 +90,59 @@ def compare(name: str, seeds: list[int], a: Path, b: Path, name_b: str | None = 
           f"| {d.mean():+.3f} | {interval} | {fmt(p)} | | |")
 
 
+def assemble(config: Path, out: Path, sources: list[str]) -> None:
+    """Gather each method's runs from its own experiment folder into one experiment folder ``out`` and summarize them
+    there (summary.json, summary_final.json with Holm over every comparison, plots; ``adaptenv report out`` then
+    draws the HTML report).
+
+    ``sources``: ``METHOD=FOLDER`` (the runs' own ``final_eval.json``) or ``METHOD=FOLDER:NAME`` (this tool's
+    ``NAME.json``). Run folders are linked, not copied; each gets a ``final_eval.json`` from its evaluation, with
+    pi_0's figures of its seed (same policy, same episodes) taken from a run that has them.
+    """
+    from adaptenv.curriculum.experiment import ExperimentConfig, final_evaluation, summarize
+
+    cfg = ExperimentConfig.load(config)
+    given: dict[str, tuple[Path, str]] = {}
+    for src in sources:
+        method, _, where = src.partition("=")
+        folder, _, name = where.partition(":")
+        if not method or not folder:
+            raise SystemExit(f"assemble: {src!r} is not METHOD=FOLDER[:NAME]")
+        given[method] = (Path(folder), name or "final_eval")
+    if sorted(given) != sorted(cfg.methods):
+        raise SystemExit(f"assemble: {config} lists methods {cfg.methods}, the sources give {sorted(given)}; "
+                         "give one METHOD=FOLDER per method")
+    docs: dict[tuple[str, int], dict] = {}
+    for method, (folder, name) in given.items():
+        for seed in cfg.seeds:
+            src = folder / f"seed_{seed}"
+            if not (src / f"{name}.json").is_file():
+                raise SystemExit(f"assemble: {src / name}.json is missing; evaluate that run first")
+            docs[(method, seed)] = json.loads((src / f"{name}.json").read_text())
+            dst = out / method / f"seed_{seed}"
+            dst.mkdir(parents=True, exist_ok=True)
+            for entry in src.iterdir():
+                link = dst / entry.name
+                if entry.name not in ("final_eval.json", f"{name}.json") and not link.is_symlink():
+                    link.symlink_to(entry.resolve())
+    episodes = {d["episodes"] for d in docs.values()}
+    if len(episodes) != 1:
+        raise SystemExit(f"assemble: the evaluations have different episode counts {sorted(episodes)}; "
+                         "evaluate every run on the same number")
+    for (method, seed), doc in docs.items():
+        initial = doc.get("initial") or next((d["initial"] for (_, s), d in docs.items() if s == seed and "initial" in d),
+                                             None)
+        if initial is None:
+            raise SystemExit(f"assemble: no run of seed {seed} has pi_0's figures ('initial'); include a method "
+                             "evaluated by `adaptenv experiment --final-episodes`")
+        final = {"episodes": doc["episodes"], "iteration": doc["iteration"], "initial": initial, "final": doc["final"]}
+        (out / method / f"seed_{seed}" / "final_eval.json").write_text(json.dumps(final, indent=1))
+    (out / "experiment.json").write_text(json.dumps(asdict(cfg), indent=1))
+    summarize(out, cfg)
+    final_evaluation(out, cfg, episodes.pop())
+    print((out / "summary_final.md").read_text())
+
+
 def layouts(seeds: list[int], folders: list[Path]) -> None:
     """Print, per method folder and seed, the distinct layouts trained on and the trained scenes by kind."""
     print("| method | seed | distinct layouts | fresh houses | children | training houses |\n|---|---|---|---|---|---|")
@@ -115,6 +171,10 @@ def main() -> None:
     cmp.add_argument("--name-b", default=None, help="B's file name when it differs (e.g. final_eval)")
     cmp.add_argument("a", type=Path)
     cmp.add_argument("b", type=Path)
+    asm = sub.add_parser("assemble")
+    asm.add_argument("--config", required=True, type=Path, help="experiment config naming the methods, seeds, reference")
+    asm.add_argument("--out", required=True, type=Path)
+    asm.add_argument("sources", nargs="+", help="METHOD=FOLDER or METHOD=FOLDER:NAME")
     lay = sub.add_parser("layouts")
     lay.add_argument("--seeds", required=True)
     lay.add_argument("folders", nargs="+", type=Path)
@@ -123,6 +183,8 @@ def main() -> None:
         evaluate(args.name, args.suites.split(","), args.episodes, args.runs)
     elif args.command == "compare":
         compare(args.name, [int(s) for s in args.seeds.split(",")], args.a, args.b, args.name_b)
+    elif args.command == "assemble":
+        assemble(args.config, args.out, args.sources)
     else:
         layouts([int(s) for s in args.seeds.split(",")], args.folders)
 

@@ -70,3 +70,45 @@ def test_layouts_counts_a_child_as_its_parents_layout(tmp_path, capsys):
         (run / f"iter_{t:04d}" / "scenes.json").write_text(json.dumps({"trained_on": names}))
     _tool().layouts([0], [tmp_path / "ours"])
     assert "| ours | 0 | 3 | 3 | 1 | 1 |" in capsys.readouterr().out
+
+
+def _fake_run(run: Path, heldout: str, final: dict | None = None, name: str = "final_eval",
+              initial: float | None = None) -> None:
+    """A finished 2-iteration run folder evaluating ``heldout`` during the run, and its final evaluation file."""
+    from adaptenv.curriculum.records import IterationRecord, SetMetrics, write_iterations
+
+    run.mkdir(parents=True)
+    figs = SetMetrics(success=0.5, spl=0.3, collisions=1.0, episodes=4)
+    write_iterations(run, [IterationRecord(iteration=t, env_steps=100 * t, grad_updates=t, edits=0,
+                                           heldout={heldout: figs}) for t in range(2)])
+    doc = {"episodes": 300, "iteration": 1, "final": {k: figs.model_copy(update={"success": v}).model_dump()
+                                                      for k, v in (final or {}).items()}}
+    if initial is not None:
+        doc["initial"] = {k: figs.model_copy(update={"success": initial}).model_dump() for k in final}
+    (run / f"{name}.json").write_text(json.dumps(doc))
+
+
+def test_assemble_gathers_methods_from_two_experiments_and_tests_them(tmp_path, capsys):
+    # ours-dr was evaluated by this tool (heldout.json, no pi_0 figures); dr by its experiment (final_eval.json).
+    ours_dr, dr = [0.70, 0.75, 0.65], [0.60, 0.62, 0.61]
+    for seed in range(3):
+        _fake_run(tmp_path / "a" / "ours-dr" / f"seed_{seed}", "val", {"long": ours_dr[seed]}, name="heldout")
+        _fake_run(tmp_path / "b" / "dr" / f"seed_{seed}", "long", {"long": dr[seed]}, initial=0.55)
+    config = tmp_path / "combined.json"
+    config.write_text(json.dumps({"methods": ["ours-dr", "dr"], "seeds": [0, 1, 2], "reference": "ours-dr",
+                                  "loop": {"heldout": {"long": "suite:long-unseen"}}}))
+    out = tmp_path / "combined"
+    _tool().assemble(config, out, [f"ours-dr={tmp_path / 'a' / 'ours-dr'}:heldout", f"dr={tmp_path / 'b' / 'dr'}"])
+    summary = json.loads((out / "summary_final.json").read_text())
+    # ours-dr - dr per seed +0.10, +0.13, +0.04: mean 0.09, t(2) = 3.40, p = 0.077 (the in-loop sets differ: val, long)
+    assert summary["effects"]["dr"]["success:long"]["diff"] == pytest.approx(0.09)
+    assert summary["tests"]["dr"]["success:long"] == pytest.approx(0.0766, abs=1e-4)
+    assert summary["methods"]["ours-dr"]["success_gain:long"]["mean"] == pytest.approx(0.70 - 0.55)
+    assert summary["episodes"] == 300
+    assert (out / "ours-dr" / "seed_0" / "iterations.jsonl").is_symlink()
+    assert "| dr | long | +0.090 |" in capsys.readouterr().out
+    with pytest.raises(SystemExit, match="lists methods"):
+        _tool().assemble(config, tmp_path / "x", [f"ours-dr={tmp_path / 'a' / 'ours-dr'}:heldout"])
+    with pytest.raises(SystemExit, match="no run of seed 0 has pi_0's figures"):
+        config.write_text(json.dumps({"methods": ["ours-dr"], "seeds": [0], "reference": "ours-dr", "loop": {}}))
+        _tool().assemble(config, tmp_path / "y", [f"ours-dr={tmp_path / 'a' / 'ours-dr'}:heldout"])

@@ -222,10 +222,11 @@ def write_summary(out: Path, cfg: ExperimentConfig, table: dict[str, dict[int, d
         if m == cfg.reference:
             continue
         common = sorted(set(ref) & set(seeds))
+        shared = [key for key in metrics if all(key in ref[s] and key in seeds[s] for s in common)]  # same sets
         summary["tests"][m] = {key: paired_test([ref[s][key] for s in common], [seeds[s][key] for s in common])
-                               for key in metrics if key.split(":")[0] in TESTED}
+                               for key in shared if key.split(":")[0] in TESTED}
         summary["effects"][m] = {key: paired_effect([ref[s][key] for s in common], [seeds[s][key] for s in common])
-                                 for key in metrics if key.split(":")[0] == "success"}
+                                 for key in shared if key.split(":")[0] == "success"}
     # the family the claim rests on: held-out success of the reference against every method on every set
     family = {f"{m}|{key}": p for m, tests in summary["tests"].items() for key, p in tests.items()
               if key.split(":")[0] == "success"}
@@ -353,8 +354,8 @@ def curves(out: Path, cfg: ExperimentConfig, set_name: str, x: str) -> dict[str,
     result = {}
     for m in cfg.methods:
         runs = [read_iterations(run_dir(out, m, s)) for s in cfg.seeds]
-        runs = [r for r in runs if r]
-        if not runs:
+        runs = [r for r in runs if r and all(set_name in rec.heldout for rec in r)]
+        if not runs:  # the method never evaluated this set
             continue
         n = min(len(r) for r in runs)
         ys = np.array([[rec.heldout[set_name].success for rec in r[:n]] for r in runs])
@@ -373,7 +374,7 @@ def _plots(out: Path, cfg: ExperimentConfig) -> None:
     from matplotlib.ticker import MaxNLocator
 
     sets = sorted({k for m in cfg.methods for s in cfg.seeds for r in read_iterations(run_dir(out, m, s))[:1]
-                   for k in r.heldout})
+                   for k in r.heldout})  # methods may evaluate different sets (runs gathered from several experiments)
     (out / "plots").mkdir(exist_ok=True)
     for set_name in sets:
         for x, label in (("iteration", "iteration"), ("env_steps", "environment steps")):
