@@ -65,11 +65,16 @@ def test_holm_adjusts_step_down_and_keeps_order():
 
 
 @pytest.mark.slow
-def test_small_experiment_writes_every_artifact(tiny_policy, tmp_path):
+def test_small_experiment_writes_every_artifact(tiny_policy, tmp_path, capsys):
     cfg = ExperimentConfig.load(REPO / "configs" / "experiment-small.json")
     cfg.methods = ["none", "dr", "ours"]
     cfg.loop["policy"] = str(tiny_policy)
     summary = run_experiment(cfg, tmp_path)
+    log = capsys.readouterr().err  # stderr is not a terminal here: a timestamped line per stage and per run
+    for m in cfg.methods:
+        for s in cfg.seeds:
+            assert f" {m} seed {s}: run finished ({cfg.loop['iterations']} iterations)" in log
+    assert " ours seed 1: t=1: fine-tuning on " in log
     for m in cfg.methods:
         rows = (tmp_path / m / "per_seed.csv").read_text().splitlines()
         assert rows[0] == "metric:set,seed_0,seed_1"

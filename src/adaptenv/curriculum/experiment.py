@@ -19,6 +19,9 @@ from __future__ import annotations
 
 import json
 import math
+import sys
+import time
+from collections.abc import Callable
 from dataclasses import asdict, dataclass, field, fields
 from pathlib import Path
 from typing import Any
@@ -95,11 +98,25 @@ def run_dir(out: Path, method: str, seed: int) -> Path:
 
 
 def _run_one(args: tuple[dict[str, Any], str, str]) -> str:
-    """Worker entry point (picklable): run or resume one (method, seed)."""
+    """Worker entry point (picklable): run or resume one (method, seed).
+
+    When stderr is a log rather than a terminal (a background experiment), each finished stage and
+    run gets a timestamped line there, so hours of work are not silent; on a terminal the progress bar speaks.
+    """
     loop_fields, folder, command = args
     cfg = LoopConfig(**loop_fields)
-    run_loop(cfg, folder, resume=True, command=command)
+    say = None if sys.stderr.isatty() else _log_line(f"{cfg.method} seed {cfg.seed}")
+    records = run_loop(cfg, folder, resume=True, command=command, progress=say)
+    if say is not None:
+        say(f"run finished ({records[-1].iteration} iterations)" if records else "run finished")
     return folder
+
+
+def _log_line(prefix: str) -> Callable[[str], None]:
+    """A ``progress`` callback that writes ``HH:MM:SS prefix: text`` lines to stderr."""
+    def say(text: str) -> None:
+        print(f"{time.strftime('%H:%M:%S')} {prefix}: {text}", file=sys.stderr, flush=True)
+    return say
 
 
 def run_experiment(cfg: ExperimentConfig, out: str | Path, *, executor: Any = None, command: str = "",
