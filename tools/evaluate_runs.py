@@ -4,6 +4,7 @@
     python tools/evaluate_runs.py compare --name val --seeds 0,1,2,3 METHOD_A_FOLDER METHOD_B_FOLDER
     python tools/evaluate_runs.py layouts --seeds 0,1,2,3 METHOD_FOLDER...
     python tools/evaluate_runs.py assemble --config EXPERIMENT.json --out FOLDER METHOD=FOLDER[:NAME]...
+    python tools/evaluate_runs.py pack EXPERIMENT_FOLDER DEST
 
 ``evaluate`` writes ``RUN/<name>.json`` with the last iteration's policy on each suite (a suite name,
 or any house-set spec with a colon such as ``preset:NAME``), on the
@@ -13,8 +14,10 @@ and for the mean of the suites, the difference A - B averaged over the seeds, it
 the paired t test (scipy) and, per suite, Holm's adjusted p over the suites. ``layouts`` counts,
 per run, the distinct house layouts fine-tuned on over all iterations (a child ``house~t02f03``
 has its parent's layout) and the scenes by kind. ``assemble`` gathers methods run in different
-experiment folders (or sessions) into one, with the experiment's own summaries and HTML report. docs/RESULTS.md's
-validation tables are this script's output.
+experiment folders (or sessions) into one, with the experiment's own summaries and HTML report. ``pack`` copies
+an experiment's results without policies or scenes (``pack_experiment``), small enough to commit; run
+``adaptenv experiment`` on the copy to go on where it stopped. docs/RESULTS.md's validation tables are this
+script's output.
 """
 
 from __future__ import annotations
@@ -175,6 +178,9 @@ def main() -> None:
     asm.add_argument("--config", required=True, type=Path, help="experiment config naming the methods, seeds, reference")
     asm.add_argument("--out", required=True, type=Path)
     asm.add_argument("sources", nargs="+", help="METHOD=FOLDER or METHOD=FOLDER:NAME")
+    pk = sub.add_parser("pack")
+    pk.add_argument("folder", type=Path)
+    pk.add_argument("dest", type=Path)
     lay = sub.add_parser("layouts")
     lay.add_argument("--seeds", required=True)
     lay.add_argument("folders", nargs="+", type=Path)
@@ -185,6 +191,10 @@ def main() -> None:
         compare(args.name, [int(s) for s in args.seeds.split(",")], args.a, args.b, args.name_b)
     elif args.command == "assemble":
         assemble(args.config, args.out, args.sources)
+    elif args.command == "pack":
+        from adaptenv.curriculum.experiment import pack_experiment
+
+        print(f"packed {len(pack_experiment(args.folder, args.dest))} finished runs into {args.dest}")
     else:
         layouts([int(s) for s in args.seeds.split(",")], args.folders)
 

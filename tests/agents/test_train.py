@@ -9,6 +9,7 @@ import pytest
 import torch
 
 from adaptenv.agents.checkpoint import load_checkpoint
+from adaptenv.agents.network import available_cores
 from adaptenv.agents.train import (
     SequenceBuffer,
     TrainConfig,
@@ -118,7 +119,8 @@ def test_finetune_returns_a_new_policy(tiny_set, tmp_path):
 
 @pytest.mark.slow
 def test_overlapped_learning_does_not_depend_on_timing(tmp_path):
-    runs = [train(tiny_config(tmp_path, frames=2048, output="", run_dir="", final_eval_episodes=1)) for _ in range(2)]
+    runs = [train(tiny_config(tmp_path, frames=2048, output="", run_dir="", final_eval_episodes=1, overlap=True))
+            for _ in range(2)]
     a, b = (r.net.state_dict() for r in runs)
     assert all(torch.equal(a[k], b[k]) for k in a)
     serial = train(tiny_config(tmp_path, frames=2048, output="", run_dir="", final_eval_episodes=1, overlap=False))
@@ -153,3 +155,21 @@ def test_bench_train_measures_the_recipe_it_is_given(capsys):
     assert small["recipe"]["hidden"] == 32 and small["parameters"] < default["parameters"] / 4
     assert small["replay_ratio"] == default["replay_ratio"] / 2 == 1.0
     assert '"benchmark": "imitation-learning throughput"' in capsys.readouterr().out
+
+
+def test_serial_training_uses_every_available_core_and_the_learner_thread_one(tmp_path, monkeypatch):
+    monkeypatch.setattr("os.cpu_count", lambda: 4)
+    monkeypatch.delenv("OMP_NUM_THREADS", raising=False)
+    assert available_cores() == 4
+    monkeypatch.setenv("OMP_NUM_THREADS", "1")  # what an executor's worker sets
+    assert available_cores() == 1
+    monkeypatch.setenv("OMP_NUM_THREADS", "2")
+    before = torch.get_num_threads()
+    try:
+        serial = train(tiny_config(tmp_path, frames=512, output="", run_dir="", final_eval_episodes=1, threads=0))
+        overlap = train(tiny_config(tmp_path, frames=512, output="", run_dir="", final_eval_episodes=1, threads=0,
+                                    overlap=True))
+    finally:
+        torch.set_num_threads(before)
+    assert serial.card["torch_threads"] == 2
+    assert overlap.card["torch_threads"] == 1

@@ -13,6 +13,7 @@ from adaptenv.curriculum.experiment import (
     ExperimentConfig,
     final_evaluation,
     holm,
+    pack_experiment,
     paired_effect,
     paired_test,
     run_experiment,
@@ -116,3 +117,27 @@ def test_small_experiment_writes_every_artifact(tiny_policy, tmp_path, capsys):
     stamp = (tmp_path / "ours" / "seed_0" / "final_eval.json").stat().st_mtime_ns
     assert final_evaluation(tmp_path, cfg, 8) == final
     assert (tmp_path / "ours" / "seed_0" / "final_eval.json").stat().st_mtime_ns == stamp
+
+
+@pytest.mark.slow
+def test_runs_are_finally_evaluated_as_they_finish_and_a_packed_copy_resumes(tiny_policy, tmp_path):
+    cfg = ExperimentConfig.load(REPO / "configs" / "experiment-small.json")
+    cfg.methods, cfg.reference = ["none", "dr"], "dr"
+    cfg.loop["policy"] = str(tiny_policy)
+    out = tmp_path / "exp"
+    run_experiment(cfg, out, final_episodes=6)
+    for m in cfg.methods:
+        for s in cfg.seeds:
+            doc = json.loads((out / m / f"seed_{s}" / "final_eval.json").read_text())
+            assert doc["episodes"] == 6 and doc["iteration"] == cfg.loop["iterations"]
+    for s in cfg.seeds:  # pi_0 is evaluated once per seed and shared by that seed's runs
+        cached = json.loads((out / "initial_eval" / f"seed_{s}.json").read_text())
+        assert cached["figures"] == json.loads((out / "dr" / f"seed_{s}" / "final_eval.json").read_text())["initial"]
+    final = final_evaluation(out, cfg, 6)
+
+    packed = pack_experiment(out, tmp_path / "packed")
+    assert len(packed) == len(cfg.methods) * len(cfg.seeds)
+    assert not list((tmp_path / "packed").rglob("*.pt")) and not list((tmp_path / "packed").rglob("scenes"))
+    # the packed copy has no policy, so resuming works only if every finished run is skipped
+    run_experiment(cfg, tmp_path / "packed", final_episodes=6)
+    assert final_evaluation(tmp_path / "packed", cfg, 6)["methods"] == final["methods"]

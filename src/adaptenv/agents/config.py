@@ -74,8 +74,8 @@ class TrainConfig:
     save_every: int = 200
     """Save the checkpoint and resume state every this many gradient updates."""
     threads: int = 0
-    """Torch threads (0: half the cores, i.e. 1 on a 2-core machine; see configure_torch)."""
-    overlap: bool = True
+    """Torch threads (0: every available core in the serial loop, one beside the learner thread; see configure_torch)."""
+    overlap: bool = False
     """Run an iteration's gradient steps in a second thread while the next block is collected (its weights lag one iteration)."""
     progress: bool = True
     """Show a progress bar."""
@@ -162,7 +162,7 @@ class PPOConfig:
     min_start_distance: float = 0.0
     """Episodes start this geodesic distance (m) or more from the target (0: any)."""
     threads: int = 0
-    """Torch threads (0: half the cores; see configure_torch)."""
+    """Torch threads (0: every available core; see configure_torch)."""
     progress: bool = True
     """Show a progress bar."""
     tensorboard: bool = True

@@ -204,15 +204,23 @@ class NeuralPolicy:
         return choose_actions(logits, u, self.end_threshold), h
 
 
+def available_cores() -> int:
+    """Cores this process may use: the machine's, capped by ``OMP_NUM_THREADS`` (an executor's worker sets 1)."""
+    import os
+
+    cores = os.cpu_count() or 2
+    cap = os.environ.get("OMP_NUM_THREADS", "")
+    return max(1, min(cores, int(cap))) if cap.isdigit() and int(cap) > 0 else cores
+
+
 def configure_torch(threads: int | None = None) -> int:
     """Set torch's intra-op threads and return the number.
 
-    Default: half the cores (1 on a 2-core machine). The simulator's numba kernels use the other
-    core(s), and on a busy 2-core machine two spinning OpenMP threads made every small torch op
-    tens of times slower (measured: 8,000 vs 800 gradient frames/s), so one thread is the safe choice.
+    Default: half the available cores (1 on a 2-core machine), for code that runs torch beside
+    the simulator's kernels or a learner thread: on a busy 2-core machine two spinning OpenMP
+    threads made every small torch op tens of times slower (measured: 8,000 vs 800 gradient
+    frames/s). Serial training loops pass :func:`available_cores` instead.
     """
-    import os
-
-    n = threads or max(1, (os.cpu_count() or 2) // 2)
+    n = threads or max(1, available_cores() // 2)
     torch.set_num_threads(n)
     return n

@@ -59,6 +59,7 @@ from adaptenv.agents.network import (
     NavNet,
     NetConfig,
     NeuralPolicy,
+    available_cores,
     choose_actions,
     configure_torch,
     count_parameters,
@@ -165,7 +166,7 @@ def train_ppo(cfg: PPOConfig, *, worlds: Sequence[Any] | None = None, init_net: 
               command: str = "") -> TrainResult:
     """Run PPO as configured; returns the trained network, its card and the logged rows."""
     check_ppo_config(cfg)
-    threads = configure_torch(cfg.threads or None)
+    threads = configure_torch(cfg.threads or available_cores())
     run_dir = default_ppo_run_dir(cfg)
     if run_dir:
         run_dir.mkdir(parents=True, exist_ok=True)

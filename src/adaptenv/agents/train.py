@@ -15,9 +15,10 @@ Each iteration:
    expert labels joins a FIFO dataset of at most ``buffer_frames`` frames.
 3. **Learn.** ``updates_per_iter`` Adam steps of cross-entropy on minibatches of ``batch_chunks``
    sequences of ``chunk_len`` steps drawn uniformly from the dataset. The GRU is unrolled through
-   each chunk, resetting its memory where an episode starts inside it. With ``overlap`` (the
-   default) these steps run in a learner thread while the next block is collected by a copy of
-   the weights synchronised after every iteration (so collection lags one iteration).
+   each chunk, resetting its memory where an episode starts inside it. By default these steps
+   run after the collection on every available core; with ``overlap`` they run in a learner
+   thread while the next block is collected by a copy of the weights synchronised after every
+   iteration (so collection lags one iteration).
 
 After the last iteration the ``end`` threshold is chosen on fresh episodes in the training houses
 (``calibrate_episodes``; :mod:`adaptenv.agents.stop`) and saved in the checkpoint.
@@ -60,6 +61,7 @@ from adaptenv.agents.network import (
     NavNet,
     NetConfig,
     NeuralPolicy,
+    available_cores,
     choose_actions,
     configure_torch,
     count_parameters,
@@ -241,7 +243,7 @@ def train(cfg: TrainConfig, *, worlds: Sequence[NavWorld] | None = None, init_ne
     ``cfg.init``. Both are how :func:`finetune` trains on houses held in memory.
     """
     check_config(cfg)
-    threads = configure_torch(cfg.threads or None)
+    threads = configure_torch(cfg.threads or (None if cfg.overlap else available_cores()))
     run_dir = default_run_dir(cfg)
     state_path = run_dir / "state.pt" if run_dir else None
     if cfg.resume and (state_path is None or not state_path.is_file()):

@@ -153,8 +153,9 @@ def experiment(
     executor: str = EXECUTOR_OPTION,
     workers: int = WORKERS_OPTION,
     address: str = ADDRESS_OPTION,
-    final_episodes: int = typer.Option(0, "--final-episodes", min=0, help="Then evaluate pi_0 and each run's "
-                                       "last policy on this many held-out episodes per set (summary_final.md)."),
+    final_episodes: int = typer.Option(0, "--final-episodes", min=0, help="Evaluate pi_0 and each run's last "
+                                       "policy on this many held-out episodes per set as the run finishes "
+                                       "(final_eval.json; summary_final.md at the end)."),
     strict: bool = STRICT_OPTION,
 ) -> None:
     """Run methods x seeds (resuming finished runs), then write CSVs, the summary table and plots.
@@ -176,7 +177,8 @@ def experiment(
         console.print(f"[dim]{text}[/]")
 
     try:
-        run_experiment(cfg, out, executor=ex, command=" ".join(["adaptenv"] + sys.argv[1:]), progress=say)
+        run_experiment(cfg, out, executor=ex, command=" ".join(["adaptenv"] + sys.argv[1:]), progress=say,
+                       final_episodes=final_episodes)
         console.print((out / "summary.md").read_text(encoding="utf-8"))
         if final_episodes:
             from adaptenv.curriculum.experiment import final_evaluation

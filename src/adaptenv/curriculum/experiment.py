@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import json
 import math
+import shutil
 import sys
 import time
 from collections.abc import Callable
@@ -35,6 +36,8 @@ from adaptenv.curriculum.executor import InProcessExecutor
 from adaptenv.curriculum.jobs import PolicyWeights
 from adaptenv.curriculum.loop import METHODS, LoopConfig, evaluate_sets, run_loop
 from adaptenv.curriculum.records import (
+    ITERATIONS,
+    STATE,
     RunInfo,
     SkippedHouses,
     atomic_write_text,
@@ -97,18 +100,24 @@ def run_dir(out: Path, method: str, seed: int) -> Path:
     return Path(out) / method / f"seed_{seed}"
 
 
-def _run_one(args: tuple[dict[str, Any], str, str]) -> str:
-    """Worker entry point (picklable): run or resume one (method, seed).
+def _run_one(args: tuple[dict[str, Any], str, str, int]) -> str:
+    """Worker entry point (picklable): run or resume one (method, seed), then (``final_episodes`` > 0) its final
+    evaluation, so a finished run is complete on its own and an interrupted experiment loses no evaluation.
 
     When stderr is a log rather than a terminal (a background experiment), each finished stage and
     run gets a timestamped line there, so hours of work are not silent; on a terminal the progress bar speaks.
     """
-    loop_fields, folder, command = args
+    loop_fields, folder, command, final_episodes = args
     cfg = LoopConfig(**loop_fields)
     say = None if sys.stderr.isatty() else _log_line(f"{cfg.method} seed {cfg.seed}")
     records = run_loop(cfg, folder, resume=True, command=command, progress=say)
     if say is not None:
         say(f"run finished ({records[-1].iteration} iterations)" if records else "run finished")
+    if final_episodes and records and records[-1].iteration == cfg.iterations:
+        run_final_eval(Path(folder).parent.parent, cfg.method, cfg.seed, cfg.heldout, final_episodes,
+                       InProcessExecutor())
+        if say is not None:
+            say(f"final evaluation written ({final_episodes} episodes per set)")
     return folder
 
 
@@ -120,13 +129,16 @@ def _log_line(prefix: str) -> Callable[[str], None]:
 
 
 def run_experiment(cfg: ExperimentConfig, out: str | Path, *, executor: Any = None, command: str = "",
-                   progress: Any = None) -> dict[str, Any]:
-    """Run every (method, seed) that is not finished yet, then summarize; returns the summary."""
+                   progress: Any = None, final_episodes: int = 0) -> dict[str, Any]:
+    """Run every (method, seed) that is not finished yet, then summarize; returns the summary.
+
+    ``final_episodes`` > 0: each run is evaluated on that many held-out episodes per set as soon as it
+    finishes (its ``final_eval.json``; see :func:`final_evaluation`)."""
     out = Path(out)
     check_llm_section(cfg.loop.get("llm") or {}, "experiment config: loop.llm")  # before anything is saved
     out.mkdir(parents=True, exist_ok=True)
     atomic_write_text(out / "experiment.json", json.dumps(asdict(cfg), indent=1))
-    jobs = [(asdict(cfg.loop_config(m, s)), str(run_dir(out, m, s)), command) for m in cfg.methods
+    jobs = [(asdict(cfg.loop_config(m, s)), str(run_dir(out, m, s)), command, final_episodes) for m in cfg.methods
             for s in cfg.seeds]
     if executor is None:
         for i, job in enumerate(jobs):
@@ -272,42 +284,61 @@ FINAL_EVAL = "final_eval.json"
 """Per run: held-out figures of pi_0 and of the last policy on ``episodes`` episodes per set."""
 
 
+#: pi_0's final-evaluation figures per seed (the same policy and episodes in every run of a seed), computed once.
+INITIAL_EVAL = "initial_eval"
+
+
+def _evaluate_policy(policy_path: Path, specs: dict[str, str], episodes: int, seed: int, ex: Any) -> dict[str, Any]:
+    weights = PolicyWeights.of(load_checkpoint(policy_path).policy())
+    return {k: v.model_dump() for k, v in evaluate_sets(weights, specs, episodes, seed, ex).items()}
+
+
+def run_final_eval(out: Path, method: str, seed: int, specs: dict[str, str], episodes: int, ex: Any,
+                   say: Callable[[str], None] = lambda text: None) -> dict[str, Any] | None:
+    """A run's ``final_eval.json``: pi_0 and the last policy on ``episodes`` episodes per held-out set (the seed's
+    episodes, so every method's run of a seed is paired); computed only when missing or stale. None: no record yet."""
+    folder = run_dir(out, method, seed)
+    recs = read_iterations(folder)
+    if not recs:
+        return None
+    path = folder / FINAL_EVAL
+    doc = json.loads(path.read_text(encoding="utf-8")) if path.is_file() else {}
+    if doc.get("episodes") == episodes and doc.get("iteration") == recs[-1].iteration:
+        return doc
+    say(f"final evaluation: {method} seed {seed} ({episodes} episodes per set)")
+    cache = out / INITIAL_EVAL / f"seed_{seed}.json"
+    initial = json.loads(cache.read_text(encoding="utf-8")) if cache.is_file() else {}
+    if initial.get("episodes") != episodes or initial.get("sets") != specs:
+        initial = {"episodes": episodes, "sets": specs,
+                   "figures": _evaluate_policy(iteration_dir(folder, 0) / "policy.pt", specs, episodes, seed, ex)}
+        cache.parent.mkdir(parents=True, exist_ok=True)
+        atomic_write_text(cache, json.dumps(initial, indent=1))
+    doc = {"episodes": episodes, "iteration": recs[-1].iteration, "initial": initial["figures"],
+           "final": _evaluate_policy(iteration_dir(folder, recs[-1].iteration) / "policy.pt", specs, episodes, seed, ex)}
+    atomic_write_text(path, json.dumps(doc, indent=1))
+    return doc
+
+
 def final_evaluation(out: str | Path, cfg: ExperimentConfig, episodes: int, *, executor: Any = None,
                      progress: Any = None) -> dict[str, Any]:
-    """Evaluate pi_0 and every finished run's last policy on ``episodes`` held-out episodes per set
-    (the seed's episodes, so comparisons stay paired), then write ``summary_final``; cached per run."""
+    """Evaluate pi_0 and every run's last policy that has no current ``final_eval.json`` on ``episodes`` held-out
+    episodes per set (:func:`run_final_eval`), then write ``summary_final`` from every run's file."""
     out, ex = Path(out), executor if executor is not None else InProcessExecutor()
     specs = cfg.loop_config(cfg.reference, cfg.seeds[0]).heldout
     say = progress or (lambda text: None)
-
-    def evaluate(policy_path: Path, seed: int) -> dict[str, Any]:
-        weights = PolicyWeights.of(load_checkpoint(policy_path).policy())
-        return {k: v.model_dump() for k, v in evaluate_sets(weights, specs, episodes, seed, ex).items()}
-
-    initial: dict[int, dict[str, Any]] = {}  # pi_0 is the same policy in every run of a seed
     table: dict[str, dict[int, dict[str, float]]] = {}
     for m in cfg.methods:
         for s in cfg.seeds:
-            folder = run_dir(out, m, s)
-            recs = read_iterations(folder)
-            if not recs:
+            doc = run_final_eval(out, m, s, specs, episodes, ex, say)
+            if doc is None:
                 continue
-            path = folder / FINAL_EVAL
-            doc = json.loads(path.read_text(encoding="utf-8")) if path.is_file() else {}
-            if doc.get("episodes") != episodes or doc.get("iteration") != recs[-1].iteration:
-                say(f"final evaluation: {m} seed {s} ({episodes} episodes per set)")
-                if s not in initial:
-                    initial[s] = evaluate(iteration_dir(folder, 0) / "policy.pt", s)
-                doc = {"episodes": episodes, "iteration": recs[-1].iteration, "initial": initial[s],
-                       "final": evaluate(iteration_dir(folder, recs[-1].iteration) / "policy.pt", s)}
-                atomic_write_text(path, json.dumps(doc, indent=1))
-            initial.setdefault(s, doc["initial"])
             row = {f"{k}:{name}": float(v[k]) for name, v in doc["final"].items() for k in METRICS}
             row.update({f"success_gain:{name}": v["success"] - doc["initial"][name]["success"]
                         for name, v in doc["final"].items()})
-            row.update(_budget(recs[-1]))
+            row.update(_budget(read_iterations(run_dir(out, m, s))[-1]))
             table.setdefault(m, {})[s] = row
     return write_summary(out, cfg, table, suffix="_final", episodes=episodes)
+
 
 
 def summary_markdown(summary: dict[str, Any]) -> str:
@@ -408,3 +439,33 @@ def _plots(out: Path, cfg: ExperimentConfig) -> None:
             fig.tight_layout()
             fig.savefig(out / "plots" / f"heldout_{set_name}_vs_{x}.png")
             plt.close(fig)
+
+#: What :func:`pack_experiment` keeps of a finished run: enough to summarize it and to skip it on resume.
+PACKED_RUN_FILES = ("run.json", STATE, ITERATIONS, FINAL_EVAL)
+
+
+def pack_experiment(out: str | Path, dest: str | Path, cfg: ExperimentConfig | None = None) -> list[Path]:
+    """Copy an experiment's results without policies or scenes to ``dest`` (small enough to commit): its config,
+    summaries, pi_0's evaluations, and each finished, finally evaluated run's record. ``adaptenv experiment`` on
+    ``dest`` with the same config skips those runs and runs the rest. Returns the runs packed."""
+    out, dest = Path(out), Path(dest)
+    cfg = cfg or ExperimentConfig(**json.loads((out / "experiment.json").read_text(encoding="utf-8")))
+    dest.mkdir(parents=True, exist_ok=True)
+    top = [p for p in out.iterdir() if p.is_file() and p.suffix in (".json", ".md")]
+    top += sorted((out / INITIAL_EVAL).glob("*.json")) + sorted(out.glob("*/per_seed*.csv"))
+    for p in top:
+        (dest / p.relative_to(out)).parent.mkdir(parents=True, exist_ok=True)
+        shutil.copy2(p, dest / p.relative_to(out))
+    packed = []
+    for m in cfg.methods:
+        for s in cfg.seeds:
+            src = run_dir(out, m, s)
+            recs = read_iterations(src)
+            if not recs or recs[-1].iteration != cfg.loop_config(m, s).iterations or not (src / FINAL_EVAL).is_file():
+                continue
+            to = run_dir(dest, m, s)
+            to.mkdir(parents=True, exist_ok=True)
+            for name in PACKED_RUN_FILES:
+                shutil.copy2(src / name, to / name)
+            packed.append(to)
+    return packed

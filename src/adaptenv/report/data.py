@@ -357,30 +357,32 @@ def load_experiment(path: Path) -> ExperimentData:
     exp = ExperimentData(path, runs)
     exp.files = sorted(p for p in path.iterdir() if p.is_file() and p.suffix.lower() in DATA_SUFFIXES)
     exp.files += sorted(p for m in runs for p in (path / m).iterdir() if p.is_file() and p.suffix.lower() in DATA_SUFFIXES)
-    if (path / SUMMARY).is_file():
-        try:
-            exp.summary = json.loads((path / SUMMARY).read_text(encoding="utf-8"))
-        except (ValueError, OSError) as exc:
-            exp.warnings.append(f"{SUMMARY} is unreadable ({_first_line(exc)}); no significance column")
-        else:
-            exp.pvalues = find_pvalues(exp.summary, exp.methods, exp.sets)
-            if isinstance(exp.summary, dict):
-                exp.baseline = _text(exp.summary.get("baseline"))
-                exp.reference = _text(exp.summary.get("reference"))
-                for key in ("test", "significance_test"):
-                    if isinstance(exp.summary.get(key), str):
-                        exp.test = exp.summary[key]
-    if (path / FINAL_SUMMARY).is_file():
-        try:
-            final = json.loads((path / FINAL_SUMMARY).read_text(encoding="utf-8"))
-        except (ValueError, OSError) as exc:
-            exp.warnings.append(f"{FINAL_SUMMARY} is unreadable ({_first_line(exc)}); no final evaluation shown")
-        else:
-            if isinstance(final, dict) and isinstance(final.get("methods"), dict):
-                exp.final = final
-            else:
-                exp.warnings.append(f"{FINAL_SUMMARY} has no 'methods' table; no final evaluation shown")
+    exp.summary = _read_json(path / SUMMARY, "no significance column", exp.warnings)
+    if exp.summary is not None:
+        exp.pvalues = find_pvalues(exp.summary, exp.methods, exp.sets)
+        if isinstance(exp.summary, dict):
+            exp.baseline = _text(exp.summary.get("baseline"))
+            exp.reference = _text(exp.summary.get("reference"))
+            for key in ("test", "significance_test"):
+                if isinstance(exp.summary.get(key), str):
+                    exp.test = exp.summary[key]
+    final = _read_json(path / FINAL_SUMMARY, "no final evaluation shown", exp.warnings)
+    if isinstance(final, dict) and isinstance(final.get("methods"), dict):
+        exp.final = final
+    elif final is not None:
+        exp.warnings.append(f"{FINAL_SUMMARY} has no 'methods' table; no final evaluation shown")
     return exp
+
+
+def _read_json(path: Path, consequence: str, warnings: list[str]) -> Any:
+    """A JSON file's content; None when it is missing, or unreadable (then a warning ending in ``consequence``)."""
+    if not path.is_file():
+        return None
+    try:
+        return json.loads(path.read_text(encoding="utf-8"))
+    except (ValueError, OSError) as exc:
+        warnings.append(f"{path.name} is unreadable ({_first_line(exc)}); {consequence}")
+        return None
 
 
 def _text(x: Any) -> str | None:

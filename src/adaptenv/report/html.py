@@ -693,8 +693,8 @@ def _p(p: object) -> str:
 
 
 def _seeds(figs: dict) -> str:
-    ns = {f.get("n") for f in figs.values() if isinstance(f, dict)}
-    return str(max(n for n in ns if isinstance(n, int))) if any(isinstance(n, int) for n in ns) else "–"
+    ns = [f["n"] for f in figs.values() if isinstance(f, dict) and isinstance(f.get("n"), int)]
+    return str(max(ns)) if ns else "–"
 
 
 def mean_text(values: list[float], digits: int) -> str:

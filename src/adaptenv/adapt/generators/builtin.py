@@ -121,7 +121,7 @@ class BuiltinGenerator:
     def generate(self, house: House, analysis: Analysis, *, steps: int, context: GenerationContext,
                  rng: np.random.Generator) -> GenerationResult:
         ep, original = context.episode, RealismReference.of(house)
-        route, v, world, values, realism, result = self._begin(house, context)
+        route, v, world, values, realism, result = self._begin(house, context, original)
         suggestions = sorted(analysis.suggestions, key=lambda s: -s.priority)
         targets = {t.object_id for t in world.instances_of(ep.target_type)}
         for step in range(steps):
@@ -166,10 +166,11 @@ class BuiltinGenerator:
         result.house = v.house
         return result
 
-    def _begin(self, house: House, context: GenerationContext
+    def _begin(self, house: House, context: GenerationContext, reference: RealismReference
                ) -> tuple[RouteSpec, EditValidator, NavWorld, ObjectiveValues, float, GenerationResult]:
         """The search's start: the route of pi_t's episode, a validator over ``house`` (the scene so far), its
-        compiled world, objective values and realism, and a result with the first objective trace entry."""
+        compiled world, objective values and realism (against ``reference``, built from ``house``), and a result
+        with the first objective trace entry."""
         ep = context.episode
         route = RouteSpec.from_episode(ep.target_type, ep.start, context.trajectory)
         v = EditValidator(house, episode_targets=[ep.target_type], start=ep.start[:2])
@@ -177,7 +178,7 @@ class BuiltinGenerator:
         values = measure(world, route)
         result = GenerationResult(house=v.house, steps=[], edit_log=v.log, generator=self.name,
                                   objective_trace=[values.as_dict()])
-        return route, v, world, values, realism_score(v.house, house), result
+        return route, v, world, values, realism_score(v.house, reference), result
 
     def _applied(self, v: EditValidator, chosen: Candidate, edit: Edit, record: StepRecord, result: GenerationResult,
                  context: GenerationContext, step: int) -> tuple[NavWorld, ObjectiveValues, float | None]:

@@ -210,7 +210,7 @@ class FailureModeGenerator(BuiltinGenerator):
     def generate(self, house: House, analysis: Analysis, *, steps: int, context: GenerationContext,
                  rng: np.random.Generator) -> GenerationResult:
         ep, reference = context.episode, RealismReference.of(house)
-        route, v, world, values, realism, result = self._begin(house, context)
+        route, v, world, values, realism, result = self._begin(house, context, reference)
         plan = mode_plan(context.diagnosis, analysis)
         for step in range(steps):
             family = plan[step % len(plan)]
