@@ -173,3 +173,15 @@ def test_serial_training_uses_every_available_core_and_the_learner_thread_one(tm
         torch.set_num_threads(before)
     assert serial.card["torch_threads"] == 2
     assert overlap.card["torch_threads"] == 1
+
+
+@pytest.mark.slow
+def test_bench_end_to_end_times_the_training_loop_apart_from_the_call():
+    from adaptenv.agents.houses import load_house_set
+    from adaptenv.bench.train import end_to_end
+
+    figs = end_to_end(load_house_set("preset:tiny").worlds, iterations=1, repeats=1,
+                      recipe={"hidden": 32, "feature_dim": 32, "conv_channels": 8, "threads": 1})
+    # the loop excludes the set-up and the final evaluation, so it is faster than the whole call
+    assert figs["dagger_end_to_end_frames_per_s"] > figs["dagger_whole_call_frames_per_s"] > 0
+    assert figs["dagger_end_to_end_overlap_frames_per_s"] > 0 and figs["dagger_resume_speed_ratio"] > 0

