@@ -185,3 +185,13 @@ def test_bench_end_to_end_times_the_training_loop_apart_from_the_call():
     # the loop excludes the set-up and the final evaluation, so it is faster than the whole call
     assert figs["dagger_end_to_end_frames_per_s"] > figs["dagger_whole_call_frames_per_s"] > 0
     assert figs["dagger_end_to_end_overlap_frames_per_s"] > 0 and figs["dagger_resume_speed_ratio"] > 0
+
+
+def test_training_gives_back_the_callers_torch_threads(tmp_path):
+    before = torch.get_num_threads()
+    torch.set_num_threads(1)
+    try:
+        result = train(tiny_config(tmp_path, frames=512, output="", run_dir="", final_eval_episodes=1, threads=2))
+        assert result.card["torch_threads"] == 2 and torch.get_num_threads() == 1
+    finally:
+        torch.set_num_threads(before)

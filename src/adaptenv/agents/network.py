@@ -9,6 +9,8 @@ the head reads the memory and the current features. About 0.4 M parameters: fast
 
 from __future__ import annotations
 
+from collections.abc import Iterator
+from contextlib import contextmanager
 from dataclasses import asdict, dataclass
 
 import numpy as np
@@ -224,3 +226,13 @@ def configure_torch(threads: int | None = None) -> int:
     n = threads or max(1, available_cores() // 2)
     torch.set_num_threads(n)
     return n
+
+
+@contextmanager
+def torch_threads(threads: int | None = None) -> Iterator[int]:
+    """Run a block with ``threads`` torch threads (:func:`configure_torch`'s rule), then restore the caller's."""
+    before = torch.get_num_threads()
+    try:
+        yield configure_torch(threads)
+    finally:
+        torch.set_num_threads(before)

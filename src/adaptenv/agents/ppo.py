@@ -61,9 +61,9 @@ from adaptenv.agents.network import (
     NeuralPolicy,
     available_cores,
     choose_actions,
-    configure_torch,
     count_parameters,
     obs_to_tensors,
+    torch_threads,
 )
 from adaptenv.agents.registry import init_checkpoint
 from adaptenv.agents.stop import calibrate_end_threshold
@@ -164,9 +164,15 @@ def _initial_net(cfg: PPOConfig, init_net: NavNet | None) -> NavNet:
 
 def train_ppo(cfg: PPOConfig, *, worlds: Sequence[Any] | None = None, init_net: NavNet | None = None,
               command: str = "") -> TrainResult:
-    """Run PPO as configured; returns the trained network, its card and the logged rows."""
+    """Run PPO as configured; returns the trained network, its card and the logged rows (torch's thread count is
+    the caller's again afterwards)."""
     check_ppo_config(cfg)
-    threads = configure_torch(cfg.threads or available_cores())
+    with torch_threads(cfg.threads or available_cores()) as threads:
+        return _train_ppo(cfg, worlds, init_net, command, threads)
+
+
+def _train_ppo(cfg: PPOConfig, worlds: Sequence[Any] | None, init_net: NavNet | None, command: str,
+               threads: int) -> TrainResult:
     run_dir = default_ppo_run_dir(cfg)
     if run_dir:
         run_dir.mkdir(parents=True, exist_ok=True)

@@ -63,9 +63,9 @@ from adaptenv.agents.network import (
     NeuralPolicy,
     available_cores,
     choose_actions,
-    configure_torch,
     count_parameters,
     obs_to_tensors,
+    torch_threads,
 )
 from adaptenv.agents.registry import init_checkpoint
 from adaptenv.agents.stop import calibrate_end_threshold
@@ -240,10 +240,16 @@ def train(cfg: TrainConfig, *, worlds: Sequence[NavWorld] | None = None, init_ne
     """Run behaviour cloning + DAgger as configured; returns the trained network and its card.
 
     ``worlds`` (compiled NavWorlds) override ``cfg.houses``; ``init_net`` (a NavNet) overrides
-    ``cfg.init``. Both are how :func:`finetune` trains on houses held in memory.
+    ``cfg.init``. Both are how :func:`finetune` trains on houses held in memory. Torch's thread count is the
+    caller's again afterwards.
     """
     check_config(cfg)
-    threads = configure_torch(cfg.threads or (None if cfg.overlap else available_cores()))
+    with torch_threads(cfg.threads or (None if cfg.overlap else available_cores())) as threads:
+        return _train(cfg, worlds, init_net, command, threads)
+
+
+def _train(cfg: TrainConfig, worlds: Sequence[NavWorld] | None, init_net: NavNet | None, command: str,
+           threads: int) -> TrainResult:
     run_dir = default_run_dir(cfg)
     state_path = run_dir / "state.pt" if run_dir else None
     if cfg.resume and (state_path is None or not state_path.is_file()):

@@ -45,7 +45,7 @@ from adaptenv.agents.checkpoint import load_checkpoint, save_checkpoint
 from adaptenv.agents.config import FinetuneConfig
 from adaptenv.agents.evaluate import EpisodeResult, EvalReport, mean_se, summarize, write_report
 from adaptenv.agents.houses import load_house_set
-from adaptenv.agents.network import NeuralPolicy
+from adaptenv.agents.network import NeuralPolicy, torch_threads
 from adaptenv.agents.registry import resolve_policy
 from adaptenv.agents.teachers import TEACHERS
 from adaptenv.agents.train import finetune
@@ -217,8 +217,15 @@ def run_loop(cfg: LoopConfig, run_dir: str | Path, *, resume: bool = False, exec
 
     Rollouts, held-out evaluation and scene generation go through ``executor`` (in process when
     None; see :mod:`adaptenv.curriculum.executor`); every executor gives the same results.
-    ``progress(text)`` is called with one line per finished stage.
+    ``progress(text)`` is called with one line per finished stage. In-process work runs on one torch thread
+    (rollouts, G's checks and evaluations are small batches; fine-tuning sets its own), then the caller's is back.
     """
+    with torch_threads(1):
+        return _run_loop(cfg, run_dir, resume, executor, progress, command)
+
+
+def _run_loop(cfg: LoopConfig, run_dir: str | Path, resume: bool, executor: Executor | None,
+              progress: Callable[[str], None] | None, command: str) -> list[IterationRecord]:
     cfg.check()
     run_dir = Path(run_dir)
     say = progress or (lambda text: None)
