@@ -120,12 +120,14 @@ def test_small_experiment_writes_every_artifact(tiny_policy, tmp_path, capsys):
 
 
 @pytest.mark.slow
-def test_runs_are_finally_evaluated_as_they_finish_and_a_packed_copy_resumes(tiny_policy, tmp_path):
+def test_runs_are_finally_evaluated_as_they_finish_and_a_packed_copy_resumes(tiny_policy, tmp_path, capsys):
     cfg = ExperimentConfig.load(REPO / "configs" / "experiment-small.json")
     cfg.methods, cfg.reference = ["none", "dr"], "dr"
     cfg.loop["policy"] = str(tiny_policy)
     out = tmp_path / "exp"
     run_experiment(cfg, out, final_episodes=6)
+    log = capsys.readouterr().err  # a background experiment's log says when each run's evaluation is written
+    assert log.count("final evaluation written: ") == len(cfg.methods) * len(cfg.seeds)
     for m in cfg.methods:
         for s in cfg.seeds:
             doc = json.loads((out / m / f"seed_{s}" / "final_eval.json").read_text())
@@ -139,5 +141,7 @@ def test_runs_are_finally_evaluated_as_they_finish_and_a_packed_copy_resumes(tin
     assert len(packed) == len(cfg.methods) * len(cfg.seeds)
     assert not list((tmp_path / "packed").rglob("*.pt")) and not list((tmp_path / "packed").rglob("scenes"))
     # the packed copy has no policy, so resuming works only if every finished run is skipped
+    capsys.readouterr()
     run_experiment(cfg, tmp_path / "packed", final_episodes=6)
+    assert "final evaluation" not in capsys.readouterr().err
     assert final_evaluation(tmp_path / "packed", cfg, 6)["methods"] == final["methods"]

@@ -115,9 +115,7 @@ def _run_one(args: tuple[dict[str, Any], str, str, int]) -> str:
         say(f"run finished ({records[-1].iteration} iterations)" if records else "run finished")
     if final_episodes and records and records[-1].iteration == cfg.iterations:
         run_final_eval(Path(folder).parent.parent, cfg.method, cfg.seed, cfg.heldout, final_episodes,
-                       InProcessExecutor())
-        if say is not None:
-            say(f"final evaluation written ({final_episodes} episodes per set)")
+                       InProcessExecutor(), say or (lambda text: None))
     return folder
 
 
@@ -316,6 +314,7 @@ def run_final_eval(out: Path, method: str, seed: int, specs: dict[str, str], epi
     doc = {"episodes": episodes, "iteration": recs[-1].iteration, "initial": initial["figures"],
            "final": _evaluate_policy(iteration_dir(folder, recs[-1].iteration) / "policy.pt", specs, episodes, seed, ex)}
     atomic_write_text(path, json.dumps(doc, indent=1))
+    say(f"final evaluation written: {method} seed {seed}")
     return doc
 
 
