@@ -1,9 +1,10 @@
 """Time the loop's failure-mode G on N procedural houses, as ``ours`` runs it, and hash what it returns.
 
-    python tools/time_generate_jobs.py 4
+    python tools/time_generate_jobs.py 4 [failure-modes | regret-only]
 
 Each job diagnoses the house with the shipped policy (4 hard episodes), makes 5 edits with their
-rollout checks, and diagnoses the child: :func:`adaptenv.curriculum.jobs.run_generate`. Run it from
+rollout checks, and diagnoses the child: :func:`adaptenv.curriculum.jobs.run_generate`; the
+generator is ``ours``' (failure-modes, the default) or ``ours-nof``'s (regret-only). Run it from
 two source trees (``PYTHONPATH=...``) to compare their speed; equal hashes mean equal children and
 edit logs. docs/BENCHMARKS.md quotes it.
 """
@@ -22,10 +23,10 @@ from adaptenv.curriculum.jobs import GenerateJob, PolicyWeights, run_generate
 from adaptenv.scene.procedural.generate import generate_house
 
 
-def main(n: int) -> None:
+def main(n: int, generator: str = "failure-modes") -> None:
     torch.set_num_threads(1)
     weights = PolicyWeights.of(load_pretrained())
-    jobs = [GenerateJob("failure-modes", generate_house(100 + k), f"dr{k:04d}", 5, (0, 1, 100 + k), weights=weights,
+    jobs = [GenerateJob(generator, generate_house(100 + k), f"dr{k:04d}", 5, (0, 1, 100 + k), weights=weights,
                         diagnose_episodes=4) for k in range(n)]
     times, digests, edits = [], [], []
     for job in jobs:
@@ -40,4 +41,4 @@ def main(n: int) -> None:
 
 
 if __name__ == "__main__":
-    main(int(sys.argv[1]) if len(sys.argv) > 1 else 4)
+    main(int(sys.argv[1]) if len(sys.argv) > 1 else 4, *sys.argv[2:3])

@@ -116,8 +116,7 @@ def test_mode_plan_falls_back_to_the_analysed_episode_then_the_default(scene):
 
 
 def test_rollouts_in_several_worlds_match_one_world_at_a_time(scene):
-    from adaptenv.adapt.generators.failure_modes import run_in_worlds
-    from adaptenv.agents.rollout import checking_episodes, run_policy
+    from adaptenv.agents.rollout import checking_episodes, run_in_worlds, run_policy
 
     house, world, ep, *_ = scene
     res, after = _run(scene, "premature_end", steps=1)

@@ -205,3 +205,27 @@ def test_revision_loop_is_bounded_and_stops_on_success():
     applied.clear()
     stop = revise_until_verified(0, apply, lambda p, r: Check(False, "no"), lambda p, r, c: None)
     assert applied == [0] and stop.revisions == 0
+
+
+def test_builtin_rollout_checks_score_each_scene_as_one_run_at_a_time(scene):
+    """G rolls pi out on the scene and its candidates in one batch; the scores are each scene's own runs."""
+    from adaptenv.agents.registry import load_pretrained
+    from adaptenv.agents.rollout import checking_episodes, mean_spl, run_policy
+
+    house, world, ep, _, traj, analysis = scene
+    policy = load_pretrained()  # stochastic motions, seeded per episode
+    ctx = GenerationContext(episode=ep, trajectory=traj, policy=policy, render=False, rollout_episodes=3)
+    res = BuiltinGenerator(max_candidates=8).generate(house, analysis, steps=2, context=ctx,
+                                                      rng=np.random.default_rng(3))
+    eps = checking_episodes(ep, 3)
+    assert res.steps[0].policy_score_before == mean_spl(run_policy(world, eps, policy))
+    current = house
+    for s in res.steps:
+        if s.status != "applied":
+            continue
+        current = replay(current, [s.edit])
+        alone = mean_spl(run_policy(compile_world(current, "child"), eps, policy))
+        assert s.policy_score_after == alone
+    scores = [s.policy_score_before for s in res.steps] + [s.policy_score_after for s in res.steps]
+    assert any(s.status == "applied" for s in res.steps)
+    assert len({x for x in scores if x is not None}) > 1, "the check should see different SPLs"

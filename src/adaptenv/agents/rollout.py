@@ -1,12 +1,14 @@
-"""Run a policy on given episodes of one house and keep its trajectories: what F analyses and G checks.
+"""Run a policy on given episodes of a house and keep its trajectories: what F analyses and G checks.
 
 Every caller that needs pi_t's behaviour in one scene (the adaptation step, the built-in G's
-rollout checks, benchmarks) goes through :func:`run_policy`, which runs any
+rollout checks, benchmarks) goes through :func:`run_policy`, or :func:`run_in_worlds` for the same
+episodes in several scenes at once (G's candidates); both run any
 :class:`~adaptenv.agents.policy.Policy` in the batched harness of :mod:`adaptenv.agents.evaluate`
-and returns :class:`~adaptenv.sim.trajectory.Trajectory` objects with their metrics::
+and return :class:`~adaptenv.sim.trajectory.Trajectory` objects with their metrics::
 
     trajs = run_policy(world, [episode], policy)
-    score = policy_score(world, checking_episodes(episode, 3), policy)   # mean SPL, the R G lowers
+    runs = run_in_worlds([world, child], checking_episodes(episode, 3), policy)   # one batch for both
+    scores = [mean_spl(ts) for ts in runs]   # mean SPL, the R G lowers
 """
 
 from __future__ import annotations
@@ -43,6 +45,30 @@ def run_recorded(world: NavWorld, episodes: list[Episode], policy: Policy
     return out
 
 
+def run_in_worlds(worlds: list[NavWorld], episodes: list[Episode], policy: Policy) -> list[list[Trajectory]]:
+    """Roll ``policy`` out on the same episodes in several worlds in one batch: trajectories with metrics, per world.
+
+    One batch instead of a run per world: the policy is called once per step for all of them, which is
+    what makes G's checks of several candidate scenes cheap (the sampler is seeded per episode, so the
+    trajectories are those of one world at a time)."""
+    pairs = [(w, ep) for w in range(len(worlds)) for ep in episodes]
+    if not pairs:
+        return [[] for _ in worlds]
+    results, recs = run_episodes(worlds, pairs, policy, batch=len(pairs), record=lambda r: True)
+    out: list[list[Trajectory]] = [[] for _ in worlds]
+    for k, ((w, ep), res) in enumerate(zip(pairs, results, strict=True)):
+        traj = trajectory_of(worlds[w], res, recs[k], policy_name(policy))
+        traj.seed = ep.seed
+        traj.metrics = episode_metrics(worlds[w], traj)
+        out[w].append(traj)
+    return out
+
+
+def mean_spl(trajectories: list[Trajectory]) -> float:
+    """Mean SPL of recorded trajectories (the R that G tries to lower); NaN for none."""
+    return float(np.mean([t.metrics.spl for t in trajectories])) if trajectories else float("nan")
+
+
 def run_policy(world: NavWorld, episodes: list[Episode], policy: Policy) -> list[Trajectory]:
     """Roll ``policy`` out on each episode of one world; trajectories carry their metrics."""
     return [traj for _, traj in run_recorded(world, episodes, policy)]
@@ -58,12 +84,6 @@ def checking_episodes(episode: Episode, n: int) -> list[Episode]:
     n = max(1, int(n))
     return [replace(episode, start=(episode.start[0], episode.start[1], (episode.start[2] + k * 360.0 / n) % 360.0))
             for k in range(n)]
-
-
-def policy_score(world: NavWorld, episodes: list[Episode], policy: Policy) -> float:
-    """Mean SPL of the policy over the episodes (the R that G tries to lower)."""
-    trajs = run_policy(world, episodes, policy)
-    return float(np.mean([t.metrics.spl for t in trajs])) if trajs else float("nan")
 
 
 def draw_episode(world: NavWorld, rng: np.random.Generator, target_type: str | None = None, *,

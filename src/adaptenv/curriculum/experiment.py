@@ -38,6 +38,7 @@ from adaptenv.curriculum.loop import METHODS, LoopConfig, evaluate_sets, run_loo
 from adaptenv.curriculum.records import (
     ITERATIONS,
     STATE,
+    IterationRecord,
     RunInfo,
     SkippedHouses,
     atomic_write_text,
@@ -292,9 +293,10 @@ def _evaluate_policy(policy_path: Path, specs: dict[str, str], episodes: int, se
 
 
 def run_final_eval(out: Path, method: str, seed: int, specs: dict[str, str], episodes: int, ex: Any,
-                   say: Callable[[str], None] = lambda text: None) -> dict[str, Any] | None:
-    """A run's ``final_eval.json``: pi_0 and the last policy on ``episodes`` episodes per held-out set (the seed's
-    episodes, so every method's run of a seed is paired); computed only when missing or stale. None: no record yet."""
+                   say: Callable[[str], None] = lambda text: None) -> tuple[dict[str, Any], IterationRecord] | None:
+    """A run's ``final_eval.json`` (pi_0 and the last policy on ``episodes`` episodes per held-out set, the seed's
+    episodes, so every method's run of a seed is paired) and its last iteration record; the file is computed only
+    when missing or stale. None: no record yet."""
     folder = run_dir(out, method, seed)
     recs = read_iterations(folder)
     if not recs:
@@ -302,7 +304,7 @@ def run_final_eval(out: Path, method: str, seed: int, specs: dict[str, str], epi
     path = folder / FINAL_EVAL
     doc = json.loads(path.read_text(encoding="utf-8")) if path.is_file() else {}
     if doc.get("episodes") == episodes and doc.get("iteration") == recs[-1].iteration:
-        return doc
+        return doc, recs[-1]
     say(f"final evaluation: {method} seed {seed} ({episodes} episodes per set)")
     cache = out / INITIAL_EVAL / f"seed_{seed}.json"
     initial = json.loads(cache.read_text(encoding="utf-8")) if cache.is_file() else {}
@@ -315,7 +317,7 @@ def run_final_eval(out: Path, method: str, seed: int, specs: dict[str, str], epi
            "final": _evaluate_policy(iteration_dir(folder, recs[-1].iteration) / "policy.pt", specs, episodes, seed, ex)}
     atomic_write_text(path, json.dumps(doc, indent=1))
     say(f"final evaluation written: {method} seed {seed}")
-    return doc
+    return doc, recs[-1]
 
 
 def final_evaluation(out: str | Path, cfg: ExperimentConfig, episodes: int, *, executor: Any = None,
@@ -328,16 +330,16 @@ def final_evaluation(out: str | Path, cfg: ExperimentConfig, episodes: int, *, e
     table: dict[str, dict[int, dict[str, float]]] = {}
     for m in cfg.methods:
         for s in cfg.seeds:
-            doc = run_final_eval(out, m, s, specs, episodes, ex, say)
-            if doc is None:
+            done = run_final_eval(out, m, s, specs, episodes, ex, say)
+            if done is None:
                 continue
+            doc, last = done
             row = {f"{k}:{name}": float(v[k]) for name, v in doc["final"].items() for k in METRICS}
             row.update({f"success_gain:{name}": v["success"] - doc["initial"][name]["success"]
                         for name, v in doc["final"].items()})
-            row.update(_budget(read_iterations(run_dir(out, m, s))[-1]))
+            row.update(_budget(last))
             table.setdefault(m, {})[s] = row
     return write_summary(out, cfg, table, suffix="_final", episodes=episodes)
-
 
 
 def summary_markdown(summary: dict[str, Any]) -> str:

@@ -53,7 +53,7 @@ from adaptenv.adapt.objectives import (
 from adaptenv.adapt.realism import RealismReference
 from adaptenv.adapt.validation import EditValidator, Proposal
 from adaptenv.adapt.verification import Check, check_objective, revise_until_verified
-from adaptenv.agents.rollout import checking_episodes, policy_score
+from adaptenv.agents.rollout import checking_episodes, mean_spl, run_in_worlds
 from adaptenv.scene.geometry import SceneGeometry
 from adaptenv.scene.house import House
 from adaptenv.sim.rollout import expert_policy, run_episode
@@ -289,14 +289,19 @@ class BuiltinGenerator:
 
     def _rollout_rank(self, scored: list[Candidate], world: NavWorld, context: GenerationContext,
                       record: StepRecord, cache: dict[int, float]) -> list[Candidate]:
-        """Re-rank the best few candidates by the policy's mean SPL on them (lowest first); ``cache`` by id."""
+        """Re-rank the best few candidates by the policy's mean SPL on them (lowest first); ``cache`` by id.
+
+        The scene itself (first time) and the candidates not yet scored are rolled out in one batch."""
         episodes = checking_episodes(context.episode, context.rollout_episodes)
-        if record.policy_score_before is None:
-            record.policy_score_before = policy_score(world, episodes, context.policy)
         head = scored[:self.rollout_candidates]
+        todo = [c for c in head if id(c) not in cache]
+        first = record.policy_score_before is None
+        runs = iter(run_in_worlds(([world] if first else []) + [c.world for c in todo], episodes, context.policy))
+        if first:
+            record.policy_score_before = mean_spl(next(runs))
+        for c in todo:
+            cache[id(c)] = mean_spl(next(runs))
         for c in head:
-            if id(c) not in cache:
-                cache[id(c)] = policy_score(c.world, episodes, context.policy)
             c.policy_score = cache[id(c)]
         head.sort(key=lambda c: (round(c.policy_score, 6), -c.score))
         return head + scored[self.rollout_candidates:]

@@ -51,15 +51,11 @@ from adaptenv.adapt.objectives import (
 )
 from adaptenv.adapt.realism import RealismReference
 from adaptenv.adapt.validation import EditValidator
-from adaptenv.agents.evaluate import run_episodes, trajectory_of
-from adaptenv.agents.policy import policy_name
-from adaptenv.agents.rollout import checking_episodes
+from adaptenv.agents.rollout import checking_episodes, mean_spl, run_in_worlds
 from adaptenv.scene.geometry import SceneGeometry
 from adaptenv.scene.house import House
-from adaptenv.sim.metrics import episode_metrics
 from adaptenv.sim.spec import MAX_RANGE
-from adaptenv.sim.task import Episode, visible_points
-from adaptenv.sim.trajectory import Trajectory
+from adaptenv.sim.task import visible_points
 from adaptenv.sim.world import NavWorld
 
 #: Objects within this distance (m) of the route count as distractors (weight falls linearly to 0).
@@ -185,19 +181,6 @@ def mode_plan(diagnosis: SceneDiagnosis | None, analysis: Analysis) -> list[str]
 
 # --------------------------------------------------------------------------- the generator
 
-def run_in_worlds(worlds: list[NavWorld], episodes: list[Episode], policy) -> list[list[Trajectory]]:
-    """pi_t on the same episodes in several worlds at once (one batch): trajectories with metrics, per world."""
-    pairs = [(w, ep) for w in range(len(worlds)) for ep in episodes]
-    results, recs = run_episodes(worlds, pairs, policy, batch=len(pairs), record=lambda r: True)
-    out: list[list[Trajectory]] = [[] for _ in worlds]
-    for k, ((w, ep), res) in enumerate(zip(pairs, results, strict=True)):
-        traj = trajectory_of(worlds[w], res, recs[k], policy_name(policy))
-        traj.seed = ep.seed
-        traj.metrics = episode_metrics(worlds[w], traj)
-        out[w].append(traj)
-    return out
-
-
 class FailureModeGenerator(BuiltinGenerator):
     """The built-in G with objectives and moves per failure family (see the module docstring)."""
 
@@ -264,9 +247,9 @@ class FailureModeGenerator(BuiltinGenerator):
         episodes = checking_episodes(context.episode, context.rollout_episodes)
         head = ranked[: self.rollout_candidates]
         runs = run_in_worlds([world] + [c.world for c in head], episodes, context.policy)
-        record.policy_score_before = float(np.mean([t.metrics.spl for t in runs[0]]))
+        record.policy_score_before = mean_spl(runs[0])
         for c, trajs in zip(head, runs[1:], strict=True):
-            c.policy_score = float(np.mean([t.metrics.spl for t in trajs]))
+            c.policy_score = mean_spl(trajs)
             modes = [MODE_FAMILY.get(analyze_trajectory(t, c.world).outcome.failure_mode or "")
                      for t in trajs if not t.metrics.success]
             c.produced = family in modes
