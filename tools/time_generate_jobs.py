@@ -1,4 +1,4 @@
-"""Time the loop's failure-mode G on N procedural houses, as ``ours`` runs it, and hash what it returns.
+"""Time the loop's G (failure-mode or regret-only) on N procedural houses, as the loop runs it, and hash what it returns.
 
     python tools/time_generate_jobs.py 4 [failure-modes | regret-only]
 
