@@ -19,7 +19,9 @@ from adaptenv.agents.rollout import (
     draw_episode,
     find_solved_episode,
     rollout,
+    run_policy,
     run_recorded,
+    total_steps,
 )
 from adaptenv.cli import app
 from adaptenv.curriculum.jobs import GenerateJob, PolicyWeights, Rollout, run_generate
@@ -101,6 +103,24 @@ def test_checking_episodes_keep_start_and_target():
     eps = checking_episodes(Episode("Bed", (1.0, 2.0, 30.0), seed=4), 3)
     assert [e.start for e in eps] == [(1.0, 2.0, 30.0), (1.0, 2.0, 150.0), (1.0, 2.0, 270.0)]
     assert {e.target_type for e in eps} == {"Bed"}
+
+
+def test_a_jobs_env_steps_count_every_step_pi_t_takes_for_g(house):
+    """The loop's budget counts G's rollout checks of candidate edits, and the diagnosis episodes when there are some."""
+    world = compile_world(house, "h")
+    weights = PolicyWeights.of(load_pretrained())
+    episode = draw_episode(world, np.random.default_rng([0, 1]))
+    [(res, traj)] = run_recorded(world, [episode], weights.policy())
+    made = run_generate(GenerateJob("builtin", house, "h", 1, (0,), weights=weights,
+                                    rollout=Rollout(episode, res, traj, True)))
+    checks = [s["check_steps"] for s in made.edit_log["steps"]]
+    own = total_steps([run_policy(world, checking_episodes(episode, 3), weights.policy())])
+    assert made.rollout_steps == sum(checks) and checks[0] > own, "the scene's own check episodes plus its candidates'"
+
+    made = run_generate(GenerateJob("failure-modes", house, "h", 1, (0,), weights=weights, diagnose_episodes=2))
+    diagnosis = sum(e["steps"] for key in ("diagnosis", "diagnosis_after") for e in made.edit_log[key]["episodes"])
+    checks = [s["check_steps"] for s in made.edit_log["steps"]]
+    assert sum(checks) > 0 and made.rollout_steps == diagnosis + sum(checks)
 
 
 @pytest.mark.slow

@@ -69,6 +69,11 @@ def mean_spl(trajectories: list[Trajectory]) -> float:
     return float(np.mean([t.metrics.spl for t in trajectories])) if trajectories else float("nan")
 
 
+def total_steps(runs: list[list[Trajectory]]) -> int:
+    """Environment steps taken in :func:`run_in_worlds`' trajectories (what a budget counts)."""
+    return sum(len(t.steps) for trajs in runs for t in trajs)
+
+
 def run_policy(world: NavWorld, episodes: list[Episode], policy: Policy) -> list[Trajectory]:
     """Roll ``policy`` out on each episode of one world; trajectories carry their metrics."""
     return [traj for _, traj in run_recorded(world, episodes, policy)]

@@ -18,7 +18,7 @@ import numpy as np
 
 from adaptenv.adapt.analysis import Analysis, Analyzer, BuiltinAnalyzer, LLMAnalyzer
 from adaptenv.adapt.diagnosis import NoAnalyzer, hard_episodes
-from adaptenv.adapt.generators import Generator, make_generator
+from adaptenv.adapt.generators import GenerationResult, Generator, make_generator
 from adaptenv.adapt.generators.random_perturbation import random_single_edits
 from adaptenv.adapt.llm import LLMConfig, make_backend
 from adaptenv.adapt.llm.accounting import scene_usage
@@ -194,7 +194,7 @@ class Generated:
     regret_after: float | None = None
     """Regret of pi_t in the child over the same episodes."""
     rollout_steps: int = 0
-    """pi_t's steps in the diagnosis episodes, parent and child (G's own checks not included)."""
+    """pi_t's environment steps in this job: the diagnosis episodes (parent and child) and G's rollout checks."""
     before: Trajectory | None = None
     """The episode F analysed in the parent (the worst one of a diagnosis)."""
 
@@ -215,12 +215,12 @@ def run_generate(job: GenerateJob) -> Generated:
                       generator=generator, steps=job.edit_steps, rng=rng, before=job.rollout.trajectory,
                       name=job.name)
     log, gen = res.generation.to_json_dict(), res.generation
-    usage = scene_usage(res.analysis, gen)
+    common = dict(usage=scene_usage(res.analysis, gen), stopped=gen.stopped, rollout_steps=check_steps(gen))
     if not res.valid:  # the final check refused the whole edited house: the parent stands, nothing was applied
         log["final_validation"] = res.problems
-        return Generated(job.house, log, 0, res.analysis, res.before, valid=False, usage=usage, stopped=gen.stopped)
+        return Generated(job.house, log, 0, res.analysis, res.before, valid=False, **common)
     return Generated(res.house, log, res.edits_applied, res.analysis, res.after,
-                     moved=[e.object_id for e in gen.applied], usage=usage, stopped=gen.stopped)
+                     moved=[e.object_id for e in gen.applied], **common)
 
 
 def _run_diagnosed(job: GenerateJob, rng: np.random.Generator) -> Generated:
@@ -234,7 +234,8 @@ def _run_diagnosed(job: GenerateJob, rng: np.random.Generator) -> Generated:
     log = res.generation.to_json_dict()
     log["diagnosis"] = res.diagnosis.model_dump(mode="json")
     log["diagnosis_after"] = res.diagnosis_after.model_dump(mode="json")
-    steps = sum(e.steps for e in res.diagnosis.episodes) + sum(e.steps for e in res.diagnosis_after.episodes)
+    steps = (sum(e.steps for e in res.diagnosis.episodes) + sum(e.steps for e in res.diagnosis_after.episodes)
+             + check_steps(res.generation))
     common = dict(regret_before=res.diagnosis.regret, rollout_steps=steps, before=res.before,
                   usage=scene_usage(res.analysis, res.generation), stopped=res.generation.stopped)
     if not res.valid:
@@ -244,6 +245,11 @@ def _run_diagnosed(job: GenerateJob, rng: np.random.Generator) -> Generated:
     return Generated(res.house, log, res.edits_applied, res.analysis, res.after,
                      moved=[e.object_id for e in res.generation.applied], regret_after=res.diagnosis_after.regret,
                      **common)
+
+
+def check_steps(generation: GenerationResult) -> int:
+    """pi_t's environment steps in G's rollout checks of one generation."""
+    return sum(s.check_steps for s in generation.steps)
 
 
 def make_fg(kind: GeneratorKind, llm: dict[str, Any]) -> tuple[Analyzer, Generator]:

@@ -171,6 +171,7 @@ class EditingMethod(Method):
         for k, (job, made) in enumerate(zip(jobs, it.executor.map(run_generate, jobs, desc="generation"), strict=True)):
             it.made.append((job.name, made))
             it.state.edits += made.edits
+            it.state.env_steps += made.rollout_steps
             new.append(it.store.put(f"{job.name.split('~')[0]}~t{it.t:02d}{self.tag}{k:02d}", made.house))
             if len(it.gallery) < it.cfg.gallery:
                 it.gallery.append(gallery_item(it.run_dir, it.t, new[-1], job.house, made, rollouts[k].trajectory))

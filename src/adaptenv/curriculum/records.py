@@ -91,7 +91,7 @@ class IterationRecord(BaseModel):
 
     iteration: int
     env_steps: int
-    """Environment steps used so far (rollouts for analysis plus training frames), cumulative."""
+    """Environment steps used so far (scoring and diagnosis rollouts, G's checks, training frames), cumulative."""
     grad_updates: int
     """Gradient updates so far, cumulative."""
     edits: int

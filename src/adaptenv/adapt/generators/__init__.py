@@ -80,6 +80,8 @@ class StepRecord(BaseModel):
     policy_score_before: float | None = None
     policy_score_after: float | None = None
     """Mean SPL of the policy on the checking episodes before/after the edit (when checked)."""
+    check_steps: int = 0
+    """pi_t's environment steps in this step's rollout checks (counted in the loop's env-step budget)."""
     render: str | None = None
     """File of the render after this step, when written."""
     failure_mode: str | None = None

@@ -53,7 +53,7 @@ from adaptenv.adapt.objectives import (
 from adaptenv.adapt.realism import RealismReference
 from adaptenv.adapt.validation import EditValidator, Proposal
 from adaptenv.adapt.verification import Check, check_objective, revise_until_verified
-from adaptenv.agents.rollout import checking_episodes, mean_spl, run_in_worlds
+from adaptenv.agents.rollout import checking_episodes, mean_spl, run_in_worlds, total_steps
 from adaptenv.scene.geometry import SceneGeometry
 from adaptenv.scene.house import House
 from adaptenv.sim.rollout import expert_policy, run_episode
@@ -296,7 +296,9 @@ class BuiltinGenerator:
         head = scored[:self.rollout_candidates]
         todo = [c for c in head if id(c) not in cache]
         first = record.policy_score_before is None
-        runs = iter(run_in_worlds(([world] if first else []) + [c.world for c in todo], episodes, context.policy))
+        batch = run_in_worlds(([world] if first else []) + [c.world for c in todo], episodes, context.policy)
+        record.check_steps += total_steps(batch)
+        runs = iter(batch)
         if first:
             record.policy_score_before = mean_spl(next(runs))
         for c in todo:

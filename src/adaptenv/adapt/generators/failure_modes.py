@@ -51,7 +51,7 @@ from adaptenv.adapt.objectives import (
 )
 from adaptenv.adapt.realism import RealismReference
 from adaptenv.adapt.validation import EditValidator
-from adaptenv.agents.rollout import checking_episodes, mean_spl, run_in_worlds
+from adaptenv.agents.rollout import checking_episodes, mean_spl, run_in_worlds, total_steps
 from adaptenv.scene.geometry import SceneGeometry
 from adaptenv.scene.house import House
 from adaptenv.sim.spec import MAX_RANGE
@@ -247,6 +247,7 @@ class FailureModeGenerator(BuiltinGenerator):
         episodes = checking_episodes(context.episode, context.rollout_episodes)
         head = ranked[: self.rollout_candidates]
         runs = run_in_worlds([world] + [c.world for c in head], episodes, context.policy)
+        record.check_steps += total_steps(runs)
         record.policy_score_before = mean_spl(runs[0])
         for c, trajs in zip(head, runs[1:], strict=True):
             c.policy_score = mean_spl(trajs)
