@@ -81,6 +81,18 @@ def test_training_lowers_the_loss_and_writes_its_outputs(tmp_path):
 
 
 @pytest.mark.slow
+def test_bf16_gradient_steps_learn_as_fp32_does_and_unknown_precisions_are_refused(tmp_path):
+    rows = {p: train(tiny_config(tmp_path / p, precision=p)).rows for p in ("fp32", "bf16")}
+    losses = {p: [r["losses/loss"] for r in rs if "losses/loss" in r] for p, rs in rows.items()}
+    assert losses["bf16"] != losses["fp32"]  # the autocast is on: other arithmetic, other numbers
+    assert losses["bf16"][0] == pytest.approx(losses["fp32"][0], abs=0.02)  # the same weights and data at first
+    assert np.mean(losses["bf16"][-2:]) < losses["bf16"][0] - 0.2  # and it learns as the fp32 run does
+    assert abs(np.mean(losses["bf16"][-2:]) - np.mean(losses["fp32"][-2:])) < 0.1
+    with pytest.raises(ConfigError, match="--precision must be one of fp32, bf16"):
+        train(tiny_config(tmp_path, precision="fp16"))
+
+
+@pytest.mark.slow
 def test_resume_after_interruption_continues_from_the_checkpoint(tmp_path, monkeypatch):
     cfg = tiny_config(tmp_path, save_every=8)  # a save after every iteration (8 updates)
     calls = {"n": 0}

@@ -7,6 +7,10 @@ import inspect
 from dataclasses import dataclass
 
 
+PRECISIONS = ("fp32", "bf16")
+"""Arithmetics of DAgger's gradient steps: fp32 or bfloat16 autocast (forward in bf16, loss and weights in fp32)."""
+
+
 @dataclass
 class TrainConfig:
     """Settings of one imitation-learning run (``adaptenv train``)."""
@@ -87,6 +91,8 @@ class TrainConfig:
     """With --teacher mix: share of episodes the explorer labels."""
     min_start_distance: float = 0.0
     """Episodes start this geodesic distance (m) or more from the target (0: any)."""
+    precision: str = "fp32"
+    """Arithmetic of the gradient steps: fp32, or bf16 (autocast; about 2.4x faster on CPUs with AVX512_BF16)."""
 
 
 @dataclass
@@ -199,6 +205,8 @@ class FinetuneConfig:
     """Episodes of the final evaluation on the training houses (0: one per house)."""
     min_start_distance: float = 0.0
     """Training episodes start at least this geodesic distance (m) from the target where the house allows (0: uniform)."""
+    precision: str = "fp32"
+    """DAgger: arithmetic of the gradient steps, fp32 or bf16 (TrainConfig.precision)."""
 
 
 def field_docs(cls: type) -> dict[str, str]:

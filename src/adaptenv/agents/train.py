@@ -53,7 +53,7 @@ import torch
 import torch.nn.functional as F
 
 from adaptenv.agents.checkpoint import atomic_torch_save, load_checkpoint, save_checkpoint
-from adaptenv.agents.config import FinetuneConfig, PPOConfig, TrainConfig, field_docs
+from adaptenv.agents.config import PRECISIONS, FinetuneConfig, PPOConfig, TrainConfig, field_docs
 from adaptenv.agents.evaluate import run_episodes, sample_episodes, summarize
 from adaptenv.agents.houses import compile_houses, load_house_set
 from adaptenv.agents.network import (
@@ -99,6 +99,13 @@ def check_config(cfg: TrainConfig) -> None:
     for name in ("beta_start", "beta_end", "beta_decay_fraction"):
         if not 0.0 <= getattr(cfg, name) <= 1.0:
             raise ConfigError(f"--{name.replace('_', '-')} must lie in [0, 1], got {getattr(cfg, name)}")
+    check_precision(cfg.precision, "--precision")
+
+
+def check_precision(precision: str, where: str) -> None:
+    """Raise a ConfigError unless ``precision`` names an arithmetic of the gradient steps (fp32 or bf16)."""
+    if precision not in PRECISIONS:
+        raise ConfigError(f"{where} must be one of {', '.join(PRECISIONS)}, got {precision!r}")
 
 
 def beta_at(cfg: TrainConfig, frames: int) -> float:
@@ -351,7 +358,9 @@ def _train(cfg: TrainConfig, worlds: Sequence[NavWorld] | None, init_net: NavNet
             group["lr"] = lr
         for _ in range(cfg.updates_per_iter):
             batch = buffer.sample(cfg.batch_chunks, learn_rng)
-            logits, _ = net(batch, batch["first"], batch["h0"])
+            with torch.autocast("cpu", dtype=torch.bfloat16, enabled=cfg.precision == "bf16"):
+                logits, _ = net(batch, batch["first"], batch["h0"])
+            logits = logits.float()
             loss = F.cross_entropy(logits.reshape(-1, logits.shape[-1]), batch["label"].reshape(-1),
                                    weight=class_weight)
             optimizer.zero_grad()
@@ -485,6 +494,9 @@ def finetune(net: NavNet, worlds: Sequence[NavWorld], cfg: FinetuneConfig, seed:
     """
     if cfg.algo not in ("dagger", "ppo"):
         raise ConfigError(f"FinetuneConfig.algo must be 'dagger' or 'ppo', got {cfg.algo!r}")
+    check_precision(cfg.precision, "FinetuneConfig.precision")
+    if cfg.algo == "ppo" and cfg.precision != "fp32":
+        raise ConfigError(f"FinetuneConfig.precision {cfg.precision!r} applies to DAgger only; use fp32 with algo='ppo'")
     evals = cfg.final_eval_episodes or len(worlds)
     if cfg.algo == "ppo":
         # cycle: ppo imports this module (RunLogger, TrainResult)
@@ -505,7 +517,7 @@ def finetune(net: NavNet, worlds: Sequence[NavWorld], cfg: FinetuneConfig, seed:
                      beta_start=cfg.beta, beta_end=cfg.beta, end_threshold=cfg.end_threshold, teacher=cfg.teacher,
                      calibrate_episodes=cfg.calibrate_episodes, eval_every=0, final_eval_episodes=evals,
                      min_start_distance=cfg.min_start_distance, progress=False, tensorboard=False,
-                     learning_rate=cfg.learning_rate, save_every=10**9)
+                     learning_rate=cfg.learning_rate, save_every=10**9, precision=cfg.precision)
     result = train(tc, worlds=worlds, init_net=net)
     return result.net, result.card
 

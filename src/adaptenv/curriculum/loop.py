@@ -48,7 +48,7 @@ from adaptenv.agents.houses import load_house_set
 from adaptenv.agents.network import NeuralPolicy, torch_threads
 from adaptenv.agents.registry import resolve_policy
 from adaptenv.agents.teachers import TEACHERS
-from adaptenv.agents.train import finetune
+from adaptenv.agents.train import check_precision, finetune
 from adaptenv.curriculum import buffer as lb
 from adaptenv.curriculum.executor import Executor, InProcessExecutor
 from adaptenv.curriculum.jobs import (
@@ -111,6 +111,9 @@ class LoopConfig:
     finetune_min_start: float = 0.0
     """Fine-tuning episodes start at least this geodesic distance (m) from the target where a house allows
     (0: uniform starts; the long suites use 6 m)."""
+    finetune_precision: str = "fp32"
+    """Arithmetic of fine-tuning's gradient steps: fp32, or bf16 autocast (about 2.4x faster on CPUs with
+    AVX512_BF16, slower elsewhere; docs/BENCHMARKS.md)."""
     replay_fraction: float = 0.5
     """Share of the fine-tuning scenes drawn from earlier scenes so the policy does not forget."""
     heldout_episodes: int = 100
@@ -138,6 +141,7 @@ class LoopConfig:
         if self.edit_steps < 0 or self.diagnose_episodes < 1 or not 0.0 <= self.replay_fraction < 1.0:
             raise ConfigError("loop config: edit_steps must be >= 0, diagnose_episodes >= 1 and replay_fraction "
                               "in [0, 1)")
+        check_precision(self.finetune_precision, "loop config: finetune_precision")
         if self.finetune_min_start < 0:
             raise ConfigError(f"loop config: finetune_min_start must be >= 0 metres, got {self.finetune_min_start}")
         if self.finetune_teacher not in TEACHERS:
@@ -208,7 +212,7 @@ def finetune_config(cfg: LoopConfig, end_threshold: float) -> FinetuneConfig:
     labels, episodes starting ``finetune_min_start`` or more from the target."""
     return FinetuneConfig(frames=cfg.finetune_frames, num_envs=cfg.finetune_envs, learning_rate=cfg.finetune_lr,
                           end_threshold=end_threshold, teacher=cfg.finetune_teacher,
-                          min_start_distance=cfg.finetune_min_start)
+                          min_start_distance=cfg.finetune_min_start, precision=cfg.finetune_precision)
 
 
 def run_loop(cfg: LoopConfig, run_dir: str | Path, *, resume: bool = False, executor: Executor | None = None,
