@@ -5,6 +5,7 @@
     python tools/evaluate_runs.py layouts --seeds 0,1,2,3 METHOD_FOLDER...
     python tools/evaluate_runs.py assemble --config EXPERIMENT.json --out FOLDER METHOD=FOLDER[:NAME]...
     python tools/evaluate_runs.py pack EXPERIMENT_FOLDER DEST
+    python tools/evaluate_runs.py time EXPERIMENT_FOLDER [--log STDERR_LOG...]
 
 ``evaluate`` writes ``RUN/<name>.json`` with the last iteration's policy on each suite (a suite name,
 or any house-set spec with a colon such as ``preset:NAME``), on the
@@ -16,8 +17,10 @@ per run, the distinct house layouts fine-tuned on over all iterations (a child `
 has its parent's layout) and the scenes by kind. ``assemble`` gathers methods run in different
 experiment folders (or sessions) into one, with the experiment's own summaries and HTML report. ``pack`` copies
 an experiment's results without policies or scenes (``pack_experiment``), small enough to commit; run
-``adaptenv experiment`` on the copy to go on where it stopped. docs/RESULTS.md's validation tables are this
-script's output.
+``adaptenv experiment`` on the copy to go on where it stopped. ``time`` prints where an experiment's time went,
+per method summed over its seeds: the loop's own clock by stage and the final evaluation (``final_eval.json``'s
+``seconds``, or for older runs the ``final evaluation`` lines of a background experiment's stderr log).
+docs/RESULTS.md's validation tables and docs/BENCHMARKS.md's stage tables are this script's output.
 """
 
 from __future__ import annotations
@@ -160,6 +163,66 @@ def layouts(seeds: list[int], folders: list[Path]) -> None:
             print(f"| {folder.name} | {seed} | {distinct} | {fresh} | {children} | {len(names) - children - fresh} |")
 
 
+STAGES = ("rollouts", "scenes", "finetune", "evaluate")
+
+
+def final_eval_seconds(logs: list[Path]) -> dict[tuple[str, int], float]:
+    """Seconds of each run's final evaluation, from the ``HH:MM:SS method seed k: final evaluation ...`` lines that
+    ``adaptenv experiment`` writes to a non-terminal stderr (the start line to the ``written`` line)."""
+    import re
+    from datetime import datetime
+
+    begun: dict[tuple[str, int], datetime] = {}
+    out: dict[tuple[str, int], float] = {}
+    line_re = re.compile(r"^(\d\d:\d\d:\d\d) (\S+) seed (\d+): final evaluation( written)?:")
+    for log in logs:
+        for line in log.read_text(encoding="utf-8").splitlines():
+            if not (m := line_re.match(line)):
+                continue
+            at, key = datetime.strptime(m.group(1), "%H:%M:%S"), (m.group(2), int(m.group(3)))
+            if m.group(4) is None:
+                begun[key] = at
+            elif key in begun:
+                out[key] = (at - begun.pop(key)).total_seconds() % 86400  # a run may cross midnight
+    return out
+
+
+def timing(folder: Path, logs: list[Path]) -> None:
+    """Print seconds per method (summed over its seeds) by stage of the loop and for the final evaluation."""
+    from adaptenv.curriculum.experiment import ExperimentConfig
+    from adaptenv.curriculum.records import read_iterations
+
+    cfg = ExperimentConfig.load(folder / "experiment.json")
+    from_logs = final_eval_seconds(logs)
+    rows, seeds_done = {}, set()
+    for m in cfg.methods:
+        row = dict.fromkeys((*STAGES, "final"), 0.0)
+        for k in cfg.seeds:
+            run = folder / m / f"seed_{k}"
+            if not (run / "final_eval.json").is_file():
+                continue
+            seeds_done.add(k)
+            for rec in read_iterations(run):
+                for stage in STAGES:
+                    row[stage] += rec.stage_seconds.get(stage, 0.0)
+            doc = json.loads((run / "final_eval.json").read_text())
+            seconds = doc.get("seconds", from_logs.get((m, k)))
+            if seconds is None:
+                raise SystemExit(f"time: {run}/final_eval.json has no seconds; pass the experiment's stderr log "
+                                 "with --log")
+            row["final"] += seconds
+        rows[m] = row
+    total = {c: sum(r[c] for r in rows.values()) for c in (*STAGES, "final")}
+    whole = sum(total.values())
+    print(f"seconds per method, summed over seeds {sorted(seeds_done)} (each run's own clock; two run at once)")
+    print("| method | rollouts | scenes (F, G, checks) | fine-tuning | held-out evaluation | final evaluation | total |\n"
+          "|---|---|---|---|---|---|---|")
+    for m, r in rows.items():
+        print(f"| `{m}` | " + " | ".join(f"{r[c]:,.0f}" for c in (*STAGES, "final")) + f" | {sum(r.values()):,.0f} |")
+    print("| all | " + " | ".join(f"{total[c]:,.0f} ({total[c] / whole:.0%})" for c in (*STAGES, "final"))
+          + f" | {whole:,.0f} |")
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     sub = parser.add_subparsers(dest="command", required=True)
@@ -181,6 +244,9 @@ def main() -> None:
     pk = sub.add_parser("pack")
     pk.add_argument("folder", type=Path)
     pk.add_argument("dest", type=Path)
+    tm = sub.add_parser("time")
+    tm.add_argument("folder", type=Path)
+    tm.add_argument("--log", type=Path, nargs="*", default=[], help="stderr logs of a background experiment")
     lay = sub.add_parser("layouts")
     lay.add_argument("--seeds", required=True)
     lay.add_argument("folders", nargs="+", type=Path)
@@ -195,6 +261,8 @@ def main() -> None:
         from adaptenv.curriculum.experiment import pack_experiment
 
         print(f"packed {len(pack_experiment(args.folder, args.dest))} finished runs into {args.dest}")
+    elif args.command == "time":
+        timing(args.folder, args.log)
     else:
         layouts([int(s) for s in args.seeds.split(",")], args.folders)
 

@@ -136,6 +136,7 @@ def test_runs_are_finally_evaluated_as_they_finish_and_a_packed_copy_resumes(tin
         cached = json.loads((out / "initial_eval" / f"seed_{s}.json").read_text())
         assert cached["figures"] == json.loads((out / "dr" / f"seed_{s}" / "final_eval.json").read_text())["initial"]
     final = final_evaluation(out, cfg, 6)
+    _check_timing(out, cfg, log, tmp_path, capsys)
 
     packed = pack_experiment(out, tmp_path / "packed")
     assert len(packed) == len(cfg.methods) * len(cfg.seeds)
@@ -145,3 +146,37 @@ def test_runs_are_finally_evaluated_as_they_finish_and_a_packed_copy_resumes(tin
     run_experiment(cfg, tmp_path / "packed", final_episodes=6)
     assert "final evaluation" not in capsys.readouterr().err
     assert final_evaluation(tmp_path / "packed", cfg, 6)["methods"] == final["methods"]
+
+
+def _check_timing(out: Path, cfg: ExperimentConfig, log: str, tmp_path: Path, capsys) -> None:
+    """tools/evaluate_runs.py time: each run's final evaluation took measurable time, and the table adds the stages
+    of every run and the evaluation's seconds, read from final_eval.json or, for older runs, from the log."""
+    import importlib.util
+
+    spec = importlib.util.spec_from_file_location("evaluate_runs", REPO / "tools" / "evaluate_runs.py")
+    tool = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(tool)
+    docs = {(m, s): json.loads((out / m / f"seed_{s}" / "final_eval.json").read_text()) for m in cfg.methods
+            for s in cfg.seeds}
+    assert all(d["seconds"] > 0 for d in docs.values())
+    from_log = tool.final_eval_seconds([_write_text(tmp_path / "err.txt", log)])
+    assert set(from_log) == set(docs)  # every run's start and end lines paired
+    loop_seconds = sum(r.stage_seconds.get(st, 0.0) for m in cfg.methods for s in cfg.seeds
+                       for r in read_iterations(out / m / f"seed_{s}") for st in tool.STAGES)
+    capsys.readouterr()
+    tool.timing(out, [])
+    total = sum(d["seconds"] for d in docs.values()) + loop_seconds
+    assert capsys.readouterr().out.splitlines()[-1].endswith(f"| {total:,.0f} |")
+    for (m, s), d in docs.items():  # an older run without seconds: the log gives them, or a clear error
+        del d["seconds"]
+        (out / m / f"seed_{s}" / "final_eval.json").write_text(json.dumps(d))
+    with pytest.raises(SystemExit, match="--log"):
+        tool.timing(out, [])
+    tool.timing(out, [tmp_path / "err.txt"])
+    total = sum(from_log.values()) + loop_seconds
+    assert capsys.readouterr().out.splitlines()[-1].endswith(f"| {total:,.0f} |")
+
+
+def _write_text(path: Path, text: str) -> Path:
+    path.write_text(text, encoding="utf-8")
+    return path

@@ -6,7 +6,6 @@ import ast
 import inspect
 from dataclasses import dataclass
 
-
 PRECISIONS = ("fp32", "bf16")
 """Arithmetics of DAgger's gradient steps: fp32 or bfloat16 autocast (forward in bf16, loss and weights in fp32)."""
 

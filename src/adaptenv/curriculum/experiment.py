@@ -306,6 +306,7 @@ def run_final_eval(out: Path, method: str, seed: int, specs: dict[str, str], epi
     if doc.get("episodes") == episodes and doc.get("iteration") == recs[-1].iteration:
         return doc, recs[-1]
     say(f"final evaluation: {method} seed {seed} ({episodes} episodes per set)")
+    start = time.perf_counter()
     cache = out / INITIAL_EVAL / f"seed_{seed}.json"
     initial = json.loads(cache.read_text(encoding="utf-8")) if cache.is_file() else {}
     if initial.get("episodes") != episodes or initial.get("sets") != specs:
@@ -315,6 +316,7 @@ def run_final_eval(out: Path, method: str, seed: int, specs: dict[str, str], epi
         atomic_write_text(cache, json.dumps(initial, indent=1))
     doc = {"episodes": episodes, "iteration": recs[-1].iteration, "initial": initial["figures"],
            "final": _evaluate_policy(iteration_dir(folder, recs[-1].iteration) / "policy.pt", specs, episodes, seed, ex)}
+    doc["seconds"] = round(time.perf_counter() - start, 2)  # with pi_0's evaluation when this run made the cache
     atomic_write_text(path, json.dumps(doc, indent=1))
     say(f"final evaluation written: {method} seed {seed}")
     return doc, recs[-1]
