@@ -5,7 +5,8 @@ Figures (median of repeated timings, houses of the ``pretrain-train`` preset, wa
 - labelled frames/s: BatchSim steps plus the expert's label for every agent (target >= 20,000/s);
 - DAgger collection frames/s: the same plus the policy's own forward pass (what ``train`` collects at);
 - gradient frames/s: cross-entropy steps on (chunk_len, batch_chunks) sequences on one torch thread
-  (target >= 10,000/s);
+  (target >= 10,000/s), in the recipe's precision; and in fp32 and bf16 autocast timed alternately, with
+  their ratio (``TrainConfig.precision``);
 - inference steps/s of the policy at batch 256, and its parameter count;
 - end to end (``train`` itself: collection with the policy in the loop plus the gradient steps, default
   TrainConfig, periodic evaluation off): frames/s of the default serial loop on every core over its
@@ -149,7 +150,7 @@ def run(*, as_json: bool = False, envs: int = 256, steps: int = 200, houses: str
     import torch
     import torch.nn.functional as F
 
-    from adaptenv.agents.config import TrainConfig
+    from adaptenv.agents.config import PRECISIONS, TrainConfig
     from adaptenv.agents.houses import load_house_set
     from adaptenv.agents.network import (
         NavNet,
@@ -209,14 +210,21 @@ def run(*, as_json: bool = False, envs: int = 256, steps: int = 200, houses: str
     train_net = NavNet(NetConfig.of(cfg))
     opt = torch.optim.Adam(train_net.parameters(), lr=1e-4)
 
-    def grad_step() -> None:
-        logits, _ = train_net(seq, done, torch.zeros(N, cfg.hidden))
-        loss = F.cross_entropy(logits.reshape(-1, logits.shape[-1]), labels.reshape(-1))
+    def grad_step(precision: str) -> None:
+        with torch.autocast("cpu", dtype=torch.bfloat16, enabled=precision == "bf16"):
+            logits, _ = train_net(seq, done, torch.zeros(N, cfg.hidden))
+        loss = F.cross_entropy(logits.float().reshape(-1, logits.shape[-1]), labels.reshape(-1))
         opt.zero_grad()
         loss.backward()
         opt.step()
 
-    t_grad, c_grad = wall_and_cpu(grad_step, repeats=7, warmup=2)
+    # both precisions, alternately (three rounds), so their ratio is measured side by side
+    rounds: dict[str, list[tuple[float, float]]] = {}
+    for _ in range(3):
+        for p in PRECISIONS:
+            rounds.setdefault(p, []).append(wall_and_cpu(lambda p=p: grad_step(p), repeats=7, warmup=2))
+    grad = {p: (statistics.median(w for w, _ in r), statistics.median(c for _, c in r)) for p, r in rounds.items()}
+    t_grad, c_grad = grad[cfg.precision]
 
     bobs = {k: np.resize(v, (256, *v.shape[1:])) for k, v in sim.observe().items()}
     policy_h = net.initial_state(256)
@@ -234,6 +242,8 @@ def run(*, as_json: bool = False, envs: int = 256, steps: int = 200, houses: str
         "dagger_collect_frames_per_cpu_s": envs * steps / c_collect,
         "gradient_frames_per_s": L * N / t_grad,
         "gradient_frames_per_cpu_s": L * N / c_grad,
+        **{f"gradient_frames_per_s_{p}": L * N / grad[p][0] for p in PRECISIONS},
+        "gradient_bf16_speedup": grad["fp32"][0] / grad["bf16"][0],
         "inference_steps_per_s_b256": 256 / t_inf,
         "inference_steps_per_cpu_s_b256": 256 / c_inf,
         "parameters": count_parameters(net),

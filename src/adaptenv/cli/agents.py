@@ -239,13 +239,19 @@ def bench_train(as_json: bool = JSON_OPTION,
                                                          help="Ray convolution channels (default: TrainConfig's)."),
                 updates_per_iter: int | None = typer.Option(None, "--updates-per-iter", min=1,
                                                             help="Gradient steps per collection, i.e. the replay ratio "
-                                                                 "(default: TrainConfig's).")
+                                                                 "(default: TrainConfig's)."),
+                precision: str | None = typer.Option(None, "--precision", help="fp32 or bf16: the gradient steps of "
+                                                     "the recipe and of the end-to-end figure (default: TrainConfig's).")
                 ) -> None:
     """Training throughput: labelled, gradient and end-to-end frames/s, inference steps/s, parameter count."""
     from adaptenv.bench.train import run, run_ppo
 
     recipe = {k: v for k, v in (("hidden", hidden), ("feature_dim", feature_dim), ("conv_channels", conv_channels),
-                                ("updates_per_iter", updates_per_iter)) if v is not None}
+                                ("updates_per_iter", updates_per_iter), ("precision", precision)) if v is not None}
+    if precision is not None:
+        from adaptenv.agents.train import check_precision
+
+        check_precision(precision, "--precision")
     if algo == "ppo":
         run_ppo(as_json=as_json, iterations=max(1, iterations))
     elif algo == "dagger":
