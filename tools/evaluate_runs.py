@@ -6,6 +6,7 @@
     python tools/evaluate_runs.py assemble --config EXPERIMENT.json --out FOLDER METHOD=FOLDER[:NAME]...
     python tools/evaluate_runs.py pack EXPERIMENT_FOLDER DEST
     python tools/evaluate_runs.py time EXPERIMENT_FOLDER [--log STDERR_LOG...]
+    python tools/evaluate_runs.py table EXPERIMENT_FOLDER
 
 ``evaluate`` writes ``RUN/<name>.json`` with the last iteration's policy on each suite (a suite name,
 or any house-set spec with a colon such as ``preset:NAME``), on the
@@ -20,7 +21,9 @@ an experiment's results without policies or scenes (``pack_experiment``), small 
 ``adaptenv experiment`` on the copy to go on where it stopped. ``time`` prints where an experiment's time went,
 per method summed over its seeds: the loop's own clock by stage and the final evaluation (``final_eval.json``'s
 ``seconds``, or for older runs the ``final evaluation`` lines of a background experiment's stderr log).
-docs/RESULTS.md's validation tables and docs/BENCHMARKS.md's stage tables are this script's output.
+``table`` prints an experiment's final evaluation (``summary_final.json``) in points: every method's held-out
+success, its change from pi_0 and its budget, then the reference minus each method with intervals and p values.
+docs/RESULTS.md's validation and experiment tables and docs/BENCHMARKS.md's stage tables are this script's output.
 """
 
 from __future__ import annotations
@@ -223,6 +226,31 @@ def timing(folder: Path, logs: list[Path]) -> None:
           + f" | {whole:,.0f} |")
 
 
+def table(folder: Path) -> None:
+    """Print the final evaluation's success table (percent, mean +- s.e. over seeds) and the reference's effects."""
+    summary = json.loads((folder / "summary_final.json").read_text())
+    methods, ref = summary["methods"], summary["reference"]
+    sets = list(json.loads((folder / "experiment.json").read_text())["loop"]["heldout"])  # the config's order
+    initial = [json.loads(p.read_text())["figures"] for p in sorted((folder / "initial_eval").glob("seed_*.json"))
+               if int(p.stem.split("_")[1]) in summary["seeds"]]
+    print(f"seeds {summary['seeds']}, {summary['episodes']} episodes per suite; pi_0: "
+          + ", ".join(f"{s} {100 * np.mean([d[s]['success'] for d in initial]):.1f}" for s in sets))
+    print("| method | " + " | ".join(f"`{s}`" for s in sets) + " | change from pi_0 (" + ", ".join(sets)
+          + ") | env steps | gradient updates | edits |\n|---|" + "---|" * (len(sets) + 4))
+    for m, row in methods.items():
+        cells = [f"{100 * row[f'success:{s}']['mean']:.1f} ± {100 * (row[f'success:{s}']['se'] or 0):.1f}" for s in sets]
+        gains = ", ".join(f"{100 * row[f'success_gain:{s}']['mean']:+.1f}" for s in sets)
+        budget = [f"{row[k]['mean']:,.0f}" for k in ("env_steps:all", "grad_updates:all", "edits:all")]
+        print(f"| `{m}` | " + " | ".join(cells) + f" | {gains} | " + " | ".join(budget) + " |")
+    print(f"\n`{ref}` minus each method, points (paired over seeds; Holm over all {sum(len(v) for v in summary['effects'].values())} comparisons)")
+    print("| method | suite | difference | 95% interval | p | p (Holm) |\n|---|---|---|---|---|---|")
+    for m, effects in summary["effects"].items():
+        for key, e in sorted(effects.items(), key=lambda kv: sets.index(kv[0].split(":", 1)[1])):
+            p, ph = summary["tests"][m][key], summary["holm"][m][key]
+            print(f"| `{m}` | {key.split(':', 1)[1]} | {100 * e['diff']:+.1f} | [{100 * e['low']:+.1f}, {100 * e['high']:+.1f}] "
+                  f"| {'n/a' if p is None else f'{p:.3f}'} | {'n/a' if ph is None else f'{ph:.2f}'} |")
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     sub = parser.add_subparsers(dest="command", required=True)
@@ -247,6 +275,8 @@ def main() -> None:
     tm = sub.add_parser("time")
     tm.add_argument("folder", type=Path)
     tm.add_argument("--log", type=Path, nargs="*", default=[], help="stderr logs of a background experiment")
+    tb = sub.add_parser("table")
+    tb.add_argument("folder", type=Path)
     lay = sub.add_parser("layouts")
     lay.add_argument("--seeds", required=True)
     lay.add_argument("folders", nargs="+", type=Path)
@@ -263,6 +293,8 @@ def main() -> None:
         print(f"packed {len(pack_experiment(args.folder, args.dest))} finished runs into {args.dest}")
     elif args.command == "time":
         timing(args.folder, args.log)
+    elif args.command == "table":
+        table(args.folder)
     else:
         layouts([int(s) for s in args.seeds.split(",")], args.folders)
 

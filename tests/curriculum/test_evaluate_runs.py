@@ -112,3 +112,14 @@ def test_assemble_gathers_methods_from_two_experiments_and_tests_them(tmp_path, 
     with pytest.raises(SystemExit, match="no run of seed 0 has pi_0's figures"):
         config.write_text(json.dumps({"methods": ["ours-dr"], "seeds": [0], "reference": "ours-dr", "loop": {}}))
         _tool().assemble(config, tmp_path / "y", [f"ours-dr={tmp_path / 'a' / 'ours-dr'}:heldout"])
+
+
+def test_table_prints_a_committed_experiment_in_points(capsys):
+    """The item-4 experiment's figures as docs/RESULTS.md quotes them, from its committed summary_final.json."""
+    _tool().table(TOOL.parents[1] / "docs" / "results" / "efficacy-item4")
+    out = capsys.readouterr().out
+    assert out.startswith("seeds [0, 1, 2, 3, 4, 5, 6, 7, 8, 9], 1000 episodes per suite; pi_0: long-unseen 70.8, "
+                          "far 45.1, clutter 64.3")
+    assert "| `dr` | 70.5 ± 1.1 | 49.1 ± 0.9 | 63.9 ± 1.2 | -0.3, +4.0, -0.4 | 536,695 | 1,024 | 0 |" in out
+    assert "| `dr` | clutter | +4.2 | [+1.1, +7.3] | 0.014 | 0.19 |" in out
+    assert out.count("| `ours-dr` |") == 1 and "Holm over all 27 comparisons" in out
