@@ -108,6 +108,14 @@ def check_precision(precision: str, where: str) -> None:
         raise ConfigError(f"{where} must be one of {', '.join(PRECISIONS)}, got {precision!r}")
 
 
+def sequence_logits(net: NavNet, obs: dict[str, torch.Tensor], first: torch.Tensor, h0: torch.Tensor,
+                    precision: str) -> torch.Tensor:
+    """fp32 logits (T, B, A) of a training batch, the forward pass in ``precision`` (bf16: under CPU autocast)."""
+    with torch.autocast("cpu", dtype=torch.bfloat16, enabled=precision == "bf16"):
+        logits, _ = net(obs, first, h0)
+    return logits.float()
+
+
 def beta_at(cfg: TrainConfig, frames: int) -> float:
     """DAgger's expert-mixing probability after ``frames`` collected frames (linear decay)."""
     span = cfg.beta_decay_fraction * cfg.frames
@@ -358,9 +366,7 @@ def _train(cfg: TrainConfig, worlds: Sequence[NavWorld] | None, init_net: NavNet
             group["lr"] = lr
         for _ in range(cfg.updates_per_iter):
             batch = buffer.sample(cfg.batch_chunks, learn_rng)
-            with torch.autocast("cpu", dtype=torch.bfloat16, enabled=cfg.precision == "bf16"):
-                logits, _ = net(batch, batch["first"], batch["h0"])
-            logits = logits.float()
+            logits = sequence_logits(net, batch, batch["first"], batch["h0"], cfg.precision)
             loss = F.cross_entropy(logits.reshape(-1, logits.shape[-1]), batch["label"].reshape(-1),
                                    weight=class_weight)
             optimizer.zero_grad()

@@ -159,6 +159,7 @@ def run(*, as_json: bool = False, envs: int = 256, steps: int = 200, houses: str
         count_parameters,
         obs_to_tensors,
     )
+    from adaptenv.agents.train import sequence_logits
     from adaptenv.bench import emit
     from adaptenv.sim import task
     from adaptenv.sim.expert import ShortestPathExpert
@@ -211,9 +212,8 @@ def run(*, as_json: bool = False, envs: int = 256, steps: int = 200, houses: str
     opt = torch.optim.Adam(train_net.parameters(), lr=1e-4)
 
     def grad_step(precision: str) -> None:
-        with torch.autocast("cpu", dtype=torch.bfloat16, enabled=precision == "bf16"):
-            logits, _ = train_net(seq, done, torch.zeros(N, cfg.hidden))
-        loss = F.cross_entropy(logits.float().reshape(-1, logits.shape[-1]), labels.reshape(-1))
+        logits = sequence_logits(train_net, seq, done, torch.zeros(N, cfg.hidden), precision)
+        loss = F.cross_entropy(logits.reshape(-1, logits.shape[-1]), labels.reshape(-1))
         opt.zero_grad()
         loss.backward()
         opt.step()
