@@ -5,7 +5,7 @@
     python tools/evaluate_runs.py layouts --seeds 0,1,2,3 METHOD_FOLDER...
     python tools/evaluate_runs.py assemble --config EXPERIMENT.json --out FOLDER METHOD=FOLDER[:NAME]...
     python tools/evaluate_runs.py pack EXPERIMENT_FOLDER DEST
-    python tools/evaluate_runs.py time EXPERIMENT_FOLDER [--log STDERR_LOG...]
+    python tools/evaluate_runs.py time EXPERIMENT_FOLDER [--seeds 0,1] [--log STDERR_LOG...]
     python tools/evaluate_runs.py table EXPERIMENT_FOLDER
 
 ``evaluate`` writes ``RUN/<name>.json`` with the last iteration's policy on each suite (a suite name,
@@ -20,7 +20,7 @@ experiment folders (or sessions) into one, with the experiment's own summaries a
 an experiment's results without policies or scenes (``pack_experiment``), small enough to commit; run
 ``adaptenv experiment`` on the copy to go on where it stopped. ``time`` prints where an experiment's time went,
 per method summed over its seeds: the loop's own clock by stage and the final evaluation (``final_eval.json``'s
-``seconds``, or for older runs the ``final evaluation`` lines of a background experiment's stderr log).
+``seconds``, or for older runs the lines of a background experiment's stderr log).
 ``table`` prints an experiment's final evaluation (``summary_final.json``) in points: every method's held-out
 success, its change from pi_0 and its budget, then the reference minus each method with intervals and p values.
 docs/RESULTS.md's validation and experiment tables and docs/BENCHMARKS.md's stage tables are this script's output.
@@ -170,28 +170,31 @@ STAGES = ("rollouts", "scenes", "finetune", "evaluate")
 
 
 def final_eval_seconds(logs: list[Path]) -> dict[tuple[str, int], float]:
-    """Seconds of each run's final evaluation, from the ``HH:MM:SS method seed k: final evaluation ...`` lines that
-    ``adaptenv experiment`` writes to a non-terminal stderr (the start line to the ``written`` line)."""
+    """Seconds of each run's final evaluation, from the lines ``adaptenv experiment`` writes to a non-terminal stderr:
+    from ``HH:MM:SS method seed k: run finished`` (or ``final evaluation:``) to its ``final evaluation written``. A
+    resumed experiment repeats both lines for its finished runs at once; the longest span counts."""
     import re
     from datetime import datetime
 
     begun: dict[tuple[str, int], datetime] = {}
     out: dict[tuple[str, int], float] = {}
-    line_re = re.compile(r"^(\d\d:\d\d:\d\d) (\S+) seed (\d+): final evaluation( written)?:")
+    line_re = re.compile(r"^(\d\d:\d\d:\d\d) (\S+) seed (\d+): (run finished|final evaluation:|final evaluation written)")
     for log in logs:
         for line in log.read_text(encoding="utf-8").splitlines():
             if not (m := line_re.match(line)):
                 continue
             at, key = datetime.strptime(m.group(1), "%H:%M:%S"), (m.group(2), int(m.group(3)))
-            if m.group(4) is None:
+            if m.group(4) != "final evaluation written":
                 begun[key] = at
             elif key in begun:
-                out[key] = (at - begun.pop(key)).total_seconds() % 86400  # a run may cross midnight
+                span = (at - begun.pop(key)).total_seconds() % 86400  # a run may cross midnight
+                out[key] = max(span, out.get(key, 0.0))
     return out
 
 
-def timing(folder: Path, logs: list[Path]) -> None:
-    """Print seconds per method (summed over its seeds) by stage of the loop and for the final evaluation."""
+def timing(folder: Path, logs: list[Path], seeds: list[int] | None = None) -> None:
+    """Print seconds per method (summed over its seeds, or over ``seeds``) by stage of the loop and for the final
+    evaluation."""
     from adaptenv.curriculum.experiment import ExperimentConfig
     from adaptenv.curriculum.records import read_iterations
 
@@ -200,7 +203,7 @@ def timing(folder: Path, logs: list[Path]) -> None:
     rows, seeds_done = {}, set()
     for m in cfg.methods:
         row = dict.fromkeys((*STAGES, "final"), 0.0)
-        for k in cfg.seeds:
+        for k in seeds if seeds is not None else cfg.seeds:
             run = folder / m / f"seed_{k}"
             if not (run / "final_eval.json").is_file():
                 continue
@@ -275,6 +278,7 @@ def main() -> None:
     tm = sub.add_parser("time")
     tm.add_argument("folder", type=Path)
     tm.add_argument("--log", type=Path, nargs="*", default=[], help="stderr logs of a background experiment")
+    tm.add_argument("--seeds", default=None, help="only these seeds (default: the config's)")
     tb = sub.add_parser("table")
     tb.add_argument("folder", type=Path)
     lay = sub.add_parser("layouts")
@@ -292,7 +296,7 @@ def main() -> None:
 
         print(f"packed {len(pack_experiment(args.folder, args.dest))} finished runs into {args.dest}")
     elif args.command == "time":
-        timing(args.folder, args.log)
+        timing(args.folder, args.log, [int(k) for k in args.seeds.split(",")] if args.seeds else None)
     elif args.command == "table":
         table(args.folder)
     else:
