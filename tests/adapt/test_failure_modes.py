@@ -6,6 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from adaptenv.adapt.analysis import analyze_trajectory
 from adaptenv.adapt.diagnosis import SceneDiagnosis
 from adaptenv.adapt.generators import GenerationContext, make_generator
 from adaptenv.adapt.generators.failure_modes import (
@@ -19,6 +20,7 @@ from adaptenv.adapt.generators.failure_modes import (
 from adaptenv.adapt.objectives import RouteSpec, measure, route_points, visibility_fraction
 from adaptenv.adapt.validation import EditValidator, validate_scene
 from adaptenv.agents.policy import ExpertPolicy, StepFunctionPolicy
+from adaptenv.scene.assets import load_catalog
 from adaptenv.scene.geometry import SceneGeometry
 from adaptenv.sim.rollout import expert_policy, run_episode
 from adaptenv.sim.spec import ACTIONS
@@ -98,6 +100,35 @@ def test_target_moves_stay_in_the_targets_room_and_keep_the_house_valid(scene):
     room = world.geometry.room_of_point(*world.geometry.footprint(kept[0].object_id).center)
     moved = kept[0].world.geometry.footprint(kept[0].object_id)
     assert kept[0].world.geometry.room_of_point(*moved.center) == room
+
+
+def test_relocated_targets_go_to_a_far_plausible_room_only_when_asked():
+    house, world, ep, traj, _ = procedural_scene(2, 4, [1, 1])  # one HousePlant, in the living room
+    v = EditValidator(house, episode_targets=[ep.target_type], start=ep.start[:2])
+    targets = {t.object_id for t in world.instances_of(ep.target_type)}
+    route = RouteSpec.from_episode(ep.target_type, ep.start, traj)
+
+    def candidates(gen):
+        return gen._mode_candidates("search", v, world, route, targets, np.random.default_rng(3))
+
+    assert not [c for c in candidates(FailureModeGenerator(max_candidates=12)) if c.kind == "target_room"]
+    gen = FailureModeGenerator(max_candidates=12, relocate_targets=True)
+    cands = [c for c in candidates(gen) if c.kind == "target_room"]
+    assert cands and all(c.relocate and c.object_id in targets for c in cands)
+    geometry = SceneGeometry.from_house(v.house)
+    kept = [c for c in (gen._evaluate(v, geometry, c, route, house, ep) for c in cands) if c is not None]
+    assert kept, "some relocation passes placement, validation and the expert check"
+    g = world.geometry
+    home = g.room_of_point(*g.footprint(kept[0].object_id).center)
+    moved = kept[0].world.geometry.room_of_point(*kept[0].world.geometry.footprint(kept[0].object_id).center)
+    assert moved != home and load_catalog().type_info(ep.target_type).weight_in(g.room_types[moved]) > 0
+    ctx = GenerationContext(episode=ep, trajectory=traj, policy=None, render=False, diagnosis=_diagnosis("search"))
+    res = gen.generate(house, analyze_trajectory(traj, world), steps=3, context=ctx, rng=np.random.default_rng(0))
+    assert any(s.edit is not None and s.edit.relocate and "(target_room move)" in s.edit.intent for s in res.steps)
+    after = compile_world(res.house, "after")
+    assert hiddenness(after, route) > hiddenness(world, route)
+    assert validate_scene(res.house, episode_targets=[ep.target_type], start=ep.start[:2], original=house) == []
+    assert run_episode(after, ep, expert_policy(), record=False).metrics.success
 
 
 def test_verification_rolls_pi_t_out_and_records_the_aimed_failure(scene):

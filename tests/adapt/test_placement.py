@@ -76,6 +76,24 @@ def test_rotation_kept_when_free_and_rejected_when_it_collides():
     assert res.achieved == pytest.approx((0.0, 0.5))
 
 
+def test_a_relocation_sets_the_object_down_in_another_room_and_the_context_follows():
+    ctx = bedroom()  # chair at (1.0, 1.5) in room 0; room 1 spans x 6..9
+    marched = place(ctx, "Chair|0", 6.5, 0.5)
+    assert marched.stop_reason != "reached" and 1.0 + marched.achieved[0] < 6.0  # a march never leaves room 0
+    res = place(ctx, "Chair|0", 6.5, 0.5, relocate=True)
+    assert res.stop_reason == "reached" and res.achieved == pytest.approx((6.5, 0.5)) and res.steps == 1
+    onto_bed = place(ctx, "Chair|0", 2.5, 0.5, relocate=True)
+    assert onto_bed.stop_reason == "blocked_by_object" and onto_bed.blocked_by == "Bed|1"
+    assert onto_bed.achieved == (0.0, 0.0) and not onto_bed.changed
+    outside = place(ctx, "Chair|0", 10.0, 0.0, relocate=True)
+    assert outside.stop_reason in ("blocked_by_wall", "left_room") and not outside.changed
+    i = ctx.index["Chair|0"]
+    ctx.commit(i, ctx.centers[i] + np.array(res.achieved), 0.0)
+    assert ctx.room_ids[ctx.room_of[i]] == ctx.room_ids[1], "the chair now belongs to room 1"
+    back = place(ctx, "Chair|0", -3.0, 0.0)  # a march from there stops at room 1's wall
+    assert back.stop_reason in ("blocked_by_wall", "left_room") and 7.5 + back.achieved[0] - 0.4688 / 2 >= 6.0 - 1e-6
+
+
 def test_invalid_requests():
     ctx = bedroom()
     assert place(ctx, "Nope|1", 1.0, 0.0).stop_reason == "invalid"

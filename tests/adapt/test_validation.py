@@ -59,6 +59,18 @@ def test_moving_into_a_doorway_that_disconnects_rooms_is_rejected():
     assert {"room_unreachable", "doorway_blocked", "target_unreachable"} <= kinds(validate_scene(moved, original=house))
 
 
+def test_a_relocation_to_another_room_is_validated_logged_and_replayable():
+    house = H.make_house([(0.0, 0.0, 6.0, 4.0), (6.0, 0.0, 9.0, 4.0)], doors=[H.Door(0, 1, 2.0, 1.0)],
+                         objects=[H.Obj("Chair_002_1", 1.0, 1.5), H.Obj("Bed_1", 3.5, 2.0)], agent=(0.5, 3.5, 0.0))
+    units = 100.0 / 9.0  # the grid's 100 units span the 9 m house
+    v = EditValidator(house, start=(0.5, 3.5))
+    edit = v.try_edit("Chair|0", 6.5 * units, 0.5 * units, relocate=True, source="test")
+    assert edit.accepted and edit.relocate and edit.achieved_dx == pytest.approx(6.5)
+    assert validate_scene(v.house, original=house) == []
+    assert apply_edit(house, edit).model_dump() == v.house.model_dump()
+    assert Edit.model_validate_json(edit.model_dump_json()).relocate
+
+
 def test_validate_scene_reports_new_overlaps_walls_and_start():
     house = door_house()
     onto_bed = apply_edit(house, Edit(object_id="Chair|2", achieved_dx=1.0, achieved_dz=1.0))

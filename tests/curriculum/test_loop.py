@@ -147,6 +147,17 @@ def test_refuses_a_non_empty_folder_without_resume(tiny_policy, tmp_path):
         run_loop(tiny_config(tiny_policy, "none"), tmp_path / "x")
 
 
+def test_resume_takes_fields_added_since_the_run_as_defaults_and_refuses_other_changes(tiny_policy, tmp_path):
+    cfg = tiny_config(tiny_policy, "none", iterations=1)
+    first = run_loop(cfg, tmp_path / "r")
+    state = json.loads((tmp_path / "r" / STATE).read_text())
+    del state["config"]["relocate_targets"]  # as written before the field existed
+    (tmp_path / "r" / STATE).write_text(json.dumps(state))
+    assert figures(run_loop(cfg, tmp_path / "r", resume=True)) == figures(first)
+    with pytest.raises(ConfigError, match="different config"):
+        run_loop(tiny_config(tiny_policy, "none", iterations=1, relocate_targets=True), tmp_path / "r", resume=True)
+
+
 @pytest.mark.slow
 def test_a_killed_run_resumes_to_the_same_results(tiny_policy, tmp_path):
     """Kill a run (SIGKILL) right after its first iteration is checkpointed, resume it, compare."""

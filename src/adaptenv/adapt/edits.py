@@ -41,6 +41,8 @@ class Edit(BaseModel):
     """Requested move up (+, world +z) / down (-) in grid units."""
     rotation: float | None = None
     """Requested new absolute yaw in degrees [0, 360); None keeps the current yaw."""
+    relocate: bool = False
+    """True for a relocation: the object was set down at the move's end (possibly in another room), not marched."""
     achieved_dx: float = 0.0
     """Achieved move along world x, m."""
     achieved_dz: float = 0.0

@@ -12,9 +12,13 @@ its footprint
 - overlaps another floor object with positive depth (touching is fine), except pairs that
   already overlapped in the original scene (chairs tucked under a table): such a pair collides
   only when its intersection area exceeds :func:`allowed_overlap` of its original area;
-- leaves the object's own room polygon (flush against a wall is fine). Objects never move into
+- leaves the object's own room polygon (flush against a wall is fine). Objects never march into
   another room, not even through a doorway; whether the pose crossed a wall (``blocked_by_wall``)
   or an opening (``left_room``) is recorded.
+
+A *relocation* (``relocate=True``, an extension of the paper for targets that G hides in another
+room) does not march: the object is set down at ``p_orig + d`` if that pose is collision-free and
+lies inside one room (any room), else it stays where it is.
 
 Doorway clearance is not a placement constraint: :mod:`adaptenv.adapt.validation` checks it.
 Children (objects resting on the moved one) move rigidly with it and are not collision-checked.
@@ -376,6 +380,17 @@ class PlacementContext:
         for k, piece in zip(range(self.first[i], self.first[i + 1]), world, strict=True):
             self.objects.update(k, piece)
         self.outlines[i] = self.outline(i, center, yaw) if outline is None else outline
+        if not self.inside_room(i, center, yaw, int(self.room_of[i])):  # relocated to another room
+            self.room_of[i] = self.room_at(i, center, yaw, default=int(self.room_of[i]))
+
+    def inside_room(self, i: int, center: np.ndarray, yaw: float, room: int) -> bool:
+        """Whether object i's footprint at a pose lies inside room ``room`` (flush against a wall is fine)."""
+        outside = self.room_outside[room]
+        return not len(outside) or float(self.depth(i, np.asarray(center, float)[None], yaw, outside).max()) <= ROOM_EPS
+
+    def room_at(self, i: int, center: np.ndarray, yaw: float, default: int = -1) -> int:
+        """Index of the room whose polygon holds object i's footprint at a pose, else ``default``."""
+        return next((r for r in range(len(self.room_ids)) if self.inside_room(i, center, yaw, r)), default)
 
 
 def _room_index(fp: Footprint, geometry: SceneGeometry, room_ids: list[str]) -> int:
@@ -436,16 +451,17 @@ def _blocked_at(ctx: PlacementContext, i: int, center: np.ndarray, yaw: float) -
 
 
 def _first_collision(ctx: PlacementContext, i: int, centers: np.ndarray, yaw: float, sweep: np.ndarray | None,
-                     skip: frozenset[int] = frozenset()) -> tuple[int, tuple[str, str | None]] | None:
+                     skip: frozenset[int] = frozenset(), room: int | None = None
+                     ) -> tuple[int, tuple[str, str | None]] | None:
     """The first of K poses (centres, one yaw) that collides, and why; None when all are free.
 
     ``sweep`` (min x, min z, max x, max z) restricts the obstacles to those whose bounding box
     meets it, and ``skip`` lists pre-existing partners proven harmless along the path (pure
     speed-ups: every pose lies inside the sweep). Objects take precedence over the room when
-    both stop the same pose.
+    both stop the same pose. ``room``: the room the poses must stay in (default: the object's own).
     """
     k_count = len(centers)
-    objs, outside = ctx.objects, ctx.room_outside[ctx.room_of[i]]
+    objs, outside = ctx.objects, ctx.room_outside[ctx.room_of[i] if room is None else room]
 
     def near(s: ConvexSet) -> np.ndarray:
         if sweep is None:
@@ -571,7 +587,7 @@ def _rotate_first(ctx: PlacementContext, object_id: str, d: np.ndarray, yaw: flo
 
 
 def place(ctx: PlacementContext, object_id: str, dx: float, dz: float, yaw: float | None = None, *,
-          step: float = DEFAULT_STEP) -> PlacementResult:
+          step: float = DEFAULT_STEP, relocate: bool = False) -> PlacementResult:
     """Collision-aware placement of one object: turn in place if free, then march along (dx, dz) m.
 
     Args:
@@ -580,12 +596,16 @@ def place(ctx: PlacementContext, object_id: str, dx: float, dz: float, yaw: floa
         dx, dz: requested displacement in meters (world x, z).
         yaw: requested new absolute yaw in degrees, or None to keep the current one.
         step: the march step delta (m).
+        relocate: set the object down at the displacement's end, in whichever room holds it,
+            instead of marching (nothing moves when that pose collides or fits no room).
     """
     d = np.array([dx, dz], dtype=float)
     first = _rotate_first(ctx, object_id, d, yaw, step)
     if isinstance(first, PlacementResult):
         return first
     i, start, yaw0, cur_yaw, rotated, rot_by = first
+    if relocate:
+        return _relocate(ctx, object_id, i, start, d, yaw, yaw0, cur_yaw, rotated, rot_by)
     poses = _march_poses(start, d, step)
     reason, by, k_stop = "reached", None, len(poses)
     if len(poses):
@@ -599,6 +619,23 @@ def place(ctx: PlacementContext, object_id: str, dx: float, dz: float, yaw: floa
     if reason == "reached" and yaw is not None and _yaw_changes(yaw0, yaw) and not rotated:
         reason, by = "rotation_blocked", rot_by
     return _result(ctx, object_id, d, yaw, achieved, yaw0, cur_yaw, rotated, reason, by, rot_by, k_stop)
+
+
+def _relocate(ctx: PlacementContext, object_id: str, i: int, start: np.ndarray, d: np.ndarray, yaw: float | None,
+              yaw0: float, cur_yaw: float, rotated: bool, rot_by: str | None) -> PlacementResult:
+    """The relocation of :func:`place`: one pose at the displacement's end, checked in the room that holds it."""
+    end = start + d
+    if not np.any(d):
+        reason, by, k = "reached", None, 0
+    else:
+        room = ctx.room_at(i, end, cur_yaw, default=int(ctx.room_of[i]))
+        hit = _first_collision(ctx, i, end[None], cur_yaw, None, room=room)
+        reason, by = hit[1] if hit is not None else ("reached", None)
+        k = 0 if hit is not None else 1
+    achieved = d if k else np.zeros(2)
+    if reason == "reached" and yaw is not None and _yaw_changes(yaw0, yaw) and not rotated:
+        reason, by = "rotation_blocked", rot_by
+    return _result(ctx, object_id, d, yaw, achieved, yaw0, cur_yaw, rotated, reason, by, rot_by, k)
 
 
 def _first_hit(ctx: PlacementContext, i: int, poses: np.ndarray, yaw: float,
@@ -656,7 +693,7 @@ def reference_place(ctx: PlacementContext, object_id: str, dx: float, dz: float,
 
 
 def place_units(ctx: PlacementContext, object_id: str, dx_units: float, dy_units: float,
-                rotation: float | None = None, *, step: float = DEFAULT_STEP) -> PlacementResult:
+                rotation: float | None = None, *, step: float = DEFAULT_STEP, relocate: bool = False) -> PlacementResult:
     """:func:`place` with the paper's grid units: +dx right (world +x), +dy up (world +z)."""
     m = 1.0 / ctx.grid.units_per_meter
-    return place(ctx, object_id, dx_units * m, dy_units * m, rotation, step=step)
+    return place(ctx, object_id, dx_units * m, dy_units * m, rotation, step=step, relocate=relocate)

@@ -529,6 +529,8 @@ class Proposal:
     dx_units: float
     dy_units: float
     rotation: float | None
+    relocate: bool
+    """Whether the move is a relocation (set down at the end, possibly in another room) rather than a march."""
     result: PlacementResult
     """Where placement put the object (``result.changed`` is False when it could not move at all)."""
     problems: tuple[ValidationProblem, ...]
@@ -776,15 +778,18 @@ class EditValidator:
         return first_region_cell(component.reshape(r.shape), occ, label, r.x0, r.z0, r.res, pts, lab)
 
     # ---------------------------------------------------------------- editing
-    def propose(self, object_id: str, dx_units: float, dy_units: float, rotation: float | None = None) -> Proposal:
+    def propose(self, object_id: str, dx_units: float, dy_units: float, rotation: float | None = None, *,
+                relocate: bool = False) -> Proposal:
         """Dry run of one edit: place the object (grid units, absolute yaw) and validate; the scene is unchanged.
 
         The returned :class:`Proposal` holds the placement result and every problem found; pass it
         to :meth:`commit` to apply it (only valid while no other edit has been committed).
+        ``relocate``: set the object down at the displacement's end, possibly in another room
+        (:func:`~adaptenv.adapt.placement.place`), instead of marching.
         """
-        res = place_units(self.ctx, object_id, dx_units, dy_units, rotation, step=self.step)
+        res = place_units(self.ctx, object_id, dx_units, dy_units, rotation, step=self.step, relocate=relocate)
         request = dict(object_id=object_id, dx_units=float(dx_units), dy_units=float(dy_units), rotation=rotation,
-                       result=res, owner=self._owner, version=self._version)
+                       relocate=relocate, result=res, owner=self._owner, version=self._version)
         if res.stop_reason == "invalid":
             return Proposal(**request, problems=(ValidationProblem("invalid", res.message, (object_id,)),))
         if not res.changed:
@@ -838,16 +843,16 @@ class EditValidator:
         res = proposal.result
         if proposal.valid and res.changed:
             self._apply(self.ctx.index[res.object_id], proposal)
-        return self._record(res, proposal.dx_units, proposal.dy_units, proposal.rotation, source, intent,
-                            list(proposal.problems), invalid=res.stop_reason == "invalid")
+        return self._record(res, proposal, source, intent, invalid=res.stop_reason == "invalid")
 
     def try_edit(self, object_id: str, dx_units: float, dy_units: float, rotation: float | None = None, *,
-                 source: str = "manual", intent: str = "") -> Edit:
+                 source: str = "manual", intent: str = "", relocate: bool = False) -> Edit:
         """Place the object (grid units, absolute yaw), validate, keep it if valid; returns the logged Edit.
 
         The same as ``commit(propose(...))``.
         """
-        return self.commit(self.propose(object_id, dx_units, dy_units, rotation), source=source, intent=intent)
+        return self.commit(self.propose(object_id, dx_units, dy_units, rotation, relocate=relocate), source=source,
+                           intent=intent)
 
     def _apply(self, i: int, proposal: Proposal) -> None:
         """Move object i to the proposal's pose in every cache (footprints, regions, context, raster, house)."""
@@ -877,11 +882,12 @@ class EditValidator:
             self.regions[t] = self._region_array(np.union1d(old_cells, [cell]))
         self._version += 1
 
-    def _record(self, res: PlacementResult, dx_units: float, dy_units: float, rotation: float | None, source: str,
-                intent: str, problems: list[ValidationProblem], invalid: bool = False) -> Edit:
+    def _record(self, res: PlacementResult, proposal: Proposal, source: str, intent: str,
+                invalid: bool = False) -> Edit:
+        problems, rotation = list(proposal.problems), proposal.rotation
         ok = not problems
-        edit = Edit(object_id=res.object_id, dx_units=float(dx_units), dy_units=float(dy_units),
-                    rotation=None if rotation is None else float(rotation) % 360.0,
+        edit = Edit(object_id=res.object_id, dx_units=proposal.dx_units, dy_units=proposal.dy_units,
+                    rotation=None if rotation is None else float(rotation) % 360.0, relocate=proposal.relocate,
                     achieved_dx=res.achieved[0] if ok else 0.0, achieved_dz=res.achieved[1] if ok else 0.0,
                     achieved_dx_units=res.achieved_units[0] if ok else 0.0,
                     achieved_dy_units=res.achieved_units[1] if ok else 0.0,

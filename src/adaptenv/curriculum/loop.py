@@ -130,6 +130,9 @@ class LoopConfig:
     them out, so the buffer holds only generated scenes (fresh houses and their children)."""
     diagnose_episodes: int = 4
     """Hard episodes F diagnoses per adapted scene (ours, ours-randomscene, ours-nof, ours-dr)."""
+    relocate_targets: bool = False
+    """The failure-mode G may answer search failures by relocating a target instance to a far room of a type
+    where it plausibly stands (the methods with the failure-mode G: ours, ours-randomscene, ours-dr)."""
 
     def check(self) -> LoopConfig:
         """Return self or raise one ConfigError naming the field and the fix."""
@@ -340,7 +343,8 @@ def _open_run(cfg: LoopConfig, run_dir: Path, resume: bool, command: str
     state_path = run_dir / STATE
     if resume and state_path.is_file():
         saved = json.loads(state_path.read_text(encoding="utf-8"))
-        if not same_run(saved.get("config"), asdict(cfg)):
+        old = saved.get("config")  # a field added to LoopConfig since the run started counts as its default
+        if old is None or not same_run({**asdict(LoopConfig()), **old}, asdict(cfg)):
             raise ConfigError(f"{run_dir}: --resume with a different config than the interrupted run; "
                               "use the same config or a new output folder")
         state = LoopState(**saved["state"])

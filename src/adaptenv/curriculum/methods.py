@@ -282,7 +282,8 @@ class Ours(Method):
         parents = it.replayed = self._pick(it, it.cfg.scenes_per_iteration, Stream.REPLAY)
         jobs = [GenerateJob(self.generator, it.store.house(p), p, it.cfg.edit_steps,
                             (it.cfg.seed, it.t, Stream.GENERATE + k), weights=it.weights,
-                            diagnose_episodes=it.cfg.diagnose_episodes, llm=it.cfg.llm)
+                            diagnose_episodes=it.cfg.diagnose_episodes, llm=it.cfg.llm,
+                            relocate_targets=it.cfg.relocate_targets)
                 for k, p in enumerate(parents)]
         children = []
         for k, (job, made) in enumerate(zip(jobs, it.executor.map(run_generate, jobs, desc="diagnosis and generation"),

@@ -81,6 +81,8 @@ class Candidate:
     dy_units: float
     rotation: float | None
     kind: str
+    relocate: bool = False
+    """Set the object down at the move's end (possibly in another room) instead of marching."""
     proposal: Proposal | None = None
     world: NavWorld | None = None
     values: ObjectiveValues | None = None
@@ -257,7 +259,7 @@ class BuiltinGenerator:
                   original: RealismReference, episode: Episode) -> Candidate | None:
         """Dry-run one proposal; None when placement or validation rejects it, it changes nothing, or
         (with ``require_expert``) the shortest-path expert no longer solves the episode."""
-        proposal = v.propose(cand.object_id, cand.dx_units, cand.dy_units, cand.rotation)
+        proposal = v.propose(cand.object_id, cand.dx_units, cand.dy_units, cand.rotation, relocate=cand.relocate)
         res = proposal.result
         if not proposal.valid or not res.changed:
             return None

@@ -52,6 +52,7 @@ from adaptenv.adapt.objectives import (
 from adaptenv.adapt.realism import RealismReference
 from adaptenv.adapt.validation import EditValidator
 from adaptenv.agents.rollout import checking_episodes, mean_spl, run_in_worlds, total_steps
+from adaptenv.scene.assets import load_catalog
 from adaptenv.scene.geometry import SceneGeometry
 from adaptenv.scene.house import House
 from adaptenv.sim.spec import MAX_RANGE
@@ -73,6 +74,7 @@ INTENTS: dict[str, str] = {
     "sight_line": "occlude the target's sight line from the route",
     "doorway_view": "move tall furniture to hide the view through the target room's doorway",
     "target_late": "move the target inside its room where it is seen late",
+    "target_room": "relocate the target to a far room of a type where it plausibly stands",
     "distractor": "bring a similar-size distractor near the route",
     "mirror": "make the room near-symmetric so places look alike",
     "block_shortcut": "block a shortcut of the shortest route",
@@ -186,9 +188,10 @@ class FailureModeGenerator(BuiltinGenerator):
 
     name = "failure-modes"
 
-    def __init__(self, *, tolerance: float = 1e-6, **kw):
+    def __init__(self, *, tolerance: float = 1e-6, relocate_targets: bool = False, **kw):
         super().__init__(**kw)
         self.tolerance = tolerance
+        self.relocate_targets = relocate_targets
 
     def generate(self, house: House, analysis: Analysis, *, steps: int, context: GenerationContext,
                  rng: np.random.Generator) -> GenerationResult:
@@ -229,7 +232,7 @@ class FailureModeGenerator(BuiltinGenerator):
             record.reason = f"{family} objective {before:.3f} -> {chosen.mode_value:.3f}"
             intent = INTENTS.get(chosen.kind, INTENTS["generic"])
             edit = v.try_edit(chosen.object_id, chosen.dx_units, chosen.dy_units, chosen.rotation, source=self.name,
-                              intent=f"{family}: {intent} ({chosen.kind} move)")
+                              intent=f"{family}: {intent} ({chosen.kind} move)", relocate=chosen.relocate)
             if not edit.accepted:  # cannot happen when the dry run agreed; kept as a guard
                 record.status, record.reason = "rejected", "; ".join(edit.problems)
                 result.steps.append(record)
@@ -263,7 +266,8 @@ class FailureModeGenerator(BuiltinGenerator):
                          rng: np.random.Generator) -> list[Candidate]:
         """Up to ``max_candidates`` moves that serve ``family`` (none for families served by the generic moves)."""
         makers: dict[str, list[Callable]] = {
-            "search": [self._sight_line, self._doorway_view, self._target_late],
+            "search": [self._sight_line, self._doorway_view, self._target_late]
+            + ([self._target_room] if self.relocate_targets else []),
             "premature_end": [self._distractor],
             "looping": [self._mirror_move],
         }
@@ -287,7 +291,7 @@ class FailureModeGenerator(BuiltinGenerator):
             if key in seen or (dx == 0 and dy == 0):
                 continue
             seen.add(key)
-            out.append(Candidate(oid, dx, dy, None, kind))
+            out.append(Candidate(oid, dx, dy, None, kind, relocate=kind == "target_room"))
         return out
 
     @staticmethod
@@ -344,6 +348,25 @@ class FailureModeGenerator(BuiltinGenerator):
         spots.sort(key=lambda p: -float(np.hypot(*(p - start))))
         aim = spots[int(rng.integers(min(3, len(spots))))]
         return oid, (aim - c) * rng.uniform(0.5, 1.0), "target_late"
+
+    def _target_room(self, ctx, fps, world, route, targets, rng):
+        """A target instance relocated to a free-looking spot of a far room whose type it plausibly stands in."""
+        movable = self._movable(ctx, lambda o: o in targets and o in fps)
+        if not movable:
+            return None
+        oid = movable[int(rng.integers(len(movable)))]
+        geom, info = world.geometry, load_catalog().type_info(fps[oid].object_type)
+        own = geom.room_of_point(*fps[oid].center)
+        rooms = [r for r, kind in geom.room_types.items() if r != own and info.weight_in(kind) > 0]
+        if not rooms:
+            return None
+        start = np.array(route.start)
+        rooms.sort(key=lambda r: -float(np.hypot(*(np.array(geom.rooms[r].centroid.coords[0]) - start))))
+        room = rooms[int(rng.integers(min(2, len(rooms))))]
+        x0, z0, x1, z1 = geom.rooms[room].bounds
+        margin = min(ctx.reach(ctx.index[oid]), (x1 - x0) / 2, (z1 - z0) / 2)
+        aim = np.array([rng.uniform(x0 + margin, x1 - margin), rng.uniform(z0 + margin, z1 - margin)])
+        return oid, aim - ctx.centers[ctx.index[oid]], "target_room"
 
     def _distractor(self, ctx, fps, world, route, targets, rng):
         """An object of a size similar to the target's toward a route point (along the route's middle part)."""
