@@ -158,6 +158,23 @@ def test_resume_takes_fields_added_since_the_run_as_defaults_and_refuses_other_c
         run_loop(tiny_config(tiny_policy, "none", iterations=1, relocate_targets=True), tmp_path / "r", resume=True)
 
 
+def test_focus_training_saves_the_aimed_target_type_of_each_adapted_scene(tiny_policy, tmp_path):
+    from adaptenv.curriculum.records import TASKS, SceneStore
+
+    run_loop(tiny_config(tiny_policy, "ours-dr", iterations=1, focus_training=True), tmp_path / "r")
+    tasks = sorted((tmp_path / "r" / "scenes" / TASKS).glob("*.json"))
+    assert tasks, "an adapted scene records its task"
+    store = SceneStore(tmp_path / "r" / "scenes")
+    for p in tasks:
+        world = store.world(p.stem)
+        assert len(world.task_targets) == 1 and world.task_targets[0] in world.object_types
+        before = tmp_path / "r" / "iter_0001" / "gallery" / p.stem / "trajectory_before.json"
+        if before.is_file():  # the worst diagnosed episode, whose route G's edits aimed at
+            assert json.loads(before.read_text())["target_type"] == world.task_targets[0]
+    assert all("rooms" in json.loads(p.read_text()) for p in (tmp_path / "r" / "scenes").glob("*.json")), \
+        "the scenes folder holds only houses (usable as --houses)"
+
+
 @pytest.mark.slow
 def test_a_killed_run_resumes_to_the_same_results(tiny_policy, tmp_path):
     """Kill a run (SIGKILL) right after its first iteration is checkpointed, resume it, compare."""

@@ -254,6 +254,21 @@ def test_episode_sampler_draws_solvable_seeded_episodes(real_world, small_world)
         EpisodeSampler([small_world], target_types=["Bed"]).draw(np.random.default_rng(0), 1)
 
 
+def test_a_world_with_task_targets_draws_only_those_types(real_world):
+    from dataclasses import replace
+
+    from adaptenv.sim.vector import EpisodeSampler
+
+    avail = task.available_targets(real_world)
+    focused = replace(real_world, task_targets=(avail[-1], "Unicorn"))  # an absent type is ignored
+    eps, _ = EpisodeSampler([focused]).draw(np.random.default_rng(2), 30)
+    assert {ep.target_type for ep in eps} == {avail[-1]}
+    assert len({ep.target_type for ep in EpisodeSampler([real_world]).draw(np.random.default_rng(2), 30)[0]}) > 1
+    nowhere = replace(real_world, task_targets=("Unicorn",))  # no focus type present: every type, as before
+    assert EpisodeSampler([nowhere]).draw(np.random.default_rng(2), 30)[0] == \
+        EpisodeSampler([real_world]).draw(np.random.default_rng(2), 30)[0]
+
+
 def test_episode_sampler_floor_keeps_far_starts_and_falls_back_to_the_farthest(real_world, small_world):
     from adaptenv.sim.vector import EpisodeSampler
 

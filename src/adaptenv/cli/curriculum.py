@@ -91,6 +91,8 @@ def loop(
                                              "at least this geodesic distance (m) from the target (0: uniform)."),
     finetune_precision: str = typer.Option("fp32", "--finetune-precision", help="Arithmetic of fine-tuning's "
                                            "gradient steps: fp32, or bf16 (faster on CPUs with AVX512_BF16)."),
+    focus_training: bool = typer.Option(False, "--focus-training", help="Fine-tuning episodes in adapted scenes ask "
+                                        "for the target type G's edits aimed at."),
     relocate_targets: bool = typer.Option(False, "--relocate-targets", help="The failure-mode G may relocate a "
                                           "target to a far room where its type plausibly stands (search failures)."),
     heldout_episodes: int = typer.Option(100, "--heldout-episodes", min=1, help="Episodes per held-out set."),
@@ -132,7 +134,7 @@ def loop(
                      scenes_per_iteration=scenes, edit_steps=edit_steps, finetune_frames=finetune_frames,
                      finetune_lr=finetune_lr, finetune_teacher=finetune_teacher,
                      finetune_min_start=finetune_min_start, finetune_precision=finetune_precision,
-                     relocate_targets=relocate_targets,
+                     relocate_targets=relocate_targets, focus_training=focus_training,
                      heldout_episodes=heldout_episodes, llm=llm, **({"heldout": h} if (h := _heldout(heldout)) else {}))
     check_house_sets([cfg.houses, *cfg.heldout.values()], strict, console.print)
     with ExecutorOptions(executor, workers, address).make() as ex:

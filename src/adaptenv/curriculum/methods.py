@@ -294,7 +294,8 @@ class Ours(Method):
             it.buffer = lb.insert(it.buffer, it.buffer_cfg, job.name, made.regret_before, it.t)
             if not made.valid or made.edits == 0:
                 continue
-            child = it.store.put(f"{job.name.split('~')[0]}~t{it.t:02d}{self.tag}{k:02d}", made.house)
+            focus = (made.before.target_type,) if it.cfg.focus_training and made.before is not None else ()
+            child = it.store.put(f"{job.name.split('~')[0]}~t{it.t:02d}{self.tag}{k:02d}", made.house, focus)
             it.buffer = lb.insert(it.buffer, it.buffer_cfg, child, made.regret_after, it.t, parent_id=job.name)
             children.append(child)
             if len(it.gallery) < it.cfg.gallery:

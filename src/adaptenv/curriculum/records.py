@@ -19,6 +19,7 @@ An experiment folder holds one run folder per (method, seed): ``EXP_DIR/<method>
 
 from __future__ import annotations
 
+import json
 import math
 import os
 import tempfile
@@ -176,6 +177,10 @@ def _csv(records: list[IterationRecord]) -> str:
     return "\n".join(lines) + "\n"
 
 
+#: Subfolder of a scene store holding each scene's ``task_targets`` (when it has any).
+TASKS = "tasks"
+
+
 class SceneStore:
     """Scenes of a run by name, on disk (RUN_DIR/scenes/NAME.json) with an in-memory cache."""
 
@@ -185,9 +190,13 @@ class SceneStore:
         self._houses: dict[str, House] = {}
         self._worlds: dict[str, NavWorld] = {}
 
-    def put(self, name: str, house: House) -> str:
-        """Save ``house`` as scene ``name`` and return the name."""
+    def put(self, name: str, house: House, task_targets: tuple[str, ...] = ()) -> str:
+        """Save ``house`` as scene ``name`` (and the target types its training episodes ask for, if any); returns the name."""
         save_house(house, self.root / f"{name}.json")
+        if task_targets:  # beside, not among, the house files (a scenes folder stays a valid --houses folder)
+            (self.root / TASKS).mkdir(exist_ok=True)
+            (self.root / TASKS / f"{name}.json").write_text(json.dumps({"task_targets": list(task_targets)}),
+                                                            encoding="utf-8")
         self._houses[name] = house
         self._worlds.pop(name, None)
         return name
@@ -198,6 +207,11 @@ class SceneStore:
         return self._houses[name]
 
     def world(self, name: str) -> NavWorld:
+        """The scene compiled for the simulator, with the target types saved by :meth:`put`."""
         if name not in self._worlds:
-            self._worlds[name] = compile_world(self.house(name), name)
+            world = compile_world(self.house(name), name)
+            task = self.root / TASKS / f"{name}.json"
+            if task.is_file():
+                world.task_targets = tuple(json.loads(task.read_text(encoding="utf-8"))["task_targets"])
+            self._worlds[name] = world
         return self._worlds[name]

@@ -475,6 +475,8 @@ class EpisodeSampler:
     uniformly among those with finite positive geodesic distance, yaw a multiple of 30 degrees), but the
     candidate cells are computed once per (house, target) pair, so a draw costs microseconds.
 
+    A world with ``task_targets`` draws only those types (where available).
+
     ``min_distance`` > 0 keeps only starts at least that geodesic distance from the target (training on
     the long episodes the hard suites test); a (house, target) pair with no such start keeps its
     farthest quarter of starts instead, so small houses still contribute episodes.
@@ -493,6 +495,7 @@ class EpisodeSampler:
             world = self.worlds[e]
             avail = task.available_targets(world)
             types = avail if self.target_types is None else [t for t in self.target_types if t in avail]
+            types = [t for t in world.task_targets if t in types] or types
             if not types:
                 wanted = "any ObjectNav target" if self.target_types is None else f"any of {list(self.target_types)}"
                 raise AdaptenvError(f"{world.name}: no episode can be drawn ({wanted} must be present and "

@@ -54,6 +54,9 @@ class NavWorld:
     """Start pose (x, z, yaw) from the house metadata, if any."""
     cache: dict = field(default_factory=dict)
     """Per-world memo for derived arrays (e.g. distance fields by target type)."""
+    task_targets: tuple[str, ...] = ()
+    """Target types that training episodes drawn in this world ask for (empty: every available type); the
+    closed loop sets it to the type its edits aimed at (``LoopConfig.focus_training``)."""
 
     def instances_of(self, object_type: str) -> list[TargetInstance]:
         return [t for t in self.instances if t.object_type == object_type]
