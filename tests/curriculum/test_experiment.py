@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import time
 from pathlib import Path
 
 import numpy as np
@@ -117,6 +118,33 @@ def test_small_experiment_writes_every_artifact(tiny_policy, tmp_path, capsys):
     stamp = (tmp_path / "ours" / "seed_0" / "final_eval.json").stat().st_mtime_ns
     assert final_evaluation(tmp_path, cfg, 8) == final
     assert (tmp_path / "ours" / "seed_0" / "final_eval.json").stat().st_mtime_ns == stamp
+
+
+def test_runs_finishing_together_evaluate_pi_0_once(tmp_path, monkeypatch):
+    """Two runs of a seed asking for pi_0's figures at once: one evaluates, the other waits and reads the cache."""
+    import threading
+
+    from adaptenv.curriculum import experiment
+
+    calls = []
+
+    def slow_evaluation(path, specs, episodes, seed, ex):
+        calls.append(path)
+        time.sleep(0.3)
+        return {"long": {"success": 0.5 + len(calls)}}
+
+    monkeypatch.setattr(experiment, "_evaluate_policy", slow_evaluation)
+    got = []
+    args = ({"long": "suite:long"}, 4, 0, None)
+    threads = [threading.Thread(target=lambda m=m: got.append(experiment._initial_figures(tmp_path, tmp_path / m, *args)))
+               for m in ("ours", "ours-dr")]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join()
+    assert len(calls) == 1 and got[0] == got[1] and got[0]["figures"] == {"long": {"success": 1.5}}
+    assert experiment._initial_figures(tmp_path, tmp_path / "dr", {"long": "suite:long"}, 8, 0, None)["episodes"] == 8
+    assert len(calls) == 2, "a different episode count is evaluated anew"
 
 
 @pytest.mark.slow

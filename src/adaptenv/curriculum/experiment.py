@@ -27,6 +27,11 @@ from dataclasses import asdict, dataclass, field, fields
 from pathlib import Path
 from typing import Any
 
+try:
+    import fcntl
+except ImportError:  # not POSIX
+    fcntl = None
+
 import numpy as np
 from scipy import stats
 
@@ -292,6 +297,26 @@ def _evaluate_policy(policy_path: Path, specs: dict[str, str], episodes: int, se
     return {k: v.model_dump() for k, v in evaluate_sets(weights, specs, episodes, seed, ex).items()}
 
 
+def _initial_figures(out: Path, folder: Path, specs: dict[str, str], episodes: int, seed: int, ex: Any
+                     ) -> dict[str, Any]:
+    """pi_0's final evaluation for a seed, from the experiment's cache or computed once and cached.
+
+    Runs of a seed that finish together (in other processes) wait on a lock file instead of each
+    evaluating pi_0 again; without ``fcntl`` (not POSIX) each computes it.
+    """
+    cache = out / INITIAL_EVAL / f"seed_{seed}.json"
+    cache.parent.mkdir(parents=True, exist_ok=True)
+    with open(cache.with_suffix(".lock"), "w") as lock:
+        if fcntl is not None:
+            fcntl.flock(lock, fcntl.LOCK_EX)
+        initial = json.loads(cache.read_text(encoding="utf-8")) if cache.is_file() else {}
+        if initial.get("episodes") != episodes or initial.get("sets") != specs:
+            initial = {"episodes": episodes, "sets": specs,
+                       "figures": _evaluate_policy(iteration_dir(folder, 0) / "policy.pt", specs, episodes, seed, ex)}
+            atomic_write_text(cache, json.dumps(initial, indent=1))
+    return initial
+
+
 def run_final_eval(out: Path, method: str, seed: int, specs: dict[str, str], episodes: int, ex: Any,
                    say: Callable[[str], None] = lambda text: None) -> tuple[dict[str, Any], IterationRecord] | None:
     """A run's ``final_eval.json`` (pi_0 and the last policy on ``episodes`` episodes per held-out set, the seed's
@@ -307,13 +332,7 @@ def run_final_eval(out: Path, method: str, seed: int, specs: dict[str, str], epi
         return doc, recs[-1]
     say(f"final evaluation: {method} seed {seed} ({episodes} episodes per set)")
     start = time.perf_counter()
-    cache = out / INITIAL_EVAL / f"seed_{seed}.json"
-    initial = json.loads(cache.read_text(encoding="utf-8")) if cache.is_file() else {}
-    if initial.get("episodes") != episodes or initial.get("sets") != specs:
-        initial = {"episodes": episodes, "sets": specs,
-                   "figures": _evaluate_policy(iteration_dir(folder, 0) / "policy.pt", specs, episodes, seed, ex)}
-        cache.parent.mkdir(parents=True, exist_ok=True)
-        atomic_write_text(cache, json.dumps(initial, indent=1))
+    initial = _initial_figures(out, folder, specs, episodes, seed, ex)
     doc = {"episodes": episodes, "iteration": recs[-1].iteration, "initial": initial["figures"],
            "final": _evaluate_policy(iteration_dir(folder, recs[-1].iteration) / "policy.pt", specs, episodes, seed, ex)}
     doc["seconds"] = round(time.perf_counter() - start, 2)  # with pi_0's evaluation when this run made the cache
