@@ -131,8 +131,8 @@ class LoopConfig:
     diagnose_episodes: int = 4
     """Hard episodes F diagnoses per adapted scene (ours, ours-randomscene, ours-nof, ours-dr)."""
     focus_training: bool = False
-    """Fine-tuning episodes in a scene the failure-mode G adapted ask for the target type its edits aimed at
-    (the worst diagnosed episode's), instead of any type: pi_t trains on the failure it was shown."""
+    """Fine-tuning episodes in a scene adapted after a diagnosis (ours and its variants) ask for the target type
+    G's edits aimed at (the worst diagnosed episode's), instead of any type: pi_t trains on the failure it was shown."""
     relocate_targets: bool = False
     """The failure-mode G may answer search failures by relocating a target instance to a far room of a type
     where it plausibly stands (the methods with the failure-mode G: ours, ours-randomscene, ours-dr)."""
