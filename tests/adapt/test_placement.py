@@ -88,7 +88,7 @@ def test_a_relocation_sets_the_object_down_in_another_room_and_the_context_follo
     outside = place(ctx, "Chair|0", 10.0, 0.0, relocate=True)
     assert outside.stop_reason in ("blocked_by_wall", "left_room") and not outside.changed
     i = ctx.index["Chair|0"]
-    ctx.commit(i, ctx.centers[i] + np.array(res.achieved), 0.0)
+    ctx.commit(i, ctx.centers[i] + np.array(res.achieved), 0.0, relocated=True)
     assert ctx.room_ids[ctx.room_of[i]] == ctx.room_ids[1], "the chair now belongs to room 1"
     back = place(ctx, "Chair|0", -3.0, 0.0)  # a march from there stops at room 1's wall
     assert back.stop_reason in ("blocked_by_wall", "left_room") and 7.5 + back.achieved[0] - 0.4688 / 2 >= 6.0 - 1e-6

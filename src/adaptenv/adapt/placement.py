@@ -369,10 +369,12 @@ class PlacementContext:
         pieces = pose_outline(self.local_pieces[i], 0.0, 0.0, yaw)
         return np.max([poly_depth(centers, p, obstacles, idx) for p in pieces], axis=0)
 
-    def commit(self, i: int, center: np.ndarray, yaw: float, outline: np.ndarray | None = None) -> None:
+    def commit(self, i: int, center: np.ndarray, yaw: float, outline: np.ndarray | None = None, *,
+               relocated: bool = False) -> None:
         """Record that object i now stands at ``center`` with ``yaw`` (after an accepted edit).
 
-        ``outline``: ``self.outline(i, center, yaw)`` when the caller already has it.
+        ``outline``: ``self.outline(i, center, yaw)`` when the caller already has it. ``relocated``: the edit
+        was a relocation, so the object may now belong to another room (a march never leaves its room).
         """
         self.centers[i] = center
         self.yaws[i] = yaw % 360.0
@@ -380,7 +382,7 @@ class PlacementContext:
         for k, piece in zip(range(self.first[i], self.first[i + 1]), world, strict=True):
             self.objects.update(k, piece)
         self.outlines[i] = self.outline(i, center, yaw) if outline is None else outline
-        if not self.inside_room(i, center, yaw, int(self.room_of[i])):  # relocated to another room
+        if relocated:
             self.room_of[i] = self.room_at(i, center, yaw, default=int(self.room_of[i]))
 
     def inside_room(self, i: int, center: np.ndarray, yaw: float, room: int) -> bool:

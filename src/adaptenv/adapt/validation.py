@@ -872,7 +872,7 @@ class EditValidator:
         if key in self._candidate_points:
             self._points[i] = self._candidate_points[key]
         self._candidate_points.clear()
-        self.ctx.commit(i, center, res.yaw_after, proposal.outline)
+        self.ctx.commit(i, center, res.yaw_after, proposal.outline, relocated=proposal.relocate)
         self._polygons[i] = None
         self.raster.commit(i, proposal.inflated)
         self.labels.commit(i, win)
