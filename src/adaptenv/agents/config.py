@@ -68,6 +68,8 @@ class TrainConfig:
     """Size of the per-step feature vector fed to the GRU."""
     conv_channels: int = 32
     """Channels of the two ray convolutions."""
+    map: bool = False
+    """Give a fresh network the map memory it builds itself (adaptenv.sim.egomap) as an input beside the scan."""
     eval_every: int = 20
     """Evaluate the greedy policy on fresh training episodes every this many iterations (0: never)."""
     eval_episodes: int = 96

@@ -5,6 +5,11 @@ whether the ray hits the target type; two 1-D convolutions over the 32 rays (ray
 horizontal angle, so convolution is translation in view angle) feed a linear layer. The target
 type, previous action and collided flag are embedded and concatenated. A GRU cell carries memory;
 the head reads the memory and the current features. About 0.4 M parameters: fast on a CPU.
+
+With ``NetConfig.map_channels`` > 0 the network also reads the map memory the agent builds itself
+(:mod:`adaptenv.sim.egomap`): the packed egocentric crops (observation key ``map``) go through a
+small 2-D CNN beside the scan encoder. :class:`MapObserver` keeps the map and adds the key, and
+:class:`NeuralPolicy` carries it in its state, so every runner drives such a policy unchanged.
 """
 
 from __future__ import annotations
@@ -17,6 +22,7 @@ import numpy as np
 import torch
 from torch import nn
 
+from adaptenv.sim.egomap import CROP, MAP_CHANNELS, EgoMap
 from adaptenv.sim.spec import END, N_ACTIONS, N_RAYS, n_classes
 
 
@@ -34,6 +40,12 @@ class NetConfig:
     action_dim: int = 16
     feature_dim: int = 128
     hidden: int = 256
+    map_channels: int = 0
+    """Channels of the map observation (0: the network reads no map; ``egomap.MAP_CHANNELS`` with one)."""
+    map_crop: int = CROP
+    """Pixels on a side of the map observation's windows."""
+    map_dim: int = 128
+    """Size of the map encoder's output."""
 
     def resolved(self) -> NetConfig:
         """This config with ``n_classes`` filled in from the simulator spec."""
@@ -45,18 +57,50 @@ class NetConfig:
     def of(cls, settings: object) -> NetConfig:
         """The sizes named by a run config (``hidden``, ``feature_dim``, ``conv_channels``) for fresh weights."""
         return cls(hidden=settings.hidden, feature_dim=settings.feature_dim,  # type: ignore[attr-defined]
-                   conv_channels=settings.conv_channels)  # type: ignore[attr-defined]
+                   conv_channels=settings.conv_channels,  # type: ignore[attr-defined]
+                   map_channels=MAP_CHANNELS if getattr(settings, "map", False) else 0)
 
 
 def obs_to_tensors(obs: dict[str, np.ndarray], device: torch.device | str = "cpu") -> dict[str, torch.Tensor]:
-    """Convert a (batched) numpy observation to tensors: depth float32, the rest int64."""
-    return {
+    """Convert a (batched) numpy observation to tensors: depth float32, the packed map uint8, the rest int64."""
+    out = {
         "depth": torch.as_tensor(np.asarray(obs["depth"], dtype=np.float32), device=device),
         "semantic": torch.as_tensor(np.asarray(obs["semantic"], dtype=np.int64), device=device),
         "target": torch.as_tensor(np.asarray(obs["target"], dtype=np.int64), device=device),
         "prev_action": torch.as_tensor(np.asarray(obs["prev_action"], dtype=np.int64), device=device),
         "collided": torch.as_tensor(np.asarray(obs["collided"], dtype=np.int64), device=device),
     }
+    if "map" in obs:
+        out["map"] = torch.as_tensor(np.asarray(obs["map"], dtype=np.uint8), device=device)
+    return out
+
+
+class MapObserver:
+    """Adds the packed map crop (key ``map``) to each batched observation, from an :class:`EgoMap` it updates."""
+
+    def __init__(self, batch: int, crop: int = CROP):
+        self.emap = EgoMap(batch, crop=crop)
+
+    @classmethod
+    def of(cls, net: NavNet, batch: int) -> MapObserver | None:
+        """The observer a network needs for ``batch`` agents (None when it reads no map)."""
+        return cls(batch, net.config.map_crop) if net.config.map_channels else None
+
+    def __call__(self, obs: dict[str, np.ndarray], first: np.ndarray) -> dict[str, np.ndarray]:
+        """``obs`` with ``map`` added after marking it; ``first`` starts fresh maps."""
+        self.emap.update(obs, np.asarray(first, dtype=bool))
+        return {**obs, "map": self.emap.crop()}
+
+
+def observe(observer: MapObserver | None, obs: dict[str, np.ndarray], first: np.ndarray) -> dict[str, np.ndarray]:
+    """``observer(obs, first)``, or ``obs`` unchanged for a network without a map or when it holds one already."""
+    return obs if observer is None or "map" in obs else observer(obs, first)
+
+
+def unpack_map(packed: torch.Tensor, channels: int) -> torch.Tensor:
+    """float (N, channels, S, S) from packed crops (N, S, S) uint8 (bit k is channel k)."""
+    shifts = torch.arange(channels, dtype=torch.int32).view(1, channels, 1, 1)
+    return ((packed.unsqueeze(1).to(torch.int32) >> shifts) & 1).float()
 
 
 class NavNet(nn.Module):
@@ -76,8 +120,18 @@ class NavNet(nn.Module):
         self.target_embed = nn.Embedding(cfg.n_classes, cfg.target_dim)
         self.action_embed = nn.Embedding(cfg.n_actions + 1, cfg.action_dim)
         self.collided_embed = nn.Embedding(2, 8)
+        self.map_encoder = None
+        map_out = 0
+        if cfg.map_channels:
+            side = -(-cfg.map_crop // 8)
+            self.map_encoder = nn.Sequential(
+                nn.Conv2d(cfg.map_channels, 16, 3, stride=2, padding=1), nn.ReLU(),
+                nn.Conv2d(16, 32, 3, stride=2, padding=1), nn.ReLU(),
+                nn.Conv2d(32, 32, 3, stride=2, padding=1), nn.ReLU(),
+                nn.Flatten(), nn.Linear(32 * side * side, cfg.map_dim), nn.ReLU())
+            map_out = cfg.map_dim
         self.features = nn.Sequential(
-            nn.Linear(conv_out + cfg.target_dim + cfg.action_dim + 8, cfg.feature_dim), nn.ReLU())
+            nn.Linear(conv_out + cfg.target_dim + cfg.action_dim + 8 + map_out, cfg.feature_dim), nn.ReLU())
         self.gru = nn.GRUCell(cfg.feature_dim, cfg.hidden)
         self.head = nn.Sequential(nn.Linear(cfg.hidden + cfg.feature_dim, 128), nn.ReLU(),
                                   nn.Linear(128, cfg.n_actions))
@@ -92,10 +146,15 @@ class NavNet(nn.Module):
         is_target = (sem == target[:, None]).float()
         rays = torch.cat([self.class_embed(sem), depth[..., None], is_target[..., None]], dim=-1)
         scan = self.conv(rays.transpose(1, 2)).flatten(1)
-        x = torch.cat([scan, self.target_embed(target),
-                       self.action_embed(obs["prev_action"].reshape(-1)),
-                       self.collided_embed(obs["collided"].reshape(-1).clamp(0, 1))], dim=-1)
-        return self.features(x).reshape(*lead, -1)
+        parts = [scan, self.target_embed(target), self.action_embed(obs["prev_action"].reshape(-1)),
+                 self.collided_embed(obs["collided"].reshape(-1).clamp(0, 1))]
+        if self.map_encoder is not None:
+            if "map" not in obs:
+                raise ValueError("this network reads the map memory: pass observations through MapObserver "
+                                 "(adaptenv.agents.network) or run it as a NeuralPolicy")
+            packed = obs["map"].reshape(-1, *obs["map"].shape[-2:])
+            parts.append(self.map_encoder(unpack_map(packed, self.config.map_channels)))
+        return self.features(torch.cat(parts, dim=-1)).reshape(*lead, -1)
 
     def initial_state(self, batch: int) -> torch.Tensor:
         return torch.zeros(batch, self.config.hidden)
@@ -159,6 +218,14 @@ def choose_actions(logits: torch.Tensor, u: np.ndarray | None, end_threshold: fl
     return np.where(end, END, moves).astype(np.int64)
 
 
+@dataclass
+class MapState:
+    """A map-reading policy's memory: the GRU state (B, H) and the map it builds."""
+
+    h: torch.Tensor
+    observer: MapObserver
+
+
 class NeuralPolicy:
     """A :class:`NavNet` as a batched :class:`~adaptenv.agents.policy.Policy`.
 
@@ -184,8 +251,23 @@ class NeuralPolicy:
         self._context = context
         self._slots = []
 
-    def initial_state(self, batch: int) -> torch.Tensor:
-        return self.net.initial_state(batch)
+    def initial_state(self, batch: int) -> torch.Tensor | MapState:
+        """Zero memory (a tensor), with an empty map beside it for a map-reading network."""
+        h = self.net.initial_state(batch)
+        observer = MapObserver.of(self.net, batch)
+        return h if observer is None else MapState(h, observer)
+
+    def forget(self, state: torch.Tensor | MapState, indices: np.ndarray) -> torch.Tensor | MapState:
+        """``state`` with agents ``indices`` wiped: zero GRU memory and an empty map from the current pose on."""
+        idx = torch.as_tensor(np.asarray(indices, dtype=np.int64))
+        if isinstance(state, MapState):
+            state.observer.emap.reset(idx.numpy())
+            h = state.h.clone()
+            h[idx] = 0.0
+            return MapState(h, state.observer)
+        h = state.clone()
+        h[idx] = 0.0
+        return h
 
     def _uniforms(self, done: np.ndarray) -> np.ndarray:
         """One uniform number per agent, from per-episode generators when bound."""
@@ -201,9 +283,13 @@ class NeuralPolicy:
     def act(self, obs: dict[str, np.ndarray], state: torch.Tensor, done: np.ndarray
             ) -> tuple[np.ndarray, torch.Tensor]:
         done = np.asarray(done, dtype=bool)
-        logits, h = self.net.step(obs_to_tensors(obs), torch.as_tensor(done), state)
+        if isinstance(state, MapState):
+            logits, h = self.net.step(obs_to_tensors(state.observer(obs, done)), torch.as_tensor(done), state.h)
+            state = MapState(h, state.observer)
+        else:
+            logits, state = self.net.step(obs_to_tensors(obs), torch.as_tensor(done), state)
         u = None if self.greedy else self._uniforms(done)
-        return choose_actions(logits, u, self.end_threshold), h
+        return choose_actions(logits, u, self.end_threshold), state
 
 
 def available_cores() -> int:

@@ -56,6 +56,7 @@ from adaptenv.agents.config import PPOConfig
 from adaptenv.agents.evaluate import run_episodes, sample_episodes, summarize
 from adaptenv.agents.houses import load_house_set
 from adaptenv.agents.network import (
+    MapObserver,
     NavNet,
     NetConfig,
     NeuralPolicy,
@@ -63,6 +64,7 @@ from adaptenv.agents.network import (
     choose_actions,
     count_parameters,
     obs_to_tensors,
+    observe,
     torch_threads,
 )
 from adaptenv.agents.registry import init_checkpoint
@@ -191,6 +193,9 @@ def _train_ppo(cfg: PPOConfig, worlds: Sequence[Any] | None, init_net: NavNet | 
     obs_buf = {"depth": np.zeros((T, B, N_RAYS), np.float32), "semantic": np.zeros((T, B, N_RAYS), np.int64),
                "target": np.zeros((T, B), np.int64), "prev_action": np.zeros((T, B), np.int64),
                "collided": np.zeros((T, B), np.int64)}
+    observer = MapObserver.of(net, B)
+    if observer is not None:
+        obs_buf["map"] = np.zeros((T, B, net.config.map_crop, net.config.map_crop), np.uint8)
     first_buf = np.zeros((T, B), np.bool_)
     actions_buf = np.zeros((T, B), np.int64)
     logprobs_buf = np.zeros((T, B), np.float32)
@@ -222,6 +227,7 @@ def _train_ppo(cfg: PPOConfig, worlds: Sequence[Any] | None, init_net: NavNet | 
         for t in range(T):
             if t % L == 0:
                 h0_buf[t // L] = h
+            obs = observe(observer, obs, first)
             for k in obs_buf:
                 obs_buf[k][t] = obs[k]
             first_buf[t] = first
@@ -251,6 +257,7 @@ def _train_ppo(cfg: PPOConfig, worlds: Sequence[Any] | None, init_net: NavNet | 
 
         # 2. advantages by GAE; a new episode at t+1 cuts the bootstrap
         with torch.no_grad():
+            obs = observe(observer, obs, first)
             seq = {k: v[None] for k, v in obs_to_tensors(obs).items()}
             _, next_value, _ = agent(seq, torch.from_numpy(first)[None], h)
             next_value = next_value[0].numpy()

@@ -20,7 +20,7 @@ import numpy as np
 import torch
 
 from adaptenv.agents.evaluate import sample_episodes
-from adaptenv.agents.network import choose_actions, obs_to_tensors
+from adaptenv.agents.network import MapObserver, choose_actions, obs_to_tensors, observe
 from adaptenv.sim import metrics, task
 from adaptenv.sim.spec import END, MAX_STEPS
 from adaptenv.sim.vector import BatchSim
@@ -60,11 +60,12 @@ def stop_outcomes(net: Any, worlds: Sequence[Any], episodes: Sequence[tuple[int,
         obs, _ = sim.reset([ep for _, ep in chunk], [e for e, _ in chunk])
         n = len(chunk)
         h = net.initial_state(n)
+        observer = MapObserver.of(net, n)
         first = torch.ones(n, dtype=torch.bool)
         crossed = np.zeros(n, dtype=np.int64)  # grid thresholds already crossed by each agent
         for _ in range(max_steps):
             with torch.no_grad():
-                logits, h = net.step(obs_to_tensors(obs), first, h)
+                logits, h = net.step(obs_to_tensors(observe(observer, obs, first.numpy())), first, h)
             p_end = torch.softmax(logits.float(), -1)[:, END].numpy()
             now = np.searchsorted(grid_arr, p_end, side="right")  # thresholds <= p_end
             for i in np.flatnonzero(now > crossed).tolist():

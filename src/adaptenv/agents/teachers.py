@@ -129,7 +129,7 @@ def label_agreement(net: Any, worlds: list, beta: float, *, teacher: str = "expe
     import torch
     import torch.nn.functional as F
 
-    from adaptenv.agents.network import choose_actions, obs_to_tensors
+    from adaptenv.agents.network import MapObserver, choose_actions, obs_to_tensors, observe
     from adaptenv.sim.spec import N_ACTIONS
     from adaptenv.sim.vector import BatchSim, EpisodeSampler
 
@@ -139,8 +139,10 @@ def label_agreement(net: Any, worlds: list, beta: float, *, teacher: str = "expe
     labeller = make_teacher(teacher, sim, seed=seed)
     obs, _ = sim.reset(*sampler.draw(rng, envs))
     first, h = np.ones(envs, dtype=bool), net.initial_state(envs)
+    observer = MapObserver.of(net, envs)
     logits_all, labels_all, episodes = [], [], 0
     for _ in range(steps):
+        obs = observe(observer, obs, first)
         labels = labeller.label(obs, first)
         with torch.no_grad():
             logits, h = net.step(obs_to_tensors(obs), torch.from_numpy(first), h)

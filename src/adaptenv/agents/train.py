@@ -58,6 +58,7 @@ from adaptenv.agents.evaluate import run_episodes, sample_episodes, summarize
 from adaptenv.agents.houses import compile_houses, load_house_set
 from adaptenv.agents.network import (
     END_THRESHOLD,
+    MapObserver,
     NavNet,
     NetConfig,
     NeuralPolicy,
@@ -65,6 +66,7 @@ from adaptenv.agents.network import (
     choose_actions,
     count_parameters,
     obs_to_tensors,
+    observe,
     torch_threads,
 )
 from adaptenv.agents.registry import init_checkpoint
@@ -128,7 +130,8 @@ def beta_at(cfg: TrainConfig, frames: int) -> float:
 class SequenceBuffer:
     """FIFO ring of collected blocks, each (T, B) steps, sampled as (chunk_len, N) sequences."""
 
-    def __init__(self, capacity_blocks: int, steps: int, envs: int, chunk_len: int, hidden: int, n_rays: int):
+    def __init__(self, capacity_blocks: int, steps: int, envs: int, chunk_len: int, hidden: int, n_rays: int,
+                 map_crop: int = 0):
         k, t, b = capacity_blocks, steps, envs
         self.capacity, self.steps, self.envs, self.chunk_len = k, t, b, chunk_len
         self.depth = np.zeros((k, t, b, n_rays), np.float16)
@@ -139,6 +142,10 @@ class SequenceBuffer:
         self.first = np.zeros((k, t, b), np.bool_)
         self.label = np.zeros((k, t, b), np.uint8)
         self.h0 = np.zeros((k, t // chunk_len, b, hidden), np.float16)
+        self.names = ("depth", "semantic", "target", "prev_action", "collided", "first", "label", "h0")
+        if map_crop:  # packed map crops (1 byte a pixel) for a map-reading network
+            self.map = np.zeros((k, t, b, map_crop, map_crop), np.uint8)
+            self.names += ("map",)
         self.size = 0
         self.cursor = 0
 
@@ -162,7 +169,8 @@ class SequenceBuffer:
         env = rng.integers(0, self.envs, n)
         t = chk[None, :] * self.chunk_len + np.arange(self.chunk_len)[:, None]
         idx = (blk[None, :], t, env[None, :])
-        return {
+        extra = {"map": torch.from_numpy(self.map[idx])} if "map" in self.names else {}
+        return {**extra,
             "depth": torch.from_numpy(self.depth[idx].astype(np.float32)),
             "semantic": torch.from_numpy(self.semantic[idx].astype(np.int64)),
             "target": torch.from_numpy(self.target[idx].astype(np.int64)),
@@ -175,13 +183,12 @@ class SequenceBuffer:
 
     def state_dict(self) -> dict[str, Any]:
         """The filled part of the ring (for the resume state)."""
-        names = ("depth", "semantic", "target", "prev_action", "collided", "first", "label", "h0")
         return {"size": self.size, "cursor": self.cursor,
-                **{n: torch.from_numpy(getattr(self, n)[: self.size].copy()) for n in names}}
+                **{n: torch.from_numpy(getattr(self, n)[: self.size].copy()) for n in self.names}}
 
     def load_state_dict(self, state: dict[str, Any]) -> None:
         self.size, self.cursor = int(state["size"]), int(state["cursor"])
-        for n in ("depth", "semantic", "target", "prev_action", "collided", "first", "label", "h0"):
+        for n in self.names:
             getattr(self, n)[: self.size] = state[n].numpy()
 
 
@@ -293,7 +300,8 @@ def _train(cfg: TrainConfig, worlds: Sequence[NavWorld] | None, init_net: NavNet
     class_weight = torch.ones(net.config.n_actions)
     class_weight[END] = cfg.end_weight
     n_blocks = max(1, cfg.buffer_frames // (cfg.rollout_steps * cfg.num_envs))
-    buffer = SequenceBuffer(n_blocks, cfg.rollout_steps, cfg.num_envs, cfg.chunk_len, hidden, N_RAYS)
+    buffer = SequenceBuffer(n_blocks, cfg.rollout_steps, cfg.num_envs, cfg.chunk_len, hidden, N_RAYS,
+                            net.config.map_crop if net.config.map_channels else 0)
     frames, updates, iteration, wall_before = 0, 0, 0, 0.0
     learn_rng = np.random.default_rng([cfg.seed, 1])  # minibatches (its own stream: the learner may run in a thread)
     if cfg.resume:
@@ -332,11 +340,14 @@ def _train(cfg: TrainConfig, worlds: Sequence[NavWorld] | None, init_net: NavNet
                  "target": np.empty((T, B), np.uint8), "prev_action": np.empty((T, B), np.uint8),
                  "collided": np.empty((T, B), np.uint8), "first": np.empty((T, B), np.bool_),
                  "label": np.empty((T, B), np.uint8), "h0": np.empty((T // L, B, hidden), np.float16)}
+        if observer is not None:
+            block["map"] = np.empty((T, B, *buffer.map.shape[-2:]), np.uint8)
         ep_success, ep_length = [], []
         for t in range(T):
             if t % L == 0:
                 block["h0"][t // L] = h.numpy()
-            for k in ("depth", "semantic", "target", "prev_action", "collided"):
+            obs = observe(observer, obs, first)
+            for k in block.keys() - {"first", "label", "h0"}:
                 block[k][t] = obs[k]
             block["first"][t] = first
             labels = teacher.label(obs, first)
@@ -391,6 +402,7 @@ def _train(cfg: TrainConfig, worlds: Sequence[NavWorld] | None, init_net: NavNet
     actor.load_state_dict(net.state_dict())
     actor.requires_grad_(False)
     h = actor.initial_state(B)
+    observer = MapObserver.of(actor, B)
     first = np.ones(B, dtype=bool)
     logger = RunLogger(run_dir, cfg.tensorboard)
     progress = ProgressBar("DAgger" if cfg.progress else None, cfg.frames, transient=False).start()
