@@ -111,6 +111,57 @@ def fresh_and_resumed(worlds: list, iterations: int, recipe: dict | None = None)
             "dagger_resume_speed_ratio": resumed / fresh}
 
 
+MAP_RECIPE = {"map": True, "teacher": "map-explorer", "precision": "bf16", "max_episode_steps": 600}
+"""The map-reading recipe's TrainConfig fields that differ from the defaults (docs/agent.md, "The map-reading pi_0")."""
+MAP_END_TO_END_TARGET = 8_000
+
+
+def map_side_by_side(worlds: list, iterations: int, repeats: int) -> dict:
+    """``train`` frames/s over its training loop of today's default recipe and of the map recipe (MAP_RECIPE),
+    timed alternately in this process (median of ``repeats`` each), and their ratio."""
+    from adaptenv.agents.config import TrainConfig
+    from adaptenv.agents.train import train
+
+    block = TrainConfig().num_envs * TrainConfig().rollout_steps
+    recipes = {"default": {}, "map": MAP_RECIPE}
+
+    def one(recipe: dict, n: int) -> float:
+        cfg = TrainConfig(frames=n * block, output="", run_dir="", eval_every=0, final_eval_episodes=1,
+                          calibrate_episodes=0, progress=False, tensorboard=False, **recipe)
+        result = train(cfg, worlds=worlds)
+        return n * block / max(r["wall_time"] for r in result.rows if "losses/loss" in r)
+
+    for recipe in recipes.values():
+        one(recipe, 1)  # warm the kernels and the caches
+    fps: dict[str, list[float]] = {k: [] for k in recipes}
+    for _ in range(repeats):
+        for name, recipe in recipes.items():
+            fps[name].append(one(recipe, iterations))
+    ratios = [m / d for d, m in zip(fps["default"], fps["map"], strict=True)]
+    return {"dagger_end_to_end_frames_per_s_default": statistics.median(fps["default"]),
+            "dagger_end_to_end_frames_per_s_map": statistics.median(fps["map"]),
+            "map_over_default": statistics.median(ratios),
+            "map_end_to_end_target_met": bool(statistics.median(fps["map"]) >= MAP_END_TO_END_TARGET)}
+
+
+def run_map(*, as_json: bool = False, iterations: int = 3, repeats: int = 3,
+            houses: str = "preset:pretrain-train") -> dict:
+    """The map-reading recipe beside today's: teacher labelling and end-to-end training frames/s, side by side."""
+    from adaptenv.agents.houses import load_house_set
+    from adaptenv.bench import emit
+    from adaptenv.bench.teachers import bench_labelling
+
+    worlds = load_house_set(houses).worlds
+    load_before = os.getloadavg()[0]
+    figures = {**bench_labelling(houses), **map_side_by_side(worlds, iterations, repeats),
+               "houses": len(worlds), "recipe": MAP_RECIPE, "load_average_1min_before": load_before,
+               "load_average_1min_after": os.getloadavg()[0]}
+    emit("map recipe beside today's", figures, as_json,
+         notes=[f"targets: map-explorer labelling >= 5,000/s, map recipe end to end >= {MAP_END_TO_END_TARGET:,}/s "
+                "(2 cores)"])
+    return figures
+
+
 def run_ppo(*, as_json: bool = False, iterations: int = 3, houses: str = "preset:pretrain-train") -> dict:
     """PPO end to end (``train_ppo`` with PPOConfig's defaults, evaluation off): frames/s."""
     from adaptenv.agents.config import PPOConfig

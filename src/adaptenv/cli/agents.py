@@ -229,7 +229,8 @@ def _slug(spec: str) -> str:
 def bench_train(as_json: bool = JSON_OPTION,
                 envs: int = typer.Option(256, "--envs", help="Agents simulated at once."),
                 steps: int = typer.Option(200, "--steps", help="Steps timed per measurement."),
-                algo: str = typer.Option("dagger", "--algo", help="dagger (imitation figures and end to end) or ppo."),
+                algo: str = typer.Option("dagger", "--algo", help="dagger (imitation figures and end to end), ppo, or map "
+                                         "(the map-reading recipe beside today's: labelling and end to end)."),
                 iterations: int = typer.Option(3, "--iterations", min=0,
                                                help="Training iterations timed end to end (0: skip that figure)."),
                 hidden: int | None = typer.Option(None, "--hidden", min=1, help="GRU memory size (default: TrainConfig's)."),
@@ -244,7 +245,7 @@ def bench_train(as_json: bool = JSON_OPTION,
                                                      "the recipe and of the end-to-end figure (default: TrainConfig's).")
                 ) -> None:
     """Training throughput: labelled, gradient and end-to-end frames/s, inference steps/s, parameter count."""
-    from adaptenv.bench.train import run, run_ppo
+    from adaptenv.bench.train import run, run_map, run_ppo
 
     recipe = {k: v for k, v in (("hidden", hidden), ("feature_dim", feature_dim), ("conv_channels", conv_channels),
                                 ("updates_per_iter", updates_per_iter), ("precision", precision)) if v is not None}
@@ -254,10 +255,12 @@ def bench_train(as_json: bool = JSON_OPTION,
         check_precision(precision, "--precision")
     if algo == "ppo":
         run_ppo(as_json=as_json, iterations=max(1, iterations))
+    elif algo == "map":
+        run_map(as_json=as_json, iterations=max(1, iterations))
     elif algo == "dagger":
         run(as_json=as_json, envs=envs, steps=steps, iterations=iterations, recipe=recipe)
     else:
-        raise typer.BadParameter(f"expected dagger or ppo, got {algo!r}", param_hint="--algo")
+        raise typer.BadParameter(f"expected dagger, ppo or map, got {algo!r}", param_hint="--algo")
 
 
 def register(app: typer.Typer, bench: typer.Typer) -> None:
