@@ -23,8 +23,8 @@ def _rollout(success: bool, spl: float, expert: bool) -> Rollout:
 
 
 def test_every_method_is_registered_by_its_name():
-    assert set(M.METHODS) == {"none", "random", "dr", "plr", "accel", "ours", "ours-noselect", "ours-randomscene",
-                              "ours-nof", "ours-dr", "ours-llm"}
+    assert set(M.METHODS) == {"none", "random", "dr", "oracle", "plr", "accel", "ours", "ours-noselect",
+                              "ours-randomscene", "ours-nof", "ours-dr", "ours-llm"}
     assert all(cls.name == name for name, cls in M.METHODS.items())
     assert M.METHODS["ours"].generator == "failure-modes" and M.METHODS["ours-nof"].generator == "regret-only"
     assert M.METHODS["ours-noselect"].generator == "builtin" and M.METHODS["ours-llm"].generator == "llm"
@@ -123,3 +123,32 @@ def test_random_generate_jobs_carry_no_weights_and_make_the_same_child(tiny_poli
     with_policy = dataclasses.replace(jobs[0], weights=rollouts[0].weights, rollout=run_rollout(rollouts[0]))
     a, b = run_generate(jobs[0]), run_generate(with_policy)
     assert a.edits > 0 and a.house.model_dump() == b.house.model_dump() and a.edit_log == b.edit_log
+
+
+class _Store:
+    """Keeps what ``fresh_houses`` stores, by name."""
+
+    def __init__(self) -> None:
+        self.houses: dict = {}
+
+    def put(self, name, house):
+        self.houses[name] = house
+        return name
+
+
+def test_oracle_draws_fresh_houses_from_the_heldout_suites_generators():
+    from adaptenv.curriculum.loop import LoopState
+    from adaptenv.scene.procedural import generate_house, preset_spec
+
+    it = M.Iteration(t=1, cfg=LoopConfig(seed=0), state=LoopState(), store=_Store(), buffer=None, buffer_cfg=None,
+                     weights=None, executor=None, run_dir=None)
+    names = M.fresh_houses(it, 2, oracle=True)
+    large, clutter = (it.store.houses[n] for n in names)
+    assert names == ["or0000", "or0001"] and it.state.generated == 2
+    for n, (house, preset) in enumerate(((large, "suite-large"), (clutter, "suite-clutter"))):
+        seed = it.seed(M.Stream.ORACLE_HOUSES, n) % 2**31
+        assert house.to_dict() == generate_house(seed, preset_spec(preset).config()).to_dict()
+        assert house.to_dict() != generate_house(seed).to_dict()
+    assert 7 <= len(large.rooms) <= 10  # suite-large's room range
+    dr = M.fresh_houses(it, 1)[0]
+    assert dr == "dr0002" and len(it.store.houses[dr].rooms) <= 6  # plain DR keeps the default 2-6 rooms

@@ -37,7 +37,7 @@ from adaptenv.curriculum.jobs import (
     run_generate,
 )
 from adaptenv.curriculum.records import GalleryItem, SceneStore
-from adaptenv.scene.procedural import generate_house
+from adaptenv.scene.procedural import generate_house, preset_spec
 
 if TYPE_CHECKING:
     from adaptenv.curriculum.loop import LoopConfig, LoopState
@@ -60,6 +60,8 @@ class Stream(IntEnum):
     """Methods that make scenes: which earlier scenes are mixed into fine-tuning."""
     FINETUNE = 7
     """Fine-tuning (episode draws, minibatches)."""
+    ORACLE_HOUSES = 8
+    """``oracle``: seeds of its fresh houses (from the held-out suites' generator settings)."""
     GENERATE = 100
     """Scene generation; job k of the iteration uses ``[seed, t, GENERATE + k]``."""
 
@@ -176,6 +178,17 @@ class EditingMethod(Method):
             if len(it.gallery) < it.cfg.gallery:
                 it.gallery.append(gallery_item(it.run_dir, it.t, new[-1], job.house, made, rollouts[k].trajectory))
         return new
+
+
+class Oracle(DomainRandomization):
+    """``oracle``: the lever test's positive control. Fresh houses every iteration from the held-out suites' own
+    generator settings (alternately ``suite-large``'s 7-10 rooms and ``suite-clutter``'s cluttered 3-6 rooms) with
+    new seeds, never the held-out houses themselves."""
+
+    name = "oracle"
+
+    def scenes_to_roll_out(self, it: Iteration) -> list[str]:
+        return fresh_houses(it, it.cfg.scenes_per_iteration, oracle=True)
 
 
 class RandomEdits(EditingMethod):
@@ -367,17 +380,27 @@ def seeds_buffer(it: Iteration) -> bool:
     return it.buffer.size == 0 and it.cfg.seed_buffer
 
 
-def fresh_houses(it: Iteration, k: int) -> list[str]:
-    """``k`` new procedural houses (domain randomization), named ``drNNNN`` and stored."""
+ORACLE_PRESETS = ("suite-large", "suite-clutter")
+"""Whose generator settings ``oracle`` draws from, in turn."""
+
+
+def fresh_houses(it: Iteration, k: int, *, oracle: bool = False) -> list[str]:
+    """``k`` new procedural houses (domain randomization), named ``drNNNN`` and stored; with ``oracle``, from the
+    held-out suites' settings (``ORACLE_PRESETS`` in turn), named ``orNNNN``."""
     out = []
     for _ in range(k):
-        house_seed = it.seed(Stream.FRESH_HOUSES, it.state.generated) % 2**31
-        out.append(it.store.put(f"dr{it.state.generated:04d}", generate_house(house_seed)))
+        n = it.state.generated
+        if oracle:
+            seed = it.seed(Stream.ORACLE_HOUSES, n) % 2**31
+            house = generate_house(seed, preset_spec(ORACLE_PRESETS[n % len(ORACLE_PRESETS)]).config())
+            out.append(it.store.put(f"or{n:04d}", house))
+        else:
+            out.append(it.store.put(f"dr{n:04d}", generate_house(it.seed(Stream.FRESH_HOUSES, n) % 2**31)))
         it.state.generated += 1
     return out
 
 
 #: Every method by name; add a method with one class and one line here.
-METHODS: dict[str, type[Method]] = {m.name: m for m in (NoNewScenes, RandomEdits, DomainRandomization, PLR, ACCEL,
+METHODS: dict[str, type[Method]] = {m.name: m for m in (NoNewScenes, RandomEdits, DomainRandomization, Oracle, PLR, ACCEL,
                                                         Ours, OursNoSelect, OursRandomScene, OursNoF, OursDR,
                                                         OursLLM)}
