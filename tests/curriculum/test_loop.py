@@ -40,14 +40,18 @@ def test_config_errors_name_the_field():
         LoopConfig(iterations=0).check()
     with pytest.raises(ConfigError, match="finetune_teacher 'oracle' is unknown"):
         LoopConfig(finetune_teacher="oracle").check()
+    with pytest.raises(ConfigError, match="finetune_beta"):
+        LoopConfig(finetune_beta=1.5).check()
+    with pytest.raises(ConfigError, match="finetune_max_steps"):
+        LoopConfig(finetune_max_steps=0).check()
 
 
 def test_the_fine_tuning_recipe_carries_the_loop_settings():
     cfg = LoopConfig(finetune_frames=4096, finetune_envs=16, finetune_lr=3e-4, finetune_teacher="explorer",
-                     finetune_min_start=6.0).check()
+                     finetune_min_start=6.0, finetune_beta=0.5, finetune_max_steps=600).check()
     ft = finetune_config(cfg, end_threshold=0.7)
-    assert (ft.frames, ft.num_envs, ft.learning_rate, ft.teacher, ft.end_threshold, ft.min_start_distance) == (
-        4096, 16, 3e-4, "explorer", 0.7, 6.0)
+    assert (ft.frames, ft.num_envs, ft.learning_rate, ft.teacher, ft.end_threshold, ft.min_start_distance,
+            ft.beta, ft.max_episode_steps) == (4096, 16, 3e-4, "explorer", 0.7, 6.0, 0.5, 600)
     with pytest.raises(ConfigError, match="finetune_min_start"):
         LoopConfig(finetune_min_start=-1.0).check()
 

@@ -208,6 +208,8 @@ class FinetuneConfig:
     """Training episodes start at least this geodesic distance (m) from the target where the house allows (0: uniform)."""
     precision: str = "fp32"
     """DAgger: arithmetic of the gradient steps, fp32 or bf16 (TrainConfig.precision)."""
+    max_episode_steps: int = 300
+    """Episode cap while collecting (the evaluation's is 600)."""
 
 
 def field_docs(cls: type) -> dict[str, str]:

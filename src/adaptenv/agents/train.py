@@ -535,7 +535,8 @@ def finetune(net: NavNet, worlds: Sequence[NavWorld], cfg: FinetuneConfig, seed:
                      beta_start=cfg.beta, beta_end=cfg.beta, end_threshold=cfg.end_threshold, teacher=cfg.teacher,
                      calibrate_episodes=cfg.calibrate_episodes, eval_every=0, final_eval_episodes=evals,
                      min_start_distance=cfg.min_start_distance, progress=False, tensorboard=False,
-                     learning_rate=cfg.learning_rate, save_every=10**9, precision=cfg.precision)
+                     learning_rate=cfg.learning_rate, save_every=10**9, precision=cfg.precision,
+                     max_episode_steps=cfg.max_episode_steps)
     result = train(tc, worlds=worlds, init_net=net)
     return result.net, result.card
 

@@ -86,7 +86,12 @@ def loop(
     finetune_frames: int = typer.Option(16_384, "--finetune-frames", min=1, help="DAgger frames per iteration."),
     finetune_lr: float = typer.Option(1e-4, "--finetune-lr", min=0.0, help="Adam learning rate of fine-tuning."),
     finetune_teacher: str = typer.Option("expert", "--finetune-teacher", help="Who labels fine-tuning's states: "
-                                         "expert, explorer (searches) or mix."),
+                                         "expert, explorer (searches), map-explorer (searches on the agent's own map) "
+                                         "or mix."),
+    finetune_beta: float = typer.Option(0.8, "--finetune-beta", min=0.0, max=1.0, help="Probability that the "
+                                        "teacher's action is executed while fine-tuning (DAgger's beta)."),
+    finetune_max_steps: int = typer.Option(300, "--finetune-max-steps", min=1, help="Episode cap of fine-tuning's "
+                                           "episodes (600 for the map-reading agent)."),
     finetune_min_start: float = typer.Option(0.0, "--finetune-min-start", min=0.0, help="Fine-tuning episodes start "
                                              "at least this geodesic distance (m) from the target (0: uniform)."),
     finetune_precision: str = typer.Option("fp32", "--finetune-precision", help="Arithmetic of fine-tuning's "
@@ -134,7 +139,7 @@ def loop(
                      scenes_per_iteration=scenes, edit_steps=edit_steps, finetune_frames=finetune_frames,
                      finetune_lr=finetune_lr, finetune_teacher=finetune_teacher,
                      finetune_min_start=finetune_min_start, finetune_precision=finetune_precision,
-                     relocate_targets=relocate_targets, focus_training=focus_training,
+                     finetune_beta=finetune_beta, finetune_max_steps=finetune_max_steps, relocate_targets=relocate_targets, focus_training=focus_training,
                      heldout_episodes=heldout_episodes, llm=llm, **({"heldout": h} if (h := _heldout(heldout)) else {}))
     check_house_sets([cfg.houses, *cfg.heldout.values()], strict, console.print)
     with ExecutorOptions(executor, workers, address).make() as ex:

@@ -114,6 +114,10 @@ class LoopConfig:
     finetune_precision: str = "fp32"
     """Arithmetic of fine-tuning's gradient steps: fp32, or bf16 autocast (about 2.4x faster on CPUs with
     AVX512_BF16, slower elsewhere; docs/BENCHMARKS.md)."""
+    finetune_beta: float = FinetuneConfig.beta
+    """Probability that the teacher's action is executed while fine-tuning (DAgger's beta, constant)."""
+    finetune_max_steps: int = FinetuneConfig.max_episode_steps
+    """Episode cap of fine-tuning's episodes (the map-reading agent trains to the evaluation's 600)."""
     replay_fraction: float = 0.5
     """Share of the fine-tuning scenes drawn from earlier scenes so the policy does not forget."""
     heldout_episodes: int = 100
@@ -148,6 +152,9 @@ class LoopConfig:
             raise ConfigError("loop config: edit_steps must be >= 0, diagnose_episodes >= 1 and replay_fraction "
                               "in [0, 1)")
         check_precision(self.finetune_precision, "loop config: finetune_precision")
+        if not 0.0 <= self.finetune_beta <= 1.0 or self.finetune_max_steps < 1:
+            raise ConfigError(f"loop config: finetune_beta must lie in [0, 1] and finetune_max_steps be positive, got "
+                              f"{self.finetune_beta} and {self.finetune_max_steps}")
         if self.finetune_min_start < 0:
             raise ConfigError(f"loop config: finetune_min_start must be >= 0 metres, got {self.finetune_min_start}")
         if self.finetune_teacher not in TEACHERS:
@@ -214,11 +221,12 @@ def evaluate_sets(weights: PolicyWeights, specs: dict[str, str], episodes: int, 
 
 
 def finetune_config(cfg: LoopConfig, end_threshold: float) -> FinetuneConfig:
-    """The loop's fine-tuning recipe (identical for every method): DAgger at beta 0.8 with ``finetune_teacher``'s
-    labels, episodes starting ``finetune_min_start`` or more from the target."""
+    """The loop's fine-tuning recipe (identical for every method): DAgger at ``finetune_beta`` with
+    ``finetune_teacher``'s labels, episodes starting ``finetune_min_start`` or more from the target."""
     return FinetuneConfig(frames=cfg.finetune_frames, num_envs=cfg.finetune_envs, learning_rate=cfg.finetune_lr,
                           end_threshold=end_threshold, teacher=cfg.finetune_teacher,
-                          min_start_distance=cfg.finetune_min_start, precision=cfg.finetune_precision)
+                          min_start_distance=cfg.finetune_min_start, precision=cfg.finetune_precision,
+                          beta=cfg.finetune_beta, max_episode_steps=cfg.finetune_max_steps)
 
 
 def run_loop(cfg: LoopConfig, run_dir: str | Path, *, resume: bool = False, executor: Executor | None = None,
