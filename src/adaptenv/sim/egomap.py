@@ -21,7 +21,8 @@ The observation :meth:`EgoMap.crop` is egocentric: two ``CROP`` x ``CROP`` windo
 heading (agent at the centre, facing up, row 0 ahead), the fine one (``CELL`` m cells, 6.4 m across by
 default) and the coarse one (``CELL * COARSE`` m cells, 25.6 m across), packed as 8 bits per pixel:
 bits 0-3 the fine window's channels, bits 4-7 the coarse window's. :func:`unpack` spreads them to
-(..., 8, CROP, CROP) floats.
+(..., 8, CROP, CROP) 0/1 values (float32, or any dtype asked for). ``NavEnv(map=True)`` and
+``NavVectorEnv(map=True)`` (``adaptenv.sim.env``) keep an EgoMap and return the unpacked crop as ``obs["map"]``.
 
 Example::
 
@@ -38,6 +39,7 @@ import math
 
 import numba
 import numpy as np
+from numpy.typing import DTypeLike
 
 from adaptenv.sim.scan import RAY_OFFSETS_DEG
 from adaptenv.sim.spec import (
@@ -176,8 +178,9 @@ class EgoMap:
     """
 
     def __init__(self, batch: int, *, size: int = SIZE, crop: int = CROP, cell: float = CELL, coarse: int = COARSE):
-        if size % coarse or size % 2:
-            raise ValueError(f"size ({size}) must be even and a multiple of coarse ({coarse})")
+        if size % (2 * coarse):
+            raise ValueError(f"size ({size}) must be a multiple of 2 * coarse ({2 * coarse}), so that the coarse "
+                             "grid's centre is the fine grid's; pick such a size")
         self.size, self.crop_size, self.cell, self.coarse_factor = int(size), int(crop), float(cell), int(coarse)
         self.grid = np.zeros((batch, size, size), dtype=np.uint8)
         self.coarse = np.zeros((batch, size // coarse, size // coarse), dtype=np.uint8)
@@ -236,10 +239,10 @@ class EgoMap:
         return np.stack([wx, wz], axis=-1)
 
 
-def unpack(packed: np.ndarray) -> np.ndarray:
-    """float32 (..., MAP_CHANNELS, CROP, CROP) from packed crops (..., CROP, CROP)."""
+def unpack(packed: np.ndarray, dtype: DTypeLike = np.float32) -> np.ndarray:
+    """0/1 values of ``dtype`` (float32 by default), (..., MAP_CHANNELS, CROP, CROP), from packed crops (..., CROP, CROP)."""
     bits = (packed[..., None, :, :] >> np.arange(MAP_CHANNELS, dtype=np.uint8)[:, None, None]) & 1
-    return bits.astype(np.float32)
+    return bits.astype(dtype, copy=False)
 
 
 __all__ = ["CELL", "CHANNELS", "COARSE", "CROP", "EgoMap", "FREE", "MAP_CHANNELS", "N_CHANNELS", "OBSTACLE",

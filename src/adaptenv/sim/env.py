@@ -23,6 +23,7 @@ from adaptenv.errors import ConfigError
 from adaptenv.scene.house import House, load_house
 from adaptenv.scene.procedural import generate_houses
 from adaptenv.sim import task
+from adaptenv.sim.egomap import CROP, MAP_CHANNELS, EgoMap, unpack
 from adaptenv.sim.spec import ACTIONS, MAX_STEPS, N_ACTIONS, N_RAYS, TARGET_TYPES, n_classes
 from adaptenv.sim.trajectory import Pose, Step, Trajectory
 from adaptenv.sim.vector import BatchSim, EpisodeSampler
@@ -38,16 +39,24 @@ BUILTIN_HOUSES = 8
 """Size of the built-in procedural house set used when an env is built without houses."""
 
 
-def observation_space() -> spaces.Dict:
-    """The single-agent observation space of ``spec``."""
+def observation_space(map: bool = False) -> spaces.Dict:
+    """The single-agent observation space of ``spec``; with ``map``, also the unpacked egocentric map crop."""
     k = n_classes()
-    return spaces.Dict({
+    parts = {
         "depth": spaces.Box(0.0, 1.0, (N_RAYS,), np.float32),
         "semantic": spaces.MultiDiscrete(np.full(N_RAYS, k, dtype=np.int64)),
         "target": spaces.Discrete(k),
         "prev_action": spaces.Discrete(N_ACTIONS + 1),
         "collided": spaces.Discrete(2),
-    })
+    }
+    if map:
+        parts["map"] = spaces.Box(0, 1, (MAP_CHANNELS, CROP, CROP), np.uint8)
+    return spaces.Dict(parts)
+
+
+def map_observation(emap: EgoMap) -> np.ndarray:
+    """uint8 (B, MAP_CHANNELS, CROP, CROP), values 0/1: ``emap``'s egocentric crops, unpacked."""
+    return unpack(emap.crop(), dtype=np.uint8)
 
 
 def _to_world(item: HouseLike, name: str) -> tuple[NavWorld, House | None]:
@@ -100,6 +109,8 @@ class NavEnv(gymnasium.Env):
         renderer: draws a frame for ``render()``: ``renderer(house, geometry, trajectory) -> (H, W, 3)
             uint8``; the registered id passes :func:`adaptenv.render.topdown.env_frame` (rendering sits
             above the simulator, so the simulator never imports it).
+        map: add the key ``"map"``: the egocentric crops of an :class:`~adaptenv.sim.egomap.EgoMap` the
+            env builds from the agent's own observations (uint8 (MAP_CHANNELS, CROP, CROP), 0/1).
 
     Example::
 
@@ -112,7 +123,7 @@ class NavEnv(gymnasium.Env):
 
     def __init__(self, houses: Sequence[HouseLike] | None = None, target_types: Sequence[str] | None = None,
                  max_steps: int = MAX_STEPS, render_mode: str | None = None, builtin_seed: int = 0,
-                 renderer: FrameRenderer | None = None) -> None:
+                 renderer: FrameRenderer | None = None, map: bool = False) -> None:
         if render_mode not in (None, "rgb_array"):
             raise ConfigError(f"render_mode: expected None or 'rgb_array', got {render_mode!r}")
         if render_mode is not None and renderer is None:
@@ -120,8 +131,10 @@ class NavEnv(gymnasium.Env):
                               "gymnasium.make('adaptenv/ObjectNav-v0', render_mode='rgb_array') or pass "
                               "renderer=adaptenv.render.topdown.env_frame")
         self.renderer = renderer
-        self.observation_space = observation_space()
+        self.observation_space = observation_space(map=map)
         self.action_space = spaces.Discrete(N_ACTIONS)
+        self.emap = EgoMap(1) if map else None
+        """The map memory behind the ``map`` key (None without the option)."""
         self.render_mode = render_mode
         self.max_steps = int(max_steps)
         self.target_types = tuple(target_types) if target_types is not None else None
@@ -178,27 +191,35 @@ class NavEnv(gymnasium.Env):
         self._world, self._house = world, house
         self._sim.reset([episode], [0])
         self._start, self._steps = self._pose(), []
-        return self._obs(), self._info(terminated=False)
+        return self._obs(first=True), self._info(terminated=False)
 
     def step(self, action):
         if self._sim is None:
             raise gymnasium.error.ResetNeeded("call reset() before step()")
         sim = self._sim
         before = self._pose() if self.render_mode is not None else None
+        frozen = bool(sim.done[0])  # stepped after its end: the simulator ignores the action
         self._action[0] = int(action)
         sim.advance(self._action)
         if before is not None:
             self._steps.append(Step(pose=before, action=ACTIONS[int(action)], moved=bool(sim.moved[0])))
         terminated = bool(sim.last_terminated[0])
-        return self._obs(), float(sim.last_reward[0]), terminated, bool(sim.last_truncated[0]), self._info(terminated)
+        obs = self._obs(first=False, mark=not frozen)
+        return obs, float(sim.last_reward[0]), terminated, bool(sim.last_truncated[0]), self._info(terminated)
 
     def _pose(self):
         return Pose(x=float(self._sim.x[0]), z=float(self._sim.z[0]), yaw=float(self._sim.yaw[0]))
 
-    def _obs(self) -> dict[str, Any]:
+    def _obs(self, first: bool, mark: bool = True) -> dict[str, Any]:
+        """The observation; with the map option, ``mark`` updates the map from it first (``first``: a fresh map)."""
         sim = self._sim
-        return {"depth": sim._depth[0].copy(), "semantic": sim._classes[0].copy(), "target": np.int64(sim.target[0]),
-                "prev_action": np.int64(sim.prev_action[0]), "collided": np.int64(not sim.moved[0])}
+        obs = {"depth": sim._depth[0].copy(), "semantic": sim._classes[0].copy(), "target": np.int64(sim.target[0]),
+               "prev_action": np.int64(sim.prev_action[0]), "collided": np.int64(not sim.moved[0])}
+        if self.emap is not None:
+            if mark:
+                self.emap.update({k: np.asarray(v)[None] for k, v in obs.items()}, np.array([first]))
+            obs["map"] = map_observation(self.emap)[0]
+        return obs
 
     def _info(self, terminated: bool) -> dict[str, Any]:
         sim = self._sim
@@ -239,13 +260,16 @@ class NavVectorEnv(VectorEnv):
     ignored, the reward is 0 and the observation is the new episode's first), Gymnasium's
     ``AutoresetMode.NEXT_STEP``. ``info`` holds per-agent arrays (``success``, ``spl``,
     ``collisions``, ``geodesic``, ``path_length``, ``steps``, ``x``, ``z``, ``yaw``).
+
+    ``map=True`` adds the key ``"map"`` as in :class:`NavEnv`, one :class:`~adaptenv.sim.egomap.EgoMap`
+    over the slots; a slot's map starts afresh with each of its episodes (autoreset included).
     """
 
     metadata = {"render_modes": [], "autoreset_mode": AutoresetMode.NEXT_STEP}
 
     def __init__(self, num_envs: int = 8, houses: Sequence[HouseLike] | None = None,
                  target_types: Sequence[str] | None = None, max_steps: int = MAX_STEPS,
-                 builtin_seed: int = 0, render_mode: str | None = None) -> None:
+                 builtin_seed: int = 0, render_mode: str | None = None, map: bool = False) -> None:
         if num_envs < 1:
             raise ConfigError(f"num_envs: expected a positive count, got {num_envs}")
         self.num_envs = int(num_envs)
@@ -253,7 +277,9 @@ class NavVectorEnv(VectorEnv):
         self.render_mode = render_mode
         self.target_types = tuple(target_types) if target_types is not None else None
         self._houses = _HouseSet(houses, builtin_seed)
-        self.single_observation_space = observation_space()
+        self.single_observation_space = observation_space(map=map)
+        self.emap = EgoMap(self.num_envs) if map else None
+        """The slots' map memory behind the ``map`` key (None without the option)."""
         self.single_action_space = spaces.Discrete(N_ACTIONS)
         self.observation_space = batch_space(self.single_observation_space, self.num_envs)
         self.action_space = batch_space(self.single_action_space, self.num_envs)
@@ -279,13 +305,14 @@ class NavVectorEnv(VectorEnv):
         eps, envs = self._episodes(self.num_envs)
         obs, info = self._sim.reset(eps, envs)
         self._autoreset[:] = False
-        return obs, info
+        return self._with_map(obs, np.ones(self.num_envs, dtype=np.bool_)), info
 
     def step(self, actions):
         if self._sim is None:
             raise gymnasium.error.ResetNeeded("call reset() before step()")
         obs, reward, terminated, truncated, info = self._sim.step(np.asarray(actions, dtype=np.int64))
-        again = np.flatnonzero(self._autoreset)
+        first = self._autoreset.copy()
+        again = np.flatnonzero(first)
         if again.size:
             eps, envs = self._episodes(again.size)
             obs = self._sim.reset_at(again, eps, envs)
@@ -293,7 +320,15 @@ class NavVectorEnv(VectorEnv):
                 if key != "spl":
                     info[key][again] = value[again]
         self._autoreset = terminated | truncated
-        return obs, reward, terminated, truncated, info
+        return self._with_map(obs, first), reward, terminated, truncated, info
+
+    def _with_map(self, obs: dict[str, np.ndarray], first: np.ndarray) -> dict[str, np.ndarray]:
+        """``obs`` with the ``map`` key after marking the slots' maps (``first``: new episodes), if the option is on."""
+        if self.emap is None:
+            return obs
+        self.emap.update(obs, first)
+        obs["map"] = map_observation(self.emap)
+        return obs
 
     def close_extras(self, **kwargs) -> None:
         self._sim = None
@@ -304,4 +339,4 @@ def make_sync_vector_env(num_envs: int, **kwargs) -> gymnasium.vector.SyncVector
     return gymnasium.vector.SyncVectorEnv([lambda: NavEnv(**kwargs) for _ in range(num_envs)])
 
 
-__all__ = ["NavEnv", "NavVectorEnv", "TARGET_TYPES", "make_sync_vector_env", "observation_space"]
+__all__ = ["NavEnv", "NavVectorEnv", "TARGET_TYPES", "make_sync_vector_env", "map_observation", "observation_space"]
