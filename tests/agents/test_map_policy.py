@@ -108,3 +108,17 @@ def test_training_a_map_network_stores_maps_and_lowers_the_loss(tmp_path, monkey
     assert all((b != 0).mean() > 0.05 for b in seen)  # real maps, not zeros
     losses = [r["losses/loss"] for r in result.rows if "losses/loss" in r]
     assert np.mean(losses[-2:]) < losses[0] - 0.2
+
+
+def test_the_network_reads_the_gym_envs_unpacked_map_as_the_packed_one(tiny_set):
+    from adaptenv.sim.env import NavVectorEnv
+
+    env = NavVectorEnv(num_envs=3, houses=list(tiny_set.worlds), map=True)
+    obs, _ = env.reset(seed=0)
+    net = map_net().eval()
+    packed = {**obs, "map": env.emap.crop()}
+    first, h = torch.ones(3, dtype=torch.bool), net.initial_state(3)
+    with torch.no_grad():
+        a, _ = net.step(obs_to_tensors(obs), first, h)
+        b, _ = net.step(obs_to_tensors(packed), first, h)
+    torch.testing.assert_close(a, b)

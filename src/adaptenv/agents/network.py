@@ -152,9 +152,14 @@ class NavNet(nn.Module):
             if "map" not in obs:
                 raise ValueError("this network reads the map memory: pass observations through MapObserver "
                                  "(adaptenv.agents.network) or run it as a NeuralPolicy")
-            packed = obs["map"].reshape(-1, *obs["map"].shape[-2:])
-            parts.append(self.map_encoder(unpack_map(packed, self.config.map_channels)))
+            parts.append(self.map_encoder(self._map_input(obs["map"], len(lead))))
         return self.features(torch.cat(parts, dim=-1)).reshape(*lead, -1)
+
+    def _map_input(self, m: torch.Tensor, lead_dims: int) -> torch.Tensor:
+        """Encoder input (N, C, S, S) from packed crops (lead..., S, S) or the Gym env's unpacked (lead..., C, S, S)."""
+        if m.dim() == lead_dims + 2:
+            return unpack_map(m.reshape(-1, *m.shape[-2:]), self.config.map_channels)
+        return m.reshape(-1, *m.shape[-3:]).float().contiguous(memory_format=torch.channels_last)
 
     def initial_state(self, batch: int) -> torch.Tensor:
         return torch.zeros(batch, self.config.hidden)
