@@ -1,4 +1,5 @@
-"""PPO fine-tuning: the acting rule's log-probabilities, a value warm-up that leaves the policy alone, a tiny run."""
+"""PPO fine-tuning: the acting rule's log-probabilities, a value warm-up that leaves the policy alone, a tiny run,
+the KL anchor to the warm start, the exploration bonus, a map-reading network."""
 
 from __future__ import annotations
 
@@ -9,11 +10,21 @@ import pytest
 import torch
 
 from adaptenv.agents.config import FinetuneConfig, PPOConfig, field_docs
-from adaptenv.agents.network import NavNet, NetConfig
-from adaptenv.agents.ppo import check_ppo_config, log_prob_entropy, sample_actions, train_ppo
+from adaptenv.agents.evaluate import sample_episodes
+from adaptenv.agents.network import MapObserver, NavNet, NetConfig, observe
+from adaptenv.agents.ppo import (
+    ExplorationBonus,
+    anchor_kl,
+    check_ppo_config,
+    log_prob_entropy,
+    sample_actions,
+    train_ppo,
+)
 from adaptenv.agents.train import finetune
 from adaptenv.errors import ConfigError
-from adaptenv.sim.spec import END
+from adaptenv.sim.egomap import MAP_CHANNELS
+from adaptenv.sim.spec import ACTIONS, END
+from adaptenv.sim.vector import BatchSim
 
 
 def tiny_ppo(tmp_path, **overrides) -> PPOConfig:
@@ -39,6 +50,10 @@ def test_config_checks_name_the_flag(tmp_path):
         check_ppo_config(tiny_ppo(tmp_path, stop_rule="never"))
     with pytest.raises(ConfigError, match="--bc-teacher"):
         check_ppo_config(tiny_ppo(tmp_path, bc_teacher="oracle"))
+    with pytest.raises(ConfigError, match="--kl-coef"):
+        check_ppo_config(tiny_ppo(tmp_path, kl_coef=-1.0))
+    with pytest.raises(ConfigError, match="--explore-bonus"):
+        check_ppo_config(tiny_ppo(tmp_path, explore_bonus=-0.1))
 
 
 def test_threshold_rule_log_probs_are_the_motion_distribution():
@@ -62,6 +77,53 @@ def test_sample_rule_draws_from_the_full_softmax():
     assert abs((actions == END).mean() - 0.4) < 0.03
 
 
+def test_anchor_kl_is_the_kl_of_the_acting_rule():
+    torch.manual_seed(0)
+    logits, logits0 = torch.randn(5, 3, 7, requires_grad=True), torch.randn(5, 3, 7)
+    p, q = torch.softmax(logits, -1), torch.softmax(logits0, -1)
+    full = (p * (p / q).log()).sum(-1)
+    assert torch.allclose(anchor_kl(logits, logits0, "sample"), full, atol=1e-6)
+    pm, qm = p[..., :END] / p[..., :END].sum(-1, keepdim=True), q[..., :END] / q[..., :END].sum(-1, keepdim=True)
+    pe, qe = p[..., END], q[..., END]
+    stop = pe * (pe / qe).log() + (1 - pe) * ((1 - pe) / (1 - qe)).log()
+    threshold = anchor_kl(logits, logits0, "threshold")
+    assert torch.allclose(threshold, stop + (pm * (pm / qm).log()).sum(-1), atol=1e-5)
+    threshold.sum().backward()  # the masked end logit leaves no NaN in the gradient
+    assert torch.isfinite(logits.grad).all()
+    for rule in ("sample", "threshold"):
+        assert anchor_kl(logits0, logits0.clone(), rule).abs().max() < 1e-6
+
+
+def bonus_run(tiny_set, with_observer: bool, n: int = 4) -> tuple[list[np.ndarray], np.ndarray]:
+    """New cells at each step of ``n`` agents that turn right in place 13 times from their starts, and the cells
+    their maps gained after the first view."""
+    eps = sample_episodes(tiny_set.worlds, n, seed=5)
+    sim = BatchSim(tiny_set.worlds)
+    obs, _ = sim.reset([e for _, e in eps], [i for i, _ in eps])
+    observer = MapObserver(n) if with_observer else None
+    bonus = ExplorationBonus(n, observer)
+    assert (observer is not None and bonus.emap is observer.emap) == with_observer  # reuses the network's map
+    first = np.ones(n, bool)
+    new = [bonus(observe(observer, obs, first), first)]
+    start = bonus.emap.seen_counts()
+    for _ in range(13):
+        obs, *_ = sim.step(np.full(n, ACTIONS.index("r")))
+        first = np.zeros(n, bool)
+        new.append(bonus(observe(observer, obs, first), first))
+    return new, bonus.emap.seen_counts() - start
+
+
+@pytest.mark.parametrize("with_observer", [False, True])
+def test_exploration_bonus_counts_newly_seen_cells_only(tiny_set, with_observer):
+    new, gained = bonus_run(tiny_set, with_observer)
+    assert (new[0] == 0).all()  # an episode's first view earns nothing
+    assert (new[1] > 0).all()  # the first turn brings 30 degrees of new view
+    assert max(n.max() for n in new[:13]) > 10
+    assert all((n >= 0).all() for n in new)
+    assert (new[13] == 0).all()  # after twelve 30-degree turns the view repeats: nothing new
+    assert np.array_equal(sum(new), gained)
+
+
 @pytest.mark.slow
 def test_value_warmup_leaves_the_policy_untouched(tmp_path):
     init = NavNet(NetConfig(hidden=32, feature_dim=32))
@@ -70,6 +132,48 @@ def test_value_warmup_leaves_the_policy_untouched(tmp_path):
     assert all(torch.equal(v, result.net.state_dict()[k]) for k, v in before.items())
     moved = train_ppo(tiny_ppo(tmp_path, output="", run_dir="", frames=1024), init_net=init)
     assert any(not torch.equal(v, moved.net.state_dict()[k]) for k, v in before.items())
+
+
+def anchor_rows(result) -> list[float]:
+    return [r["losses/kl_anchor"] for r in result.rows if "losses/kl_anchor" in r]
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("stop_rule", ["threshold", "sample"])
+def test_kl_anchor_is_zero_before_the_policy_moves(tmp_path, stop_rule):
+    init = NavNet(NetConfig(hidden=32, feature_dim=32))
+    # one iteration, one minibatch, one epoch: the only update sees pi == pi_0 (same memory, same states)
+    result = train_ppo(tiny_ppo(tmp_path, output="", run_dir="", frames=512, num_minibatches=1, update_epochs=1,
+                                kl_coef=1.0, stop_rule=stop_rule, final_eval_episodes=0), init_net=init)
+    assert anchor_rows(result) == [pytest.approx(0.0, abs=1e-7)]
+
+
+@pytest.mark.slow
+def test_a_large_kl_coef_keeps_the_policy_near_its_warm_start(tmp_path):
+    torch.manual_seed(0)
+    init = NavNet(NetConfig(hidden=32, feature_dim=32))
+    runs = {k: train_ppo(tiny_ppo(tmp_path, output="", run_dir="", frames=2048, learning_rate=3e-3, kl_coef=k,
+                                  final_eval_episodes=0), init_net=init) for k in (0.0, 10.0)}
+    free, anchored = anchor_rows(runs[0.0]), anchor_rows(runs[10.0])
+    assert len(free) == len(anchored) == 4 and free[-1] > free[0]  # unanchored, the policy drifts from pi_0
+    assert anchored[-1] < 0.25 * free[-1]
+
+
+@pytest.mark.slow
+def test_ppo_fine_tunes_a_map_reading_network_with_anchor_and_bonus(tmp_path):
+    torch.manual_seed(0)
+    init = NavNet(NetConfig(hidden=32, feature_dim=32, conv_channels=8, map_channels=MAP_CHANNELS))
+    before = {k: v.clone() for k, v in init.state_dict().items()}
+    result = train_ppo(tiny_ppo(tmp_path, kl_coef=1.0, explore_bonus=0.002, final_eval_episodes=2), init_net=init)
+    rows = [r for r in result.rows if "losses/kl_anchor" in r]
+    assert len(rows) == 2 and all(np.isfinite(r["losses/policy_loss"]) for r in rows)
+    assert all(r["charts/explore_bonus"] > 0 for r in rows)
+    assert rows[0]["losses/kl_anchor"] < 1e-3  # pi_0 reads the same maps
+    after = result.net.state_dict()
+    # the stored maps reach the gradient: the map encoder learns
+    assert any(not torch.equal(v, after[k]) for k, v in before.items() if k.startswith("map_encoder"))
+    header = (tmp_path / "run" / "metrics.csv").read_text().splitlines()[0]
+    assert "losses/kl_anchor" in header and "charts/explore_bonus" in header
 
 
 @pytest.mark.slow
@@ -90,9 +194,16 @@ def test_tiny_ppo_run_writes_checkpoint_card_and_metrics(tmp_path, bc_teacher):
 def test_finetune_with_a_named_config(tiny_set, algo):
     net = NavNet(NetConfig(hidden=32, feature_dim=32))
     before = {k: v.clone() for k, v in net.state_dict().items()}
-    cfg = FinetuneConfig(algo=algo, frames=1024, num_envs=16, learning_rate=1e-3, final_eval_episodes=3)
+    ppo_only = {"kl_coef": 0.5, "explore_bonus": 0.001}
+    cfg = FinetuneConfig(algo=algo, frames=1024, num_envs=16, learning_rate=1e-3, final_eval_episodes=3,
+                         **(ppo_only if algo == "ppo" else {}))
     new, card = finetune(net, tiny_set.worlds, cfg, seed=0)
     assert new is not net and card["frames"] == 1024
+    if algo == "ppo":
+        assert {k: card["config"][k] for k in ppo_only} == ppo_only
+    else:
+        with pytest.raises(ConfigError, match="PPO only"):
+            finetune(net, tiny_set.worlds, FinetuneConfig(algo=algo, kl_coef=0.5), seed=0)
     assert all(torch.equal(v, net.state_dict()[k]) for k, v in before.items())
     assert any(not torch.equal(v, new.state_dict()[k]) for k, v in before.items())
     with pytest.raises(ConfigError, match="algo"):

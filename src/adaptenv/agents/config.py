@@ -144,6 +144,10 @@ class PPOConfig:
     """Weight of an auxiliary cross-entropy to bc_teacher's labels of the visited states (a DAgger regulariser; 0: pure RL)."""
     bc_teacher: str = "expert"
     """Who labels the states for bc_coef: expert (shortest path, knows the target), explorer (searches) or mix."""
+    kl_coef: float = 0.0
+    """Weight of KL(pi || pi_0) to the frozen warm start on the visited states, over the acting rule's distribution (an anchor; 0: off)."""
+    explore_bonus: float = 0.0
+    """Reward per fine map cell (0.2 m) an agent sees for the first time in its episode, from its own map (suggested 0.002; 0: off)."""
     value_warmup_iters: int = 4
     """First iterations train only the value head, so a warm-started policy is not moved by a random critic."""
     stop_rule: str = "threshold"
@@ -210,6 +214,10 @@ class FinetuneConfig:
     """DAgger: arithmetic of the gradient steps, fp32 or bf16 (TrainConfig.precision)."""
     max_episode_steps: int = 300
     """Episode cap while collecting (the evaluation's is 600)."""
+    kl_coef: float = 0.0
+    """PPO: weight of the KL anchor to the starting policy (PPOConfig.kl_coef; 0: off)."""
+    explore_bonus: float = 0.0
+    """PPO: reward per newly seen fine map cell (PPOConfig.explore_bonus; 0: off)."""
 
 
 def field_docs(cls: type) -> dict[str, str]:

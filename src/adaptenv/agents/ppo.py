@@ -6,7 +6,9 @@ text and which is saved as ``config.json`` in the run folder). The reward is ``B
 
     r = -0.01 + max(0, best - d) + 10 * success
 
-(``d`` the geodesic distance to the target's success region, ``best`` the smallest ``d`` so far).
+(``d`` the geodesic distance to the target's success region, ``best`` the smallest ``d`` so far),
+plus, when ``explore_bonus`` > 0, ``explore_bonus`` per fine map cell the agent sees for the first time in its
+episode (:class:`ExplorationBonus`; not counted in ``charts/episodic_return``).
 
 Each iteration:
 
@@ -26,7 +28,8 @@ Each iteration:
    ``chunk_len``-step sequences (GRU memory at a sequence start: the stored one, reset where an
    episode starts), with PPO's clipped surrogate, a value loss, an entropy bonus and, when
    ``bc_coef`` > 0, cross-entropy to ``bc_teacher``'s labels of the visited states
-   (:mod:`adaptenv.agents.teachers`).
+   (:mod:`adaptenv.agents.teachers`), and, when ``kl_coef`` > 0, ``KL(pi || pi_0)`` to a frozen copy of the
+   warm start run over the same sequences (:func:`anchor_kl`; logged always as ``losses/kl_anchor``).
    For the first ``value_warmup_iters`` iterations only the value head learns (it reads the
    policy's memory and features, detached), so a random critic cannot move a warm-started policy.
 
@@ -38,6 +41,7 @@ TensorBoard events.
 
 from __future__ import annotations
 
+import copy
 import json
 import os
 import time
@@ -73,16 +77,17 @@ from adaptenv.agents.teachers import TEACHERS, make_teacher
 from adaptenv.agents.train import RunLogger, TrainResult
 from adaptenv.errors import ConfigError
 from adaptenv.progress import ProgressBar
+from adaptenv.sim.egomap import EgoMap
 from adaptenv.sim.spec import END, N_RAYS
 from adaptenv.sim.vector import BatchSim, EpisodeSampler
 
-__all__ = ["PPOConfig", "ActorCritic", "train_ppo", "check_ppo_config"]
+__all__ = ["PPOConfig", "ActorCritic", "ExplorationBonus", "anchor_kl", "train_ppo", "check_ppo_config"]
 
 PPO_LOG_KEYS = ("iteration", "frames", "updates", "wall_time", "charts/learning_rate", "charts/SPS",
                 "charts/collect_fps", "charts/episodes", "charts/episodic_return", "charts/episode_success",
                 "charts/episode_length", "losses/value_loss", "losses/policy_loss", "losses/entropy",
-                "losses/bc_loss", "losses/approx_kl", "losses/clipfrac", "losses/explained_variance",
-                "eval/success", "eval/spl")
+                "charts/explore_bonus", "losses/bc_loss", "losses/kl_anchor", "losses/approx_kl", "losses/clipfrac",
+                "losses/explained_variance", "eval/success", "eval/spl")
 
 
 def check_ppo_config(cfg: PPOConfig) -> None:
@@ -101,6 +106,9 @@ def check_ppo_config(cfg: PPOConfig) -> None:
         raise ConfigError(f"--bc-teacher {cfg.bc_teacher!r}: unknown teacher; choose one of {', '.join(TEACHERS)}")
     if cfg.stop_rule not in ("threshold", "sample"):
         raise ConfigError(f"--stop-rule must be 'threshold' or 'sample', got {cfg.stop_rule!r}")
+    for name in ("kl_coef", "explore_bonus", "bc_coef"):
+        if getattr(cfg, name) < 0:
+            raise ConfigError(f"--{name.replace('_', '-')} must be >= 0, got {getattr(cfg, name)}")
 
 
 class ActorCritic(nn.Module):
@@ -120,23 +128,90 @@ class ActorCritic(nn.Module):
         return self.net.head(z), value, h
 
 
-def log_prob_entropy(logits: torch.Tensor, actions: torch.Tensor, stop_rule: str
-                     ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
-    """Log-probability of ``actions`` under the acting distribution, its entropy, and which actions were drawn from it.
+def acting_log_probs(logits: torch.Tensor, stop_rule: str) -> torch.Tensor:
+    """Log-probabilities (..., A) of the distribution actions are drawn from.
 
-    ``threshold``: the distribution over the six motions (``end`` is a deterministic rule, masked out);
-    ``sample``: the full softmax.
+    ``threshold``: the six motions (``end`` is a deterministic rule, -inf here); ``sample``: the full softmax.
     """
     if stop_rule == "threshold":
         logits = logits.masked_fill(torch.arange(logits.shape[-1]) == END, float("-inf"))
-        drawn = actions != END
-    else:
-        drawn = torch.ones_like(actions, dtype=torch.bool)
-    logp = torch.log_softmax(logits, -1)
+    return torch.log_softmax(logits, -1)
+
+
+def log_prob_entropy(logits: torch.Tensor, actions: torch.Tensor, stop_rule: str
+                     ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+    """Log-probability of ``actions`` under the acting distribution, its entropy, and which actions were drawn from it."""
+    drawn = actions != END if stop_rule == "threshold" else torch.ones_like(actions, dtype=torch.bool)
+    logp = acting_log_probs(logits, stop_rule)
     chosen = logp.gather(-1, actions.clamp(max=logits.shape[-1] - 1)[..., None]).squeeze(-1)
     p = logp.exp()
     entropy = -(p * torch.where(p > 0, logp, torch.zeros_like(logp))).sum(-1)
     return torch.where(drawn, chosen, torch.zeros_like(chosen)), entropy, drawn
+
+
+def kl_divergence(logp: torch.Tensor, logq: torch.Tensor) -> torch.Tensor:
+    """``KL(p || q)`` over the last axis from log-probabilities (terms where p is 0 count 0)."""
+    p = logp.exp()
+    return (p * torch.where(p > 0, logp - logq, torch.zeros_like(logp))).sum(-1)
+
+
+def stop_log_probs(logits: torch.Tensor) -> torch.Tensor:
+    """``log (p(end), 1 - p(end))`` (..., 2) under the full softmax: the Bernoulli the threshold rule reads."""
+    logp = torch.log_softmax(logits, -1)
+    is_end = torch.arange(logits.shape[-1]) == END
+    return torch.stack([logp[..., END], torch.logsumexp(logp.masked_fill(is_end, float("-inf")), -1)], -1)
+
+
+def anchor_kl(logits: torch.Tensor, anchor_logits: torch.Tensor, stop_rule: str) -> torch.Tensor:
+    """Per-state ``KL(pi || pi_0)`` (...,) of the acting rule: ``pi`` from ``logits``, ``pi_0`` from ``anchor_logits``."""
+    # Direction: that of KL-regularised RL (KL control, RLHF): maximising return - kl_coef * KL(pi || pi_0) has the
+    # optimum pi_0 * exp(Q / kl_coef) / Z, which re-weights pi_0's own choices by their value. It is mode-seeking:
+    # pi may drop actions of pi_0 that lead nowhere at a bounded cost but pays heavily for actions pi_0 rules out.
+    # The reverse, KL(pi_0 || pi), is distillation to pi_0 (kickstarting) and would keep pi as broad as pi_0.
+    # Distribution: 'sample' draws from the full softmax, so its KL. 'threshold' reads p(end) (stop iff >= the
+    # threshold) and otherwise draws one of the six motions, so both parts are anchored: the KL of the Bernoulli
+    # p(end) plus that of the motion softmax (the full softmax's KL by the chain rule, the motion term weighted 1
+    # rather than 1 - p(end), since the motions are drawn whenever the rule does not stop).
+    kl = kl_divergence(acting_log_probs(logits, stop_rule), acting_log_probs(anchor_logits, stop_rule))
+    if stop_rule == "threshold":
+        kl = kl + kl_divergence(stop_log_probs(logits), stop_log_probs(anchor_logits))
+    return kl
+
+
+@torch.no_grad()
+def anchor_rollout_logits(anchor: NavNet, obs: dict[str, torch.Tensor], first: torch.Tensor, h: torch.Tensor,
+                          chunk_len: int) -> tuple[torch.Tensor, torch.Tensor]:
+    """pi_0's logits (T, B, A) over a whole rollout with its own memory ``h`` (B, H) carried in, and the memory after.
+
+    Unrolled in ``chunk_len``-step pieces (the update's sequence length) to bound the memory of the map encoder.
+    """
+    pieces = []
+    for lo in range(0, first.shape[0], chunk_len):
+        logits, h = anchor({k: v[lo: lo + chunk_len] for k, v in obs.items()}, first[lo: lo + chunk_len], h)
+        pieces.append(logits)
+    return torch.cat(pieces), h
+
+
+class ExplorationBonus:
+    """Fine map cells each agent sees (FREE or OBSTACLE set) for the first time in its episode, step by step.
+
+    Reads the :class:`EgoMap` of a map-reading network's :class:`MapObserver` (which updates it), or keeps one
+    of its own, built only from the agent's observations (nothing privileged).
+    """
+
+    def __init__(self, batch: int, observer: MapObserver | None):
+        self.observer = observer
+        self.emap = observer.emap if observer is not None else EgoMap(batch)
+        self.seen = np.zeros(batch, np.int64)
+
+    def __call__(self, obs: dict[str, np.ndarray], first: np.ndarray) -> np.ndarray:
+        """int64 (B,): cells first seen in ``obs`` (0 where ``first``); call once per step, after :func:`observe`."""
+        if self.observer is None:
+            self.emap.update(obs, first)
+        seen = self.emap.seen_counts()
+        new = np.where(first, 0, seen - self.seen)
+        self.seen = seen
+        return new
 
 
 def sample_actions(logits: torch.Tensor, u: np.ndarray, stop_rule: str, end_threshold: float) -> np.ndarray:
@@ -183,6 +258,7 @@ def _train_ppo(cfg: PPOConfig, worlds: Sequence[Any] | None, init_net: NavNet | 
     rng = np.random.default_rng(cfg.seed)
     worlds = list(worlds) if worlds is not None else load_house_set(cfg.houses).worlds
     net = _initial_net(cfg, init_net)
+    anchor = copy.deepcopy(net).eval().requires_grad_(False)  # pi_0, frozen
     agent = ActorCritic(net)
     optimizer = torch.optim.Adam(agent.parameters(), lr=cfg.learning_rate, eps=1e-5)
     B, T, L = cfg.num_envs, cfg.rollout_steps, cfg.chunk_len
@@ -209,7 +285,12 @@ def _train_ppo(cfg: PPOConfig, worlds: Sequence[Any] | None, init_net: NavNet | 
     teacher = make_teacher(cfg.bc_teacher, sim, seed=cfg.seed) if cfg.bc_coef > 0 else None
     obs, _ = sim.reset(*sampler.draw(rng, B))
     first = np.ones(B, dtype=bool)
+    obs = observe(observer, obs, first)
+    explore = ExplorationBonus(B, observer) if cfg.explore_bonus > 0 else None
+    if explore is not None:
+        explore(obs, first)
     h = net.initial_state(B)
+    h_anchor = anchor.initial_state(B)
     episode_return = np.zeros(B)
     logger = RunLogger(run_dir, cfg.tensorboard, PPO_LOG_KEYS)
     progress = ProgressBar("PPO" if cfg.progress else None, n_iterations * B * T, transient=False).start()
@@ -223,11 +304,11 @@ def _train_ppo(cfg: PPOConfig, worlds: Sequence[Any] | None, init_net: NavNet | 
         # 1. collect a (T, B) rollout with the current policy
         t0 = time.perf_counter()
         finished_returns, finished_success, finished_length = [], [], []
+        bonus_sum = 0.0
         agent.eval()
         for t in range(T):
             if t % L == 0:
                 h0_buf[t // L] = h
-            obs = observe(observer, obs, first)
             for k in obs_buf:
                 obs_buf[k][t] = obs[k]
             first_buf[t] = first
@@ -241,7 +322,6 @@ def _train_ppo(cfg: PPOConfig, worlds: Sequence[Any] | None, init_net: NavNet | 
                 logprob, _, _ = log_prob_entropy(logits, torch.from_numpy(action), cfg.stop_rule)
             actions_buf[t], logprobs_buf[t], values_buf[t] = action, logprob.numpy(), value.numpy()
             obs, reward, terminated, truncated, info = sim.step(action)
-            rewards_buf[t] = reward
             episode_return += reward
             finished = np.flatnonzero(terminated | truncated)
             first = np.zeros(B, dtype=bool)
@@ -252,12 +332,16 @@ def _train_ppo(cfg: PPOConfig, worlds: Sequence[Any] | None, init_net: NavNet | 
                 episode_return[finished] = 0.0
                 obs = sim.reset_at(finished, *sampler.draw(rng, finished.size))
                 first[finished] = True
+            obs = observe(observer, obs, first)
+            # the cells revealed by this step's observation reward its action (nothing where an episode ended)
+            bonus = cfg.explore_bonus * explore(obs, first) if explore is not None else 0.0
+            rewards_buf[t] = reward + bonus
+            bonus_sum += float(np.sum(bonus))
         frames += B * T
         collect_time = time.perf_counter() - t0
 
         # 2. advantages by GAE; a new episode at t+1 cuts the bootstrap
         with torch.no_grad():
-            obs = observe(observer, obs, first)
             seq = {k: v[None] for k, v in obs_to_tensors(obs).items()}
             _, next_value, _ = agent(seq, torch.from_numpy(first)[None], h)
             next_value = next_value[0].numpy()
@@ -271,17 +355,19 @@ def _train_ppo(cfg: PPOConfig, worlds: Sequence[Any] | None, init_net: NavNet | 
             advantages[t] = last_gae
         returns = advantages + values_buf
 
-        # 3. learn: clipped surrogate + value + entropy (+ imitation), on chunk_len-step sequences
+        # 3. learn: clipped surrogate + value + entropy (+ imitation, + the anchor), on chunk_len-step sequences
         agent.train()
         warmup = iteration <= cfg.value_warmup_iters
         b_obs = {k: torch.from_numpy(v) for k, v in obs_buf.items()}
         b_first, b_actions = torch.from_numpy(first_buf), torch.from_numpy(actions_buf)
+        # pi_0 over the same observations (map included) with its own memory of the same histories
+        b_anchor_logits, h_anchor = anchor_rollout_logits(anchor, b_obs, b_first, h_anchor, L)
         b_logprobs, b_adv = torch.from_numpy(logprobs_buf), torch.from_numpy(advantages)
         b_returns, b_labels = torch.from_numpy(returns), torch.from_numpy(labels_buf)
         n_chunks = T // L
         seq_ids = np.arange(n_chunks * B)  # sequence s = chunk s // B of env s % B
         mb_size = seq_ids.size // cfg.num_minibatches
-        stats: dict[str, list[float]] = {k: [] for k in ("v", "pg", "ent", "bc", "kl", "clip")}
+        stats: dict[str, list[float]] = {k: [] for k in ("v", "pg", "ent", "bc", "anchor", "kl", "clip")}
         for _epoch in range(cfg.update_epochs):
             rng.shuffle(seq_ids)
             for lo in range(0, seq_ids.size, mb_size):
@@ -306,17 +392,20 @@ def _train_ppo(cfg: PPOConfig, worlds: Sequence[Any] | None, init_net: NavNet | 
                 ent = entropy.mean()
                 bc_loss = (F.cross_entropy(logits.reshape(-1, logits.shape[-1]), b_labels[idx].reshape(-1))
                            if teacher is not None else torch.zeros(()))
+                kl_anchor = anchor_kl(logits, b_anchor_logits[idx], cfg.stop_rule).mean()
                 if warmup:
                     loss = cfg.vf_coef * v_loss
                 else:
                     loss = pg_loss - cfg.ent_coef * ent + cfg.vf_coef * v_loss + cfg.bc_coef * bc_loss
+                    if cfg.kl_coef:
+                        loss = loss + cfg.kl_coef * kl_anchor
                 optimizer.zero_grad()
                 loss.backward()
                 nn.utils.clip_grad_norm_(agent.parameters(), cfg.max_grad_norm)
                 optimizer.step()
                 updates += 1
-                for key, val in (("v", v_loss), ("pg", pg_loss), ("ent", ent), ("bc", bc_loss), ("kl", approx_kl),
-                                 ("clip", clipfrac)):
+                for key, val in (("v", v_loss), ("pg", pg_loss), ("ent", ent), ("bc", bc_loss),
+                                 ("anchor", kl_anchor), ("kl", approx_kl), ("clip", clipfrac)):
                     stats[key].append(float(val.detach()))
             if cfg.target_kl and not warmup and stats["kl"][-1] > cfg.target_kl:
                 break
@@ -331,6 +420,7 @@ def _train_ppo(cfg: PPOConfig, worlds: Sequence[Any] | None, init_net: NavNet | 
             "charts/episodic_return": float(np.mean(finished_returns)) if finished_returns else "",
             "charts/episode_success": float(np.mean(finished_success)) if finished_success else "",
             "charts/episode_length": float(np.mean(finished_length)) if finished_length else "",
+            "charts/explore_bonus": bonus_sum / (B * T), "losses/kl_anchor": float(np.mean(stats["anchor"])),
             "losses/value_loss": float(np.mean(stats["v"])), "losses/policy_loss": float(np.mean(stats["pg"])),
             "losses/entropy": float(np.mean(stats["ent"])), "losses/bc_loss": float(np.mean(stats["bc"])),
             "losses/approx_kl": float(np.mean(stats["kl"])), "losses/clipfrac": float(np.mean(stats["clip"])),

@@ -507,14 +507,16 @@ def finetune(net: NavNet, worlds: Sequence[NavWorld], cfg: FinetuneConfig, seed:
     ``algo='dagger'``: DAgger from the current weights with a fresh Adam optimizer, expert-action
     probability ``beta`` throughout, labels from ``cfg.teacher``, ``rollout_steps``-step blocks that are also the training
     sequences, a dataset holding the whole run. ``algo='ppo'``: :func:`adaptenv.agents.ppo.train_ppo`
-    on the simulator's reward with PPOConfig's defaults for the rest (value warm-up at most half the
-    iterations). Nothing is written to disk.
+    on the simulator's reward (plus ``explore_bonus``, anchored by ``kl_coef``) with PPOConfig's
+    defaults for the rest (value warm-up at most half the iterations). Nothing is written to disk.
     """
     if cfg.algo not in ("dagger", "ppo"):
         raise ConfigError(f"FinetuneConfig.algo must be 'dagger' or 'ppo', got {cfg.algo!r}")
     check_precision(cfg.precision, "FinetuneConfig.precision")
     if cfg.algo == "ppo" and cfg.precision != "fp32":
         raise ConfigError(f"FinetuneConfig.precision {cfg.precision!r} applies to DAgger only; use fp32 with algo='ppo'")
+    if cfg.algo == "dagger" and (cfg.kl_coef or cfg.explore_bonus):
+        raise ConfigError("FinetuneConfig.kl_coef and explore_bonus apply to PPO only; leave them 0 with algo='dagger'")
     evals = cfg.final_eval_episodes or len(worlds)
     if cfg.algo == "ppo":
         # cycle: ppo imports this module (RunLogger, TrainResult)
@@ -525,7 +527,8 @@ def finetune(net: NavNet, worlds: Sequence[NavWorld], cfg: FinetuneConfig, seed:
                        rollout_steps=cfg.rollout_steps, chunk_len=cfg.rollout_steps,
                        learning_rate=cfg.learning_rate, end_threshold=cfg.end_threshold,
                        calibrate_episodes=cfg.calibrate_episodes, eval_every=0, final_eval_episodes=evals,
-                       min_start_distance=cfg.min_start_distance, progress=False, tensorboard=False)
+                       min_start_distance=cfg.min_start_distance, kl_coef=cfg.kl_coef,
+                       explore_bonus=cfg.explore_bonus, progress=False, tensorboard=False)
         result = train_ppo(pc, worlds=worlds, init_net=net)
         return result.net, result.card
     steps = cfg.rollout_steps

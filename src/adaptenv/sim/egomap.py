@@ -53,6 +53,8 @@ from adaptenv.sim.spec import (
 
 FREE, OBSTACLE, TARGET, VISITED = 1, 2, 4, 8
 """Channel bits of a map cell."""
+SEEN = FREE | OBSTACLE
+"""A cell with either bit has been seen (:meth:`EgoMap.seen_counts`)."""
 CHANNELS = ("free", "obstacle", "target", "visited")
 N_CHANNELS = len(CHANNELS)
 CELL = 0.2
@@ -76,18 +78,21 @@ _BUMP = AGENT_RADIUS + 0.5 * CELL
 
 
 @numba.njit(cache=True, inline="always")
-def _mark(grid, coarse, i, x, z, bits, cell, f):
-    """OR ``bits`` into the cell holding map-frame point (x, z) of agent i (ignored outside the map)."""
+def _mark(grid, coarse, seen, i, x, z, bits, cell, f):
+    """OR ``bits`` into the cell holding map-frame point (x, z) of agent i (ignored outside the map); count it in
+    ``seen[i]`` when it gets its first FREE or OBSTACLE bit."""
     n = grid.shape[1]
     col = int(math.floor(x / cell)) + n // 2
     row = int(math.floor(z / cell)) + n // 2
     if 0 <= row < n and 0 <= col < n:
+        if grid[i, row, col] & SEEN == 0 and bits & SEEN != 0:
+            seen[i] += 1
         grid[i, row, col] |= bits
         coarse[i, row // f, col // f] |= bits
 
 
 @numba.njit(cache=True)
-def _update(grid, coarse, pose, first, prev_action, collided, depth, sem, target, offsets, yaw_delta, move_delta,
+def _update(grid, coarse, seen, pose, first, prev_action, collided, depth, sem, target, offsets, yaw_delta, move_delta,
             max_range, n_interp, cell, f, bump):
     """Integrate each agent's pose from its last action, then mark its scan (see the module docstring)."""
     b = grid.shape[0]
@@ -97,6 +102,7 @@ def _update(grid, coarse, pose, first, prev_action, collided, depth, sem, target
         if first[i]:
             grid[i, :, :] = 0
             coarse[i, :, :] = 0
+            seen[i] = 0
             pose[i, 0] = 0.0
             pose[i, 1] = 0.0
             pose[i, 2] = 0.0
@@ -106,14 +112,14 @@ def _update(grid, coarse, pose, first, prev_action, collided, depth, sem, target
                 t = math.radians(pose[i, 2])
                 if collided[i]:
                     s = 1.0 if d > 0 else -1.0
-                    _mark(grid, coarse, i, pose[i, 0] + s * bump * math.sin(t), pose[i, 1] + s * bump * math.cos(t),
+                    _mark(grid, coarse, seen, i, pose[i, 0] + s * bump * math.sin(t), pose[i, 1] + s * bump * math.cos(t),
                           OBSTACLE, cell, f)
                 else:
                     pose[i, 0] += d * math.sin(t)
                     pose[i, 1] += d * math.cos(t)
             pose[i, 2] = (pose[i, 2] + yaw_delta[a]) % 360.0
         x, z, yaw = pose[i, 0], pose[i, 1], pose[i, 2]
-        _mark(grid, coarse, i, x, z, VISITED | FREE, cell, f)
+        _mark(grid, coarse, seen, i, x, z, VISITED | FREE, cell, f)
         for k in range(n_rays):
             for s in range(n_interp + 1 if k < n_rays - 1 else 1):
                 if s == 0:
@@ -128,11 +134,11 @@ def _update(grid, coarse, pose, first, prev_action, collided, depth, sem, target
                 steps = int(dd / (0.5 * cell))
                 for j in range(steps + 1):
                     r = j * 0.5 * cell
-                    _mark(grid, coarse, i, x + r * ux, z + r * uz, FREE, cell, f)
+                    _mark(grid, coarse, seen, i, x + r * ux, z + r * uz, FREE, cell, f)
                 if dd < max_range - 1e-6:
                     r = dd + 0.25 * cell
                     bits = OBSTACLE | TARGET if cls == target[i] else OBSTACLE
-                    _mark(grid, coarse, i, x + r * ux, z + r * uz, bits, cell, f)
+                    _mark(grid, coarse, seen, i, x + r * ux, z + r * uz, bits, cell, f)
 
 
 @numba.njit(cache=True)
@@ -174,7 +180,8 @@ class EgoMap:
     """The map memory of ``batch`` agents (see the module docstring); numpy state, compiled kernels.
 
     ``grid`` (B, SIZE, SIZE) and ``coarse`` (B, SIZE / COARSE, SIZE / COARSE) hold the channel bits;
-    ``pose`` (B, 3) is each agent's integrated (x, z, yaw) in its start frame (m, m, degrees).
+    ``pose`` (B, 3) is each agent's integrated (x, z, yaw) in its start frame (m, m, degrees); ``seen`` (B,) counts
+    each agent's fine cells with a ``SEEN`` bit, kept by the kernel as it marks.
     """
 
     def __init__(self, batch: int, *, size: int = SIZE, crop: int = CROP, cell: float = CELL, coarse: int = COARSE):
@@ -185,6 +192,7 @@ class EgoMap:
         self.grid = np.zeros((batch, size, size), dtype=np.uint8)
         self.coarse = np.zeros((batch, size // coarse, size // coarse), dtype=np.uint8)
         self.pose = np.zeros((batch, 3), dtype=np.float64)
+        self.seen = np.zeros(batch, dtype=np.int64)
 
     @property
     def batch(self) -> int:
@@ -197,7 +205,7 @@ class EgoMap:
         if prev.size and (prev.min() < 0 or prev.max() > N_ACTIONS):
             raise ValueError(f"prev_action must be in [0, {N_ACTIONS}], got {prev.min()}..{prev.max()}")
         first = np.asarray(first, dtype=np.bool_).reshape(b) | (prev == NO_ACTION)
-        _update(self.grid, self.coarse, self.pose, first, prev,
+        _update(self.grid, self.coarse, self.seen, self.pose, first, prev,
                 np.asarray(obs["collided"], dtype=np.int64).reshape(b),
                 np.ascontiguousarray(obs["depth"], dtype=np.float64).reshape(b, -1) * MAX_RANGE,
                 np.ascontiguousarray(obs["semantic"], dtype=np.int64).reshape(b, -1),
@@ -209,7 +217,12 @@ class EgoMap:
         idx = np.asarray(indices, dtype=np.int64).reshape(-1)
         self.grid[idx] = 0
         self.coarse[idx] = 0
+        self.seen[idx] = 0
         self.pose[idx] = 0.0
+
+    def seen_counts(self) -> np.ndarray:
+        """int64 (B,): fine cells each agent has seen (FREE or OBSTACLE set) since its map started; a copy."""
+        return self.seen.copy()
 
     def crop(self, out: np.ndarray | None = None) -> np.ndarray:
         """uint8 (B, CROP, CROP): the egocentric windows, packed (bits 0-3 fine, 4-7 coarse)."""
@@ -223,6 +236,7 @@ class EgoMap:
         idx = np.asarray(indices, dtype=np.int64).reshape(-1)
         other = EgoMap(0, size=self.size, crop=self.crop_size, cell=self.cell, coarse=self.coarse_factor)
         other.grid, other.coarse, other.pose = self.grid[idx].copy(), self.coarse[idx].copy(), self.pose[idx].copy()
+        other.seen = self.seen[idx].copy()
         return other
 
     def to_world(self, i: int, start: tuple[float, float, float]) -> np.ndarray:
@@ -246,4 +260,4 @@ def unpack(packed: np.ndarray, dtype: DTypeLike = np.float32) -> np.ndarray:
 
 
 __all__ = ["CELL", "CHANNELS", "COARSE", "CROP", "EgoMap", "FREE", "MAP_CHANNELS", "N_CHANNELS", "OBSTACLE",
-           "SIZE", "TARGET", "VISITED", "unpack"]
+           "SEEN", "SIZE", "TARGET", "VISITED", "unpack"]
