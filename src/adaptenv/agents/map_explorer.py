@@ -61,6 +61,8 @@ LOOKAHEAD = 6
 APPROACH_CELLS = 6
 #: Extra cost factor of a step from a NEAR cell (next to an OBSTACLE cell): paths keep a cell off walls where they can.
 NEAR_COST = 3.0
+#: Extra cost factor of a step from a TIGHT cell (FREE and OBSTACLE): only narrow passages use them.
+TIGHT_COST = 20.0
 #: Cost (cells of path) of one turn when searching the headings around a blocked move.
 TURN_COST = 0.1
 #: ``end`` when a ray of the current scan hits the target type this close (m).
@@ -69,9 +71,9 @@ STOP_DISTANCE = SUCCESS_DISTANCE - 0.4
 REACH = int(math.ceil(MAX_RANGE / CELL)) + 2
 
 _EXPLORE, _APPROACH = 0, 1
-_BLOCKED, _NEAR, _CLEAR = 0, 1, 2
-BUMPED = 4
-"""Bit of the planner's cell classes: a move into this cell was blocked (kept for the episode)."""
+_BLOCKED, _TIGHT, _NEAR, _CLEAR = 0, 1, 2, 3
+BUMPS = 64
+"""Blocked moves (pose and heading) each agent remembers, so that it does not repeat one."""
 _INF = np.float32(np.inf)
 _SQRT2 = math.sqrt(2.0)
 _PROBE = MOVE_STEP + 0.5 * CELL
@@ -121,22 +123,23 @@ def _pop(hk, hv, size):
 
 @numba.njit(cache=True)
 def _classify(g, cls, box, ar, ac):
-    """Planning class of each cell of ``box`` into bits 0-1 of ``cls`` (bumped cells keep BUMPED): BLOCKED, NEAR
-    (FREE with an OBSTACLE 8-neighbour) or CLEAR (FREE, none); the agent's own cell at least NEAR."""
+    """Planning class of each cell of ``box``: BLOCKED (not FREE), TIGHT (FREE and OBSTACLE: a ray passed, another
+    stopped in it), NEAR (FREE with an OBSTACLE 8-neighbour) or CLEAR (FREE, none); the agent's own cell at least TIGHT."""
     n = g.shape[0]
     for r in range(box[0], box[1]):
         for c in range(box[2], box[3]):
             v = g[r, c]
             k = _BLOCKED
-            if (v & FREE) != 0 and (v & OBSTACLE) == 0 and not cls[r, c] & BUMPED:
+            if v & OBSTACLE and v & FREE:
+                k = _TIGHT
+            elif v & FREE:
                 k = _CLEAR
                 for rr in range(max(r - 1, 0), min(r + 2, n)):
                     for cc in range(max(c - 1, 0), min(c + 2, n)):
                         if g[rr, cc] & OBSTACLE:
                             k = _NEAR
-            cls[r, c] = (cls[r, c] & BUMPED) | k
-    if cls[ar, ac] & 3 == _BLOCKED:
-        cls[ar, ac] = (cls[ar, ac] & BUMPED) | _NEAR
+            cls[r, c] = k
+    cls[ar, ac] = max(cls[ar, ac], _TIGHT)
 
 
 @numba.njit(cache=True)
@@ -147,7 +150,7 @@ def _frontier(g, cls, box, ar, ac, least, goal):
     for r in range(box[0], box[1]):
         for c in range(box[2], box[3]):
             goal[r, c] = False
-            if cls[r, c] & 3 < least or (r == ar and c == ac):
+            if cls[r, c] < least or (r == ar and c == ac):
                 continue
             for k in range(4):
                 rr, cc = r + _DR[k], c + _DC[k]
@@ -160,7 +163,7 @@ def _frontier(g, cls, box, ar, ac, least, goal):
 
 @numba.njit(cache=True)
 def _approach(g, cls, box, radius, goal):
-    """Mark traversable cells within ``radius`` cells of a TARGET cell in ``goal``; count them."""
+    """Mark NEAR or CLEAR cells within ``radius`` cells of a TARGET cell in ``goal``; count them."""
     r0, r1, c0, c1 = box[0], box[1], box[2], box[3]
     for r in range(r0, r1):
         for c in range(c0, c1):
@@ -173,7 +176,7 @@ def _approach(g, cls, box, radius, goal):
                 continue
             for rr in range(max(r - radius, r0), min(r + radius + 1, r1)):
                 for cc in range(max(c - radius, c0), min(c + radius + 1, c1)):
-                    if (rr - r) ** 2 + (cc - c) ** 2 <= r2 and cls[rr, cc] & 3 and not goal[rr, cc]:
+                    if (rr - r) ** 2 + (cc - c) ** 2 <= r2 and cls[rr, cc] >= _NEAR and not goal[rr, cc]:
                         goal[rr, cc] = True
                         count += 1
     return count
@@ -181,18 +184,22 @@ def _approach(g, cls, box, radius, goal):
 
 @numba.njit(cache=True, inline="always")
 def _cost(cls, r, c, k):
-    """Cost of the step from cell (r, c) along neighbour direction k (length times the NEAR penalty of (r, c))."""
+    """Cost of the step from cell (r, c) along neighbour direction k (length times the penalty of (r, c)'s class)."""
     base = _SQRT2 if k >= 4 else 1.0
-    return base * (1.0 + NEAR_COST) if cls[r, c] & 3 == _NEAR else base
+    if cls[r, c] == _NEAR:
+        return base * (1.0 + NEAR_COST)
+    if cls[r, c] == _TIGHT:
+        return base * (1.0 + TIGHT_COST)
+    return base
 
 
 @numba.njit(cache=True, inline="always")
 def _step_ok(cls, box, r, c, k):
     """Whether the step from (r, c) along direction k stays on traversable cells of ``box`` without cutting a corner."""
     rr, cc = r + _DR[k], c + _DC[k]
-    if rr < box[0] or rr >= box[1] or cc < box[2] or cc >= box[3] or not cls[rr, cc] & 3:
+    if rr < box[0] or rr >= box[1] or cc < box[2] or cc >= box[3] or cls[rr, cc] == _BLOCKED:
         return False
-    return k < 4 or (cls[rr, c] & 3 != 0 and cls[r, cc] & 3 != 0)
+    return k < 4 or (cls[rr, c] != _BLOCKED and cls[r, cc] != _BLOCKED)
 
 
 @numba.njit(cache=True)
@@ -255,7 +262,7 @@ def _line_clear(cls, box, x, z, tx, tz, least, ar, ac, half):
         r, c = _cell(x + f * dx, z + f * dz, half)
         if r == ar and c == ac:
             continue
-        if r < box[0] or r >= box[1] or c < box[2] or c >= box[3] or cls[r, c] & 3 < least:
+        if r < box[0] or r >= box[1] or c < box[2] or c >= box[3] or cls[r, c] < least:
             return False
     return True
 
@@ -285,50 +292,57 @@ def _aim(cls, dist, box, x, z, ar, ac, half):
 
 
 @numba.njit(cache=True)
-def _clear_ahead(cls, box, x, z, heading, ar, ac, half):
-    """Whether a move at ``heading`` (degrees) finds traversable cells up to _PROBE ahead."""
+def _clear_ahead(cls, box, bumps, x, z, heading, ar, ac, half):
+    """Whether a move at ``heading`` (degrees) finds traversable cells up to _PROBE ahead and was not blocked before
+    from this very pose."""
+    for k in range(bumps.shape[0]):
+        if abs(bumps[k, 0] - x) < 1e-6 and abs(bumps[k, 1] - z) < 1e-6 and abs(wrap_deg(bumps[k, 2] - heading)) < 0.5:
+            return False
     t = math.radians(heading)
-    return _line_clear(cls, box, x, z, x + _PROBE * math.sin(t), z + _PROBE * math.cos(t), _NEAR, ar, ac, half)
+    return _line_clear(cls, box, x, z, x + _PROBE * math.sin(t), z + _PROBE * math.cos(t), _TIGHT, ar, ac, half)
 
 
 @numba.njit(cache=True)
-def _progress(cls, dist, box, x, z, yaw, ar, ac, half):
-    """When the way to the aim is blocked: the first action toward the lattice heading whose clear move ends on the
-    lowest cost-to-go (each turn costing TURN_COST), or a right turn when no move makes progress."""
+def _progress(cls, dist, box, bumps, x, z, yaw, ar, ac, half):
+    """When the way to the aim is blocked: the lattice heading whose clear move ends on the lowest cost-to-go (each
+    turn costing TURN_COST) and the first action toward it; (NaN, right turn) when no move makes progress."""
     best, best_h = dist[ar, ac], 1e9
     per = int(round(360.0 / ROTATE_SMALL))
     for k in range(per):
         h = yaw + k * ROTATE_SMALL
-        if not _clear_ahead(cls, box, x, z, h, ar, ac, half):
+        if not _clear_ahead(cls, box, bumps, x, z, h, ar, ac, half):
             continue
         t = math.radians(h)
         r, c = _cell(x + MOVE_STEP * math.sin(t), z + MOVE_STEP * math.cos(t), half)
+        if not (box[0] <= r < box[1] and box[2] <= c < box[3]):
+            continue
         v = dist[r, c] + TURN_COST * _n_turns(k * ROTATE_SMALL, ROTATE_LARGE, ROTATE_SMALL)
         if v < best:
             best, best_h = v, h
     if best_h > 1e8:
-        return ROTATE_RIGHT
+        return np.nan, ROTATE_RIGHT
     turn = _best_turn(wrap_deg(best_h - yaw), ROTATE_LARGE, ROTATE_SMALL)
-    return MOVE_AHEAD if turn < 0 else turn
+    return best_h, MOVE_AHEAD if turn < 0 else turn
 
 
 @numba.njit(cache=True)
-def _steer(cls, dist, box, x, z, yaw, ar, ac, half):
-    """Turn or move toward the aim cell of the plan; search the lattice headings when the way there is blocked."""
+def _steer(cls, dist, box, bumps, x, z, yaw, ar, ac, half):
+    """Turn or move toward the aim cell of the plan; search the lattice headings when the way there is blocked.
+    Returns (heading to keep turning to, or NaN; action)."""
     tr, tc = _aim(cls, dist, box, x, z, ar, ac, half)
     tx, tz = (tc - half + 0.5) * CELL, (tr - half + 0.5) * CELL
     err = wrap_deg(math.degrees(math.atan2(tx - x, tz - z)) - yaw)
-    if abs(err) <= ALIGN_TOLERANCE and _clear_ahead(cls, box, x, z, yaw, ar, ac, half):
-        return MOVE_AHEAD
+    if abs(err) <= ALIGN_TOLERANCE and _clear_ahead(cls, box, bumps, x, z, yaw, ar, ac, half):
+        return np.nan, MOVE_AHEAD
     turn = _best_turn(err, ROTATE_LARGE, ROTATE_SMALL)
     lattice = yaw + round(err / ROTATE_SMALL) * ROTATE_SMALL
-    if turn >= 0 and _clear_ahead(cls, box, x, z, lattice, ar, ac, half):
-        return turn
-    return _progress(cls, dist, box, x, z, yaw, ar, ac, half)
+    if turn >= 0 and _clear_ahead(cls, box, bumps, x, z, lattice, ar, ac, half):
+        return np.nan, turn
+    return _progress(cls, dist, box, bumps, x, z, yaw, ar, ac, half)
 
 
 @numba.njit(cache=True)
-def _face_target(g, cls, box, x, z, yaw, ar, ac, half):
+def _face_target(g, cls, box, bumps, x, z, yaw, ar, ac, half):
     """At an approach goal: turn toward the nearest TARGET cell; when facing it, step ahead unless blocked."""
     best, tx, tz = np.inf, 0.0, 0.0
     for r in range(box[0], box[1]):
@@ -342,28 +356,14 @@ def _face_target(g, cls, box, x, z, yaw, ar, ac, half):
     turn = _best_turn(err, ROTATE_LARGE, ROTATE_SMALL)
     if turn >= 0 and abs(err) > ROTATE_SMALL / 2:
         return turn
-    if _clear_ahead(cls, box, x, z, yaw, ar, ac, half):
+    if _clear_ahead(cls, box, bumps, x, z, yaw, ar, ac, half):
         return MOVE_AHEAD
     return ROTATE_RIGHT
 
 
 @numba.njit(cache=True)
-def _mark_bump(cls, x, z, yaw, prev, ar, ac, half):
-    """After a blocked move, mark BUMPED the cell the move was heading into: the one holding its end point, or
-    the one half a cell further when the end point stays in the agent's own cell."""
-    s = 1.0 if prev == MOVE_AHEAD else -1.0
-    t = math.radians(yaw)
-    n = cls.shape[0]
-    for reach in (MOVE_STEP, _PROBE):
-        r, c = _cell(x + s * reach * math.sin(t), z + s * reach * math.cos(t), half)
-        if (r != ar or c != ac) and 0 <= r < n and 0 <= c < n:
-            cls[r, c] |= BUMPED
-            return
-
-
-@numba.njit(cache=True)
-def _act(grid, pose, first, prev, collided, depth, sem, target, cls, dist, box, plan_box, mode, age, sighted, goal,
-         hk, hv, out):
+def _act(grid, pose, first, prev, collided, depth, sem, target, cls, dist, box, plan_box, mode, age, sighted, bumps,
+         n_bumps, heading, goal, hk, hv, out):
     """One action per agent from its EgoMap (see the module docstring); updates the plan arrays in place."""
     b, n = grid.shape[0], grid.shape[1]
     half = n // 2
@@ -374,10 +374,15 @@ def _act(grid, pose, first, prev, collided, depth, sem, target, cls, dist, box, 
         if first[i]:
             sighted[i] = False
             mode[i] = -1
-            cls[i, :, :] = 0
+            bumps[i, :, :] = np.nan
+            n_bumps[i] = 0
+            heading[i] = np.nan
             box[i, 0], box[i, 1], box[i, 2], box[i, 3] = ar, ar + 1, ac, ac + 1
         elif collided[i] != 0:
-            _mark_bump(cls[i], x, z, yaw, prev[i], ar, ac, half)
+            k = n_bumps[i] % BUMPS
+            bumps[i, k, 0], bumps[i, k, 1] = x, z
+            bumps[i, k, 2] = yaw if prev[i] == MOVE_AHEAD else yaw + 180.0
+            n_bumps[i] += 1
         box[i, 0] = max(min(box[i, 0], ar - REACH), 0)
         box[i, 1] = min(max(box[i, 1], ar + REACH + 1), n)
         box[i, 2] = max(min(box[i, 2], ac - REACH), 0)
@@ -401,12 +406,22 @@ def _act(grid, pose, first, prev, collided, depth, sem, target, cls, dist, box, 
             pb[:] = box[i]
             mode[i] = _plan(g, ci, d, pb, ar, ac, sighted[i], goal, hk, hv)
             age[i] = 0
+        if heading[i] == heading[i]:
+            # finish the turn a heading search chose, then take its move (no dithering around a blocked move)
+            turn = _best_turn(wrap_deg(heading[i] - yaw), ROTATE_LARGE, ROTATE_SMALL)
+            if turn >= 0:
+                out[i] = turn
+                continue
+            heading[i] = np.nan
+            if _clear_ahead(ci, pb, bumps[i], x, z, yaw, ar, ac, half):
+                out[i] = MOVE_AHEAD
+                continue
         if mode[i] < 0 or not (pb[0] <= ar < pb[1] and pb[2] <= ac < pb[3]) or not d[ar, ac] < np.inf:
             out[i] = ROTATE_RIGHT
         elif mode[i] == _APPROACH and d[ar, ac] == 0.0:
-            out[i] = _face_target(g, ci, pb, x, z, yaw, ar, ac, half)
+            out[i] = _face_target(g, ci, pb, bumps[i], x, z, yaw, ar, ac, half)
         else:
-            out[i] = _steer(ci, d, pb, x, z, yaw, ar, ac, half)
+            heading[i], out[i] = _steer(ci, d, pb, bumps[i], x, z, yaw, ar, ac, half)
 
 
 class MapExplorerPolicy:
@@ -433,6 +448,9 @@ class MapExplorerPolicy:
         self._mode = np.full(batch, -1, dtype=np.int64)
         self._age = np.zeros(batch, dtype=np.int64)
         self._sighted = np.zeros(batch, dtype=np.bool_)
+        self._bumps = np.full((batch, BUMPS, 3), np.nan)
+        self._n_bumps = np.zeros(batch, dtype=np.int64)
+        self._heading = np.full(batch, np.nan)
         self._goal = np.zeros((n, n), dtype=np.bool_)
         self._heap_k = np.empty(9 * n * n, dtype=np.float32)
         self._heap_v = np.empty(9 * n * n, dtype=np.int64)
@@ -452,7 +470,7 @@ class MapExplorerPolicy:
              np.ascontiguousarray(obs["depth"], dtype=np.float64).reshape(b, -1) * MAX_RANGE,
              np.ascontiguousarray(obs["semantic"], dtype=np.int64).reshape(b, -1),
              np.asarray(obs["target"], dtype=np.int64).reshape(b), self._cls, self._dist, self._box, self._plan_box,
-             self._mode, self._age, self._sighted, self._goal, self._heap_k, self._heap_v, out)
+             self._mode, self._age, self._sighted, self._bumps, self._n_bumps, self._heading, self._goal, self._heap_k, self._heap_v, out)
         return out, state
 
 
