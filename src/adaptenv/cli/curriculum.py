@@ -86,7 +86,7 @@ def loop(
     finetune_frames: int = typer.Option(16_384, "--finetune-frames", min=1, help="DAgger frames per iteration."),
     finetune_lr: float = typer.Option(1e-4, "--finetune-lr", min=0.0, help="Adam learning rate of fine-tuning."),
     finetune_teacher: str = typer.Option("expert", "--finetune-teacher", help="Who labels fine-tuning's states: "
-                                         "expert, explorer (searches) or mix."),
+                                         "expert, explorer or map-explorer (search) or mix."),
     finetune_min_start: float = typer.Option(0.0, "--finetune-min-start", min=0.0, help="Fine-tuning episodes start "
                                              "at least this geodesic distance (m) from the target (0: uniform)."),
     finetune_precision: str = typer.Option("fp32", "--finetune-precision", help="Arithmetic of fine-tuning's "
