@@ -6,24 +6,27 @@ marked at the pose dead-reckoned from ``prev_action`` and ``collided``). Every s
 batch in one compiled kernel:
 
 1. **Stop.** ``end`` when a ray of the current scan hits the target type within ``STOP_DISTANCE``.
-2. **Traversable cells** (0.2 m map cells): FREE cells with no OBSTACLE cell in their
-   8-neighbourhood (the agent's radius is one cell); the agent's own cell always.
-3. **Goal.** Before the target was sighted: the frontier, traversable cells with a 4-neighbour
-   that is unknown (neither FREE nor OBSTACLE), not the agent's own cell. After a sighting (any
-   TARGET cell): traversable cells within ``APPROACH_CELLS`` of a TARGET cell, or the frontier
-   while none of those can be reached.
-4. **Plan.** Dijkstra from the goal over traversable cells (8-connected, diagonals cost sqrt 2 and
-   may not cut corners) within the box the agent's scans can have reached, replanned every
-   ``REPLAN_EVERY`` steps, on the first sighting, after a bump or on reaching an exploration goal.
-   Without any path it plans again over FREE cells that are not OBSTACLE (no margin).
+2. **Cells** (0.2 m map cells): BLOCKED (not FREE), TIGHT (FREE and OBSTACLE), NEAR (FREE with an
+   OBSTACLE 8-neighbour: the agent's radius is one cell) or CLEAR; the agent's own cell is never
+   BLOCKED. Steps from NEAR and TIGHT cells cost ``1 + NEAR_COST`` and ``1 + TIGHT_COST`` times more.
+3. **Goal.** Before the target was sighted: the frontier, CLEAR cells (else NEAR cells) with a
+   4-neighbour that is unknown (neither FREE nor OBSTACLE), not the agent's own cell. After a
+   sighting (any TARGET cell): NEAR or CLEAR cells within ``APPROACH_CELLS`` of a TARGET cell, or
+   the frontier while none of those can be reached.
+4. **Plan.** Dijkstra from the goal (8-connected, diagonals cost sqrt 2 and may not cut corners)
+   within the box the agent's scans can have reached, replanned every ``REPLAN_EVERY`` steps, on
+   the first sighting, after a bump or on reaching a frontier cell.
 5. **Steer.** Aim at the farthest cell of the descent path (up to ``LOOKAHEAD`` cells) reachable
-   in a straight line over planned cells; move ahead when aligned within ``ALIGN_TOLERANCE``,
-   else take the turn (30 or 6 degrees) leaving the smallest heading error. At an approach goal,
-   face the nearest TARGET cell and step toward it. Without any goal in reach: rotate right.
+   in a straight line over CLEAR cells; move ahead when aligned within ``ALIGN_TOLERANCE`` and the
+   cells up to half a cell past the move are not BLOCKED, else take the turn (30 or 6 degrees)
+   leaving the smallest heading error. When that way is blocked, turn to the lattice heading whose
+   clear move ends on the lowest cost-to-go and take that move. At an approach goal, face the
+   nearest TARGET cell and step toward it. Without any goal in reach: rotate right.
 
-A blocked move marks the cell ahead as OBSTACLE (the EgoMap does it) and triggers a replan, so
-the next path avoids it. It needs no :class:`~adaptenv.agents.policy.PolicyContext` (no ``bind``),
-is deterministic and batch independent.
+A blocked move marks the cell ahead as OBSTACLE (the EgoMap does it) and triggers a replan; the
+policy also remembers its last ``BUMPS`` blocked moves (pose and heading) and never repeats one.
+It needs no :class:`~adaptenv.agents.policy.PolicyContext` (no ``bind``), is deterministic and
+batch independent.
 
 Example::
 
