@@ -87,7 +87,8 @@ class TrainConfig:
     tensorboard: bool = True
     """Also log to TensorBoard when the tensorboard package is importable."""
     teacher: str = "expert"
-    """Who labels DAgger's states: expert (shortest path), explorer (searches its own map) or mix."""
+    """Who labels DAgger's states: expert (shortest path), explorer (searches its own map), map-explorer (searches the
+    EgoMap of its observations only) or mix."""
     teacher_mix: float = 0.5
     """With --teacher mix: share of episodes the explorer labels."""
     min_start_distance: float = 0.0
@@ -143,7 +144,7 @@ class PPOConfig:
     bc_coef: float = 0.0
     """Weight of an auxiliary cross-entropy to bc_teacher's labels of the visited states (a DAgger regulariser; 0: pure RL)."""
     bc_teacher: str = "expert"
-    """Who labels the states for bc_coef: expert (shortest path, knows the target), explorer (searches) or mix."""
+    """Who labels the states for bc_coef: expert (shortest path, knows the target), explorer or map-explorer (search) or mix."""
     kl_coef: float = 0.0
     """Weight of KL(pi || pi_0) to the frozen warm start on the visited states, over the acting rule's distribution (an anchor; 0: off)."""
     explore_bonus: float = 0.0
@@ -203,7 +204,7 @@ class FinetuneConfig:
     end_threshold: float = 0.8
     """End threshold while collecting."""
     teacher: str = "expert"
-    """DAgger: who labels the visited states, 'expert' (shortest path), 'explorer' (searches) or 'mix'."""
+    """DAgger: who labels the visited states, 'expert' (shortest path), 'explorer', 'map-explorer' (search) or 'mix'."""
     calibrate_episodes: int = 0
     """Fresh episodes in the training houses on which the returned card's end threshold is chosen (0: keep end_threshold)."""
     final_eval_episodes: int = 0

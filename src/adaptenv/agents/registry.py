@@ -6,6 +6,8 @@ Accepted specs (every command taking ``--policy`` uses :func:`resolve_policy`):
 - ``expert``: the shortest-path expert (privileged).
 - ``explorer``: frontier exploration on the agent's own map, then the shortest path to a sighted
   target (knows its pose, not the target's location; :mod:`adaptenv.agents.explorer`).
+- ``map-explorer``: the same search planned on the agent's own EgoMap only (no privileged
+  information; :mod:`adaptenv.agents.map_explorer`).
 - ``random`` or ``random:SEED``: uniformly random actions.
 - a path to a checkpoint file (``*.pt``) written by ``adaptenv train``.
 - ``module:attribute`` or ``path/to/file.py:attribute``: user code. The attribute may be a policy
@@ -21,13 +23,15 @@ from importlib import resources
 from pathlib import Path
 
 from adaptenv.agents.explorer import ExplorerPolicy
+from adaptenv.agents.map_explorer import MapExplorerPolicy
 from adaptenv.agents.policy import ExpertPolicy, Policy, RandomPolicy
 from adaptenv.errors import ConfigError
 
-BUILTINS = ("pretrained", "expert", "explorer", "random")
-_HELP = ("expected pretrained, expert, explorer, random, a checkpoint path (.pt) or module:attribute "
+BUILTINS = ("pretrained", "expert", "explorer", "map-explorer", "random")
+_HELP = ("expected pretrained, expert, explorer, map-explorer, random, a checkpoint path (.pt) or module:attribute "
          "(e.g. examples/my_policy.py:policy)")
-POLICY_HELP = "Policy: pretrained, expert, explorer, random, a checkpoint path (.pt), or module:attribute."
+POLICY_HELP = ("Policy: pretrained, expert, explorer, map-explorer, random, a checkpoint path (.pt), "
+               "or module:attribute.")
 
 
 def pretrained_path() -> Path:
@@ -52,7 +56,7 @@ def load_pretrained(*, greedy: bool = False, seed: int = 0) -> Policy:
 def init_checkpoint(spec: str, *, flag: str = "--init") -> Path:
     """The checkpoint a warm start (``--init``) names: ``pretrained`` for the shipped one, else a path.
 
-    The other ``--policy`` names (expert, explorer, random, module:attribute) have no network to
+    The other ``--policy`` names (expert, explorer, map-explorer, random, module:attribute) have no network to
     start from and raise ConfigError.
     """
     spec = spec.strip()
@@ -72,6 +76,8 @@ def resolve_policy(spec: str, *, seed: int = 0) -> Policy:
         return ExpertPolicy()
     if spec == "explorer":
         return ExplorerPolicy()
+    if spec == "map-explorer":
+        return MapExplorerPolicy()
     if spec == "random" or spec.startswith("random:"):
         tail = spec.partition(":")[2]
         if tail and not tail.isdigit():

@@ -1,4 +1,4 @@
-"""Who labels DAgger's states: the shortest-path expert, the searching explorer, or a mix of the two.
+"""Who labels DAgger's states: the shortest-path expert, a searching explorer, or a mix of expert and explorer.
 
 A teacher is asked for one label per agent at every collection step, with the observations the
 student sees and the ``first`` mask of new episodes (the explorer keeps a map per episode, so it
@@ -7,6 +7,8 @@ must see every step). ``TrainConfig.teacher`` picks one:
 - ``expert``: :class:`~adaptenv.sim.expert.ShortestPathExpert` (knows where the target is);
 - ``explorer``: :class:`~adaptenv.agents.explorer.ExplorerPolicy` (searches; knows only its pose and
   the map it has seen);
+- ``map-explorer``: :class:`~adaptenv.agents.map_explorer.MapExplorerPolicy` (searches on the EgoMap
+  built from the student's own observations; no privileged information);
 - ``mix``: each episode is labelled by the explorer with probability ``teacher_mix`` (drawn at the
   episode's start from the run's seed), by the expert otherwise.
 """
@@ -19,12 +21,13 @@ from typing import Any, Literal, Protocol
 import numpy as np
 
 from adaptenv.agents.explorer import ExplorerPolicy
+from adaptenv.agents.map_explorer import MapExplorerPolicy
 from adaptenv.agents.policy import Observation, PolicyContext
 from adaptenv.errors import ConfigError
 from adaptenv.sim.expert import ShortestPathExpert
 
-TeacherKind = Literal["expert", "explorer", "mix"]
-TEACHERS = ("expert", "explorer", "mix")
+TeacherKind = Literal["expert", "explorer", "map-explorer", "mix"]
+TEACHERS = ("expert", "explorer", "map-explorer", "mix")
 
 
 class Teacher(Protocol):
@@ -76,6 +79,17 @@ class ExplorerTeacher(_SimTeacher):
         return actions
 
 
+class MapExplorerTeacher:
+    """The map explorer's action on the student's observations (it keeps its EgoMap from ``obs`` and ``first``)."""
+
+    def __init__(self, sim: Any):
+        self.explorer = MapExplorerPolicy()
+
+    def label(self, obs: Observation, first: np.ndarray) -> np.ndarray:
+        actions, _ = self.explorer.act(obs, None, np.asarray(first, dtype=bool))
+        return actions
+
+
 class MixTeacher:
     """Per episode, the explorer with probability ``p`` and the expert otherwise (both always run, so
     the explorer's map stays current whichever labels an episode)."""
@@ -99,6 +113,8 @@ def make_teacher(kind: str, sim: Any, *, mix: float = 0.5, seed: int = 0) -> Tea
         return ExpertTeacher(sim)
     if kind == "explorer":
         return ExplorerTeacher(sim)
+    if kind == "map-explorer":
+        return MapExplorerTeacher(sim)
     if kind == "mix":
         return MixTeacher(sim, mix, seed)
     raise ConfigError(f"--teacher {kind!r}: unknown teacher; choose one of {', '.join(TEACHERS)}")

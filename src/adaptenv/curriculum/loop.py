@@ -107,7 +107,7 @@ class LoopConfig:
     """Adam learning rate of fine-tuning, annealed to zero over each iteration's frames (the gentler of
     the two rates compared in docs/RESULTS.md)."""
     finetune_teacher: str = "expert"
-    """Who labels fine-tuning's DAgger states: expert (shortest path), explorer (searches, docs/agent.md) or mix."""
+    """Who labels fine-tuning's DAgger states: expert (shortest path), explorer or map-explorer (search, docs/agent.md) or mix."""
     finetune_min_start: float = 0.0
     """Fine-tuning episodes start at least this geodesic distance (m) from the target where a house allows
     (0: uniform starts; the long suites use 6 m)."""
