@@ -145,3 +145,10 @@ def test_cli_evaluate_records_the_wipe(tmp_path):
     assert res.exit_code == 0, res.output
     summary = json.loads((tmp_path / "summary.json").read_text())
     assert summary["wipe_every"] == 16 and "--wipe-every 16" in summary["command"]
+
+
+def test_workers_give_the_same_rows(tiny_set):
+    """Workers resolve the spec with the run's seed and wrap it themselves: the same numbers as one process."""
+    one = memory_check("pretrained", tiny_set, episodes=4, every=[4], seed=3, workers=1, batch=2, max_steps=60)
+    two = memory_check("pretrained", tiny_set, episodes=4, every=[4], seed=3, workers=2, batch=2, max_steps=60)
+    assert one["runs"] == two["runs"]
