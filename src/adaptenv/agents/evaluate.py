@@ -240,6 +240,14 @@ def per_house(results: Sequence[EpisodeResult]) -> list[dict[str, Any]]:
     return rows
 
 
+def paired_difference(results: Sequence[EpisodeResult], base: Sequence[EpisodeResult],
+                      key: str = "success") -> dict[str, Any]:
+    """Mean per-episode difference results - base of a metric over the same episodes, with a 95% normal interval."""
+    diffs = [float(getattr(r, key)) - float(getattr(b, key)) for r, b in zip(results, base, strict=True)]
+    d, se = mean_se(diffs)
+    return {"diff": d, "se": se, "ci95": [d - Z95 * se, d + Z95 * se]}
+
+
 def drop(base: dict[str, Any], other: dict[str, Any], key: str = "success") -> dict[str, float]:
     """Difference base - other of a metric with a 95% normal interval (independent samples)."""
     d = base[key] - other[key]
@@ -261,14 +269,20 @@ class EvalReport:
     recordings: dict[int, Recorded]
 
 
+def _build_policy(policy: Policy | str, seed: int, wrap: Callable[[Policy], Policy] | None) -> Policy:
+    """The policy a run drives: ``policy`` (resolved with ``seed`` when a spec), wrapped by ``wrap`` if given."""
+    pol = resolve_policy(policy, seed=seed) if isinstance(policy, str) else policy
+    return wrap(pol) if wrap is not None else pol
+
+
 def _evaluate_shard(args: tuple) -> tuple[list[EpisodeResult], dict[int, Recorded], list[EpisodeResult]]:
     """Worker entry: evaluate a slice of the episodes (and the expert on it) in a fresh process."""
-    policy_spec, houses, names, episodes, batch, max_steps, with_expert = args
+    policy_spec, houses, names, episodes, batch, max_steps, with_expert, seed, wrap = args
     # torch: loaded in worker processes only
     from adaptenv.agents.network import configure_torch
     configure_torch(1)
     worlds = compile_houses(houses, names)
-    policy = resolve_policy(policy_spec) if isinstance(policy_spec, str) else policy_spec
+    policy = _build_policy(policy_spec, seed, wrap)
     results, recs = run_episodes(worlds, episodes, policy, batch=batch, max_steps=max_steps,
                                  record=lambda r: not r.success)
     expert: list[EpisodeResult] = []
@@ -279,12 +293,15 @@ def _evaluate_shard(args: tuple) -> tuple[list[EpisodeResult], dict[int, Recorde
 
 def evaluate(policy: Policy | str, house_set: HouseSet, *, episodes: int = 200, seed: int = 0, batch: int = 64,
              workers: int = 1, max_steps: int = MAX_STEPS, with_expert: bool = True,
-             progress: Callable[[int], None] | None = None, floor: EpisodeFloor | None = None) -> EvalReport:
+             progress: Callable[[int], None] | None = None, floor: EpisodeFloor | None = None,
+             wrap: Callable[[Policy], Policy] | None = None) -> EvalReport:
     """Evaluate ``policy`` (an object, or a ``--policy`` spec when using workers) on a HouseSet.
 
     With ``workers > 1`` the episodes are split in contiguous slices over a process pool (spawned,
-    one torch thread each); the policy must then be given as a spec string. ``floor`` overrides the
-    start-distance floor of a ``suite:`` house set (see :func:`sample_episodes`).
+    one torch thread each); the policy must then be given as a spec string (resolved with ``seed``
+    in every process). ``floor`` overrides the start-distance floor of a ``suite:`` house set (see
+    :func:`sample_episodes`). ``wrap`` (picklable for workers, e.g. ``functools.partial(WipeMemory,
+    every=8)``) wraps the policy in every process.
     """
     worlds = house_set.worlds
     eps = sample_episodes(worlds, episodes, seed, floor=floor)
@@ -293,7 +310,7 @@ def evaluate(policy: Policy | str, house_set: HouseSet, *, episodes: int = 200, 
         if not isinstance(policy, str):
             raise TypeError("evaluate(workers > 1) needs the policy as a --policy spec string")
         bounds = np.linspace(0, len(eps), workers + 1).astype(int)
-        shards = [(policy, house_set.houses, house_set.names, eps[a:b], batch, max_steps, with_expert)
+        shards = [(policy, house_set.houses, house_set.names, eps[a:b], batch, max_steps, with_expert, seed, wrap)
                   for a, b in zip(bounds[:-1], bounds[1:], strict=True) if b > a]
         results, recordings, expert = [], {}, []
         with ProcessPoolExecutor(len(shards), mp_context=mp.get_context("spawn")) as pool:
@@ -308,8 +325,7 @@ def evaluate(policy: Policy | str, house_set: HouseSet, *, episodes: int = 200, 
                 if progress is not None:
                     progress(len(results))
     else:
-        pol = resolve_policy(policy) if isinstance(policy, str) else policy
-        results, recordings = run_episodes(worlds, eps, pol, batch=batch, max_steps=max_steps,
+        results, recordings = run_episodes(worlds, eps, _build_policy(policy, seed, wrap), batch=batch, max_steps=max_steps,
                                            record=lambda r: not r.success, progress=progress)
         expert = run_episodes(worlds, eps, ExpertPolicy(), batch=batch, max_steps=max_steps)[0] if with_expert else []
     if with_expert:

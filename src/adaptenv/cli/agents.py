@@ -112,9 +112,12 @@ def evaluate(
                                               "steps for (redraws per episode, paired across policies)."),
     strict: bool = typer.Option(False, "--strict", help="Fail on the first house that cannot be used instead of "
                                 "skipping it with a warning."),
+    wipe_every: int = typer.Option(0, "--wipe-every", min=0, help="Wipe the policy's memory (recurrent state and "
+                                   "map) at steps K, 2K, ... of each episode (0: never; see adaptenv memory-check)."),
 ) -> None:
     """Evaluate a policy: success, SPL, SEL, collisions, length (mean +- s.e.), per-house CSV, failure maps."""
     import json
+    from functools import partial
 
     from rich.console import Console
     from rich.table import Table
@@ -133,17 +136,26 @@ def evaluate(
                           "--episodes", str(episodes), "--seed", str(seed), "--workers", str(workers),
                           "--batch", str(batch), "-o", str(out), *(["--strict"] if strict else [])]
                          + (["--min-geodesic", f"{min_geodesic:g}"] if min_geodesic > 0 else [])
-                         + (["--min-expert-steps", str(min_expert_steps)] if min_expert_steps > 0 else []))
+                         + (["--min-expert-steps", str(min_expert_steps)] if min_expert_steps > 0 else [])
+                         + (["--wipe-every", str(wipe_every)] if wipe_every > 0 else []))
     floor = (EpisodeFloor(min_geodesic=min_geodesic, min_expert_steps=min_expert_steps)
              if min_geodesic > 0 or min_expert_steps > 0 else None)
     resolved = resolve_policy(policy, seed=seed)  # fail early on a bad --policy
+    wrap = None
+    if wipe_every:
+        from adaptenv.agents.memory import WipeMemory, require_wipeable
+
+        require_wipeable(resolved, "--wipe-every")
+        wrap = partial(WipeMemory, every=wipe_every)
     summaries = []
     for spec in houses:
         house_set = load_house_set(spec, strict=strict)
         with ProgressBar(f"{policy} on {spec}", episodes) as bar:
             report = run_eval(policy if workers > 1 else resolved, house_set, episodes=episodes, seed=seed,
-                              batch=batch, workers=workers, floor=floor, progress=bar.update)
+                              batch=batch, workers=workers, floor=floor, progress=bar.update, wrap=wrap)
         report.policy = policy
+        if wipe_every:
+            report.summary["wipe_every"] = wipe_every
         sub = out / _slug(spec) if len(houses) > 1 else out
         report.summary["failure_modes"] = failure_modes(report, house_set)
         paths = write_report(report, house_set, sub, command=command)
