@@ -56,3 +56,11 @@ def test_map_explorer_teacher_labels_every_agent(tiny_set):
         assert labels.tolist() == policy.act(obs, None, first)[0].tolist()
         obs, *_ = sim.step(labels)
         first = np.zeros(4, dtype=bool)
+
+
+def test_labelling_benchmark_times_both_teachers_on_the_same_states():
+    from adaptenv.bench.teachers import bench_labelling
+
+    out = bench_labelling("preset:tiny", agents=8, steps=8, block=4, warmup=2)
+    assert out["blocks"] == 2 and out["explorer_fps"] > 0 and out["map_explorer_fps"] > 0
+    assert out["ratio"] == out["map_explorer_fps"] / out["explorer_fps"]

@@ -154,7 +154,7 @@ def run_map(*, as_json: bool = False, iterations: int = 3, repeats: int = 3,
     worlds = load_house_set(houses).worlds
     load_before = os.getloadavg()[0]
     figures = {**bench_labelling(houses), **map_side_by_side(worlds, iterations, repeats),
-               "houses": len(worlds), "recipe": MAP_RECIPE, "load_average_1min_before": load_before,
+               "recipe": MAP_RECIPE, "load_average_1min_before": load_before,
                "load_average_1min_after": os.getloadavg()[0]}
     emit("map recipe beside today's", figures, as_json,
          notes=[f"targets: map-explorer labelling >= 5,000/s, map recipe end to end >= {MAP_END_TO_END_TARGET:,}/s "
