@@ -27,41 +27,43 @@ from adaptenv.agents.map_explorer import MapExplorerPolicy
 from adaptenv.agents.policy import ExpertPolicy, Policy, RandomPolicy
 from adaptenv.errors import ConfigError
 
-BUILTINS = ("pretrained", "expert", "explorer", "map-explorer", "random")
-_HELP = ("expected pretrained, expert, explorer, map-explorer, random, a checkpoint path (.pt) or module:attribute "
-         "(e.g. examples/my_policy.py:policy)")
-POLICY_HELP = ("Policy: pretrained, expert, explorer, map-explorer, random, a checkpoint path (.pt), "
+SHIPPED = ("pretrained", "pretrained-map")
+"""Checkpoints shipped in the package: the scan-only pi_0 and the map-reading one (docs/agent.md)."""
+BUILTINS = (*SHIPPED, "expert", "explorer", "map-explorer", "random")
+_HELP = ("expected pretrained, pretrained-map, expert, explorer, map-explorer, random, a checkpoint path (.pt) or "
+         "module:attribute (e.g. examples/my_policy.py:policy)")
+POLICY_HELP = ("Policy: pretrained, pretrained-map, expert, explorer, map-explorer, random, a checkpoint path (.pt), "
                "or module:attribute.")
 
 
-def pretrained_path() -> Path:
-    """Where the shipped checkpoint lives inside the installed package."""
-    return Path(str(resources.files("adaptenv.agents") / "data" / "pretrained.pt"))
+def pretrained_path(name: str = "pretrained") -> Path:
+    """Where the shipped checkpoint ``name`` (one of SHIPPED) lives inside the installed package."""
+    return Path(str(resources.files("adaptenv.agents") / "data" / f"{name}.pt"))
 
 
-def load_pretrained(*, greedy: bool = False, seed: int = 0) -> Policy:
-    """The shipped pretrained policy; a missing file names the command that creates it."""
+def load_pretrained(name: str = "pretrained", *, greedy: bool = False, seed: int = 0) -> Policy:
+    """A shipped pretrained policy; a missing file names the command that creates it."""
     # torch: only when a checkpoint is loaded
     from adaptenv.agents.checkpoint import load_checkpoint
 
-    path = pretrained_path()
+    path = pretrained_path(name)
     if not path.is_file():
-        raise ConfigError(f"{path}: the pretrained checkpoint is not installed; create it with "
-                          "`adaptenv train --houses preset:pretrain-train -o src/adaptenv/agents/data/pretrained.pt`")
+        raise ConfigError(f"{path}: the {name} checkpoint is not installed; create it with the command of its card "
+                          f"in docs/agent.md and -o src/adaptenv/agents/data/{name}.pt")
     policy = load_checkpoint(path).policy(greedy=greedy, seed=seed)
-    policy.name = "pretrained"
+    policy.name = name
     return policy
 
 
 def init_checkpoint(spec: str, *, flag: str = "--init") -> Path:
-    """The checkpoint a warm start (``--init``) names: ``pretrained`` for the shipped one, else a path.
+    """The checkpoint a warm start (``--init``) names: ``pretrained`` or ``pretrained-map`` for a shipped one, else a path.
 
     The other ``--policy`` names (expert, explorer, map-explorer, random, module:attribute) have no network to
     start from and raise ConfigError.
     """
     spec = spec.strip()
-    if spec == "pretrained":
-        return pretrained_path()
+    if spec in SHIPPED:
+        return pretrained_path(spec)
     if spec in BUILTINS or spec.startswith("random:") or (":" in spec and Path(spec).suffix not in (".pt", ".pth")):
         raise ConfigError(f"{flag} {spec!r}: no network to start from; use pretrained or a checkpoint path (.pt)")
     return Path(spec)
@@ -70,8 +72,8 @@ def init_checkpoint(spec: str, *, flag: str = "--init") -> Path:
 def resolve_policy(spec: str, *, seed: int = 0) -> Policy:
     """Build the policy named by ``spec`` (see the module docstring); unknown specs raise ConfigError."""
     spec = spec.strip()
-    if spec == "pretrained":
-        return load_pretrained(seed=seed)
+    if spec in SHIPPED:
+        return load_pretrained(spec, seed=seed)
     if spec == "expert":
         return ExpertPolicy()
     if spec == "explorer":
