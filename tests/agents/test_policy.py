@@ -177,3 +177,18 @@ def test_shipped_pretrained_checkpoint_loads_with_its_card():
     assert card["command"].startswith("adaptenv train") and "selection" in card
     actions = rollout_actions(policy)
     assert actions.min() >= 0 and actions.max() < N_ACTIONS
+
+
+def test_shipped_map_reading_checkpoint_loads_with_its_card():
+    import json
+
+    from adaptenv.agents.network import MapState
+    from adaptenv.agents.registry import init_checkpoint, pretrained_path
+
+    policy = resolve_policy("pretrained-map")
+    card = json.loads(pretrained_path("pretrained-map").with_suffix(".json").read_text())
+    assert policy.name == "pretrained-map" and policy.net.config.map_channels > 0
+    assert policy.end_threshold == card["end_threshold_calibration"]["threshold"]
+    assert "--map" in card["command"] and "--teacher map-explorer" in card["command"] and "selection" in card
+    assert isinstance(policy.initial_state(2), MapState)
+    assert init_checkpoint("pretrained-map") == pretrained_path("pretrained-map")
