@@ -1,0 +1,6 @@
+#!/bin/bash
+# Candidate C (amendment of 2026-11-25) of docs/results/map-pi0/DECLARED.md
+cd "$(dirname "$0")"  # a folder of your choice
+adaptenv train --houses preset:pretrain-train --frames 2000000 --seed 0 --map --teacher map-explorer \
+  --max-episode-steps 600 --precision bf16 --beta-end 0.1 --calibrate-episodes 200 --eval-every 20 --eval-episodes 96 \
+  -o C.pt --run-dir C --no-progress "$@"
