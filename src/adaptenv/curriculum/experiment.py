@@ -142,8 +142,9 @@ def run_experiment(cfg: ExperimentConfig, out: str | Path, *, executor: Any = No
     check_llm_section(cfg.loop.get("llm") or {}, "experiment config: loop.llm")  # before anything is saved
     out.mkdir(parents=True, exist_ok=True)
     atomic_write_text(out / "experiment.json", json.dumps(asdict(cfg), indent=1))
-    jobs = [(asdict(cfg.loop_config(m, s)), str(run_dir(out, m, s)), command, final_episodes) for m in cfg.methods
-            for s in cfg.seeds]
+    # seed by seed: an experiment stopped early leaves whole seeds (every method), the unit of the paired tests
+    jobs = [(asdict(cfg.loop_config(m, s)), str(run_dir(out, m, s)), command, final_episodes) for s in cfg.seeds
+            for m in cfg.methods]
     if executor is None:
         for i, job in enumerate(jobs):
             if progress:
