@@ -30,6 +30,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import sys
 from dataclasses import asdict
 from pathlib import Path
 
@@ -231,6 +232,9 @@ def timing(folder: Path, logs: list[Path], seeds: list[int] | None = None) -> No
 
 def table(folder: Path) -> None:
     """Print the final evaluation's success table (percent, mean +- s.e. over seeds) and the reference's effects."""
+    if not (folder / "summary_final.json").is_file():
+        sys.exit(f"{folder}: no summary_final.json; run `adaptenv experiment --config CONFIG -o {folder} "
+                 "--final-episodes N` first (it writes it once the runs have their final evaluation)")
     summary = json.loads((folder / "summary_final.json").read_text())
     methods, ref = summary["methods"], summary["reference"]
     sets = list(json.loads((folder / "experiment.json").read_text())["loop"]["heldout"])  # the config's order
