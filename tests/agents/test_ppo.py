@@ -208,3 +208,24 @@ def test_finetune_with_a_named_config(tiny_set, algo):
     assert any(not torch.equal(v, new.state_dict()[k]) for k, v in before.items())
     with pytest.raises(ConfigError, match="algo"):
         finetune(net, tiny_set.worlds, FinetuneConfig(algo="sac"), seed=0)
+
+
+def test_periodic_evaluation_is_paired_and_starts_at_the_warm_start(tmp_path, monkeypatch):
+    """The curve starts with pi_0 before any update, and every point scores the same episodes, started at least
+    min_start_distance from the target."""
+    import adaptenv.agents.ppo as ppo
+
+    seen = []
+
+    def spy(worlds, episodes, policy, **kw):
+        seen.append(([(k, e.seed, e.start) for k, e in episodes],
+                     [p.detach().clone() for p in policy.net.parameters()]))
+        return real(worlds, episodes, policy, **kw)
+
+    real = ppo.run_episodes
+    monkeypatch.setattr(ppo, "run_episodes", spy)
+    rows = train_ppo(tiny_ppo(tmp_path, frames=2048, eval_every=1, eval_episodes=6, final_eval_episodes=0,
+                              min_start_distance=1.0, learning_rate=3e-3)).rows
+    assert rows[0]["iteration"] == 0 and rows[0]["frames"] == 0 and "eval/success" in rows[0]
+    assert len(seen) == 5 and all(episodes == seen[0][0] for episodes, _ in seen)
+    assert any(not torch.equal(a, b) for a, b in zip(seen[0][1], seen[-1][1], strict=True))  # moved

@@ -166,7 +166,8 @@ class PPOConfig:
     conv_channels: int = 32
     """Channels of the two ray convolutions (with init '')."""
     eval_every: int = 10
-    """Evaluate the policy on fresh training episodes every this many iterations (0: never)."""
+    """Evaluate the policy every this many iterations, and the warm start before any update, on one fixed set of
+    fresh training-house episodes started min_start_distance or farther (0: never)."""
     eval_episodes: int = 96
     """Episodes per periodic evaluation."""
     final_eval_episodes: int = 200

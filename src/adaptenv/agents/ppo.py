@@ -73,6 +73,7 @@ from adaptenv.agents.network import (
 )
 from adaptenv.agents.registry import init_checkpoint
 from adaptenv.agents.stop import calibrate_end_threshold
+from adaptenv.agents.suites import EpisodeFloor
 from adaptenv.agents.teachers import TEACHERS, make_teacher
 from adaptenv.agents.train import RunLogger, TrainResult
 from adaptenv.errors import ConfigError
@@ -295,6 +296,20 @@ def _train_ppo(cfg: PPOConfig, worlds: Sequence[Any] | None, init_net: NavNet | 
     logger = RunLogger(run_dir, cfg.tensorboard, PPO_LOG_KEYS)
     progress = ProgressBar("PPO" if cfg.progress else None, n_iterations * B * T, transient=False).start()
     frames, updates = 0, 0
+    eval_episodes = sample_episodes(worlds, cfg.eval_episodes, seed=cfg.seed * 100_003,
+                                    floor=EpisodeFloor(min_geodesic=cfg.min_start_distance))
+
+    def evaluate_held_in(network: NavNet) -> tuple[float, float]:
+        """Success and SPL on the same fresh training-house episodes every time, so the curve is paired."""
+        res, _ = run_episodes(worlds, eval_episodes, NeuralPolicy(network, end_threshold=cfg.end_threshold),
+                              batch=min(cfg.eval_episodes, 128))
+        s = summarize(res)
+        return s["success"], s["spl"]
+
+    if cfg.eval_every:  # pi_0 on the same episodes: the curve's starting point
+        success0, spl0 = evaluate_held_in(net)
+        logger.log({"iteration": 0, "frames": 0, "updates": 0, "wall_time": 0.0,
+                    "eval/success": success0, "eval/spl": spl0})
     start = time.perf_counter()
     for iteration in range(1, n_iterations + 1):
         lr = cfg.learning_rate * ((1.0 - (iteration - 1) / n_iterations) if cfg.anneal_lr else 1.0)
@@ -426,11 +441,7 @@ def _train_ppo(cfg: PPOConfig, worlds: Sequence[Any] | None, init_net: NavNet | 
             "losses/approx_kl": float(np.mean(stats["kl"])), "losses/clipfrac": float(np.mean(stats["clip"])),
             "losses/explained_variance": explained}
         if cfg.eval_every and iteration % cfg.eval_every == 0:
-            episodes = sample_episodes(worlds, cfg.eval_episodes, seed=cfg.seed * 100_003 + iteration)
-            res, _ = run_episodes(worlds, episodes, NeuralPolicy(net, end_threshold=cfg.end_threshold),
-                                  batch=min(cfg.eval_episodes, 128))
-            s = summarize(res)
-            row["eval/success"], row["eval/spl"] = s["success"], s["spl"]
+            row["eval/success"], row["eval/spl"] = evaluate_held_in(net)
         logger.log(row)
         if progress:
             progress.update(frames,
