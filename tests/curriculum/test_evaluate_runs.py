@@ -115,7 +115,7 @@ def test_assemble_gathers_methods_from_two_experiments_and_tests_them(tmp_path, 
 
 
 def test_table_prints_a_committed_experiment_in_points(capsys):
-    """The item-4 experiment's figures as docs/RESULTS.md quotes them, from its committed summary_final.json."""
+    """The item-4 experiment's figures as docs/results/ARCHIVE.md quotes them, from its committed summary_final.json."""
     _tool().table(TOOL.parents[1] / "docs" / "results" / "efficacy-item4")
     out = capsys.readouterr().out
     assert out.startswith("seeds [0, 1, 2, 3, 4, 5, 6, 7, 8, 9], 1000 episodes per suite; pi_0: long-unseen 70.8, "

@@ -105,7 +105,7 @@ class LoopConfig:
     """Parallel agents while fine-tuning."""
     finetune_lr: float = FinetuneConfig.learning_rate
     """Adam learning rate of fine-tuning, annealed to zero over each iteration's frames (the gentler of
-    the two rates compared in docs/RESULTS.md)."""
+    the two rates compared in docs/results/ARCHIVE.md)."""
     finetune_teacher: str = "expert"
     """Who labels fine-tuning's DAgger states: expert (shortest path), explorer or map-explorer (search, docs/agent.md) or mix."""
     finetune_min_start: float = 0.0
