@@ -53,3 +53,16 @@ def test_readme_first_lines_are_the_two_setup_commands():
     lines = README.read_text(encoding="utf-8").splitlines()
     block = "\n".join(lines[:6])
     assert "make demo" in block and "make test" in block
+
+
+# "session" as a unit of the project's work ("session 11", "sessions 14-15", "this session's host"); the
+# operating system's and pytest's sessions ("per session", scope="session") are other words.
+WORK_SESSION = re.compile(r"\bsessions? \d+|\bsession-\d+|\bsessions? of work\b|\b(this|last|previous|earlier|next|"
+                          r"later|that|with the) session\b|\bacross sessions\b|\bsession's\b", re.IGNORECASE)
+
+
+def test_docs_speak_of_dates_and_commits_not_of_work_sessions():
+    files = [README, *(p for p in sorted((ROOT / "docs").rglob("*")) if p.suffix in {".md", ".txt", ".json"})]
+    hits = [f"{p.relative_to(ROOT)}: {m.group(0)!r}" for p in files
+            for m in WORK_SESSION.finditer(p.read_text(encoding="utf-8", errors="replace"))]
+    assert not hits, hits[:20]

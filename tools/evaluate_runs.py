@@ -16,7 +16,7 @@ and for the mean of the suites, the difference A - B averaged over the seeds, it
 the paired t test (scipy) and, per suite, Holm's adjusted p over the suites. ``layouts`` counts,
 per run, the distinct house layouts fine-tuned on over all iterations (a child ``house~t02f03``
 has its parent's layout) and the scenes by kind. ``assemble`` gathers methods run in different
-experiment folders (or sessions) into one, with the experiment's own summaries and HTML report. ``pack`` copies
+experiment folders (from other machines or commits) into one, with the experiment's own summaries and HTML report. ``pack`` copies
 an experiment's results without policies or scenes (``pack_experiment``), small enough to commit; run
 ``adaptenv experiment`` on the copy to go on where it stopped. ``time`` prints where an experiment's time went,
 per method summed over its seeds: the loop's own clock by stage and the final evaluation (``final_eval.json``'s

@@ -348,7 +348,7 @@ class OursDR(Ours):
     """``ours-dr``: ``ours``' selection, diagnosis and G, trained on the children plus this iteration's fresh houses.
 
     ``ours`` replays buffer levels, whose children share few layouts (about 38 distinct houses
-    over 4 iterations against DR's 85 in the session-7 runs); this variant keeps DR's stream of
+    over 4 iterations against DR's 85 in the runs of commit `5bd92a3`); this variant keeps DR's stream of
     new layouts and adds the adapted high-regret scenes to it instead of the buffer replay.
     """
 
