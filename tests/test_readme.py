@@ -66,3 +66,19 @@ def test_docs_speak_of_dates_and_commits_not_of_work_sessions():
     hits = [f"{p.relative_to(ROOT)}: {m.group(0)!r}" for p in files
             for m in WORK_SESSION.finditer(p.read_text(encoding="utf-8", errors="replace"))]
     assert not hits, hits[:20]
+
+
+def heading_anchors(markdown: str) -> set[str]:
+    """GitHub's anchors of a Markdown file's headings: lower case, punctuation dropped, spaces to hyphens."""
+    return {re.sub(r"[^\w\- ]", "", h.strip().lower()).replace(" ", "-")
+            for h in re.findall(r"^#+ (.+)$", markdown, flags=re.M)}
+
+
+def test_readme_links_to_files_and_headings_that_exist():
+    links = re.findall(r"\]\(([^)#\s]+\.md)(?:#([^)\s]+))?\)", README.read_text(encoding="utf-8"))
+    assert ("docs/RESULTS.md", "the-current-answer") in links
+    for path, anchor in links:
+        target = ROOT / path
+        assert target.is_file(), path
+        if anchor:
+            assert anchor in heading_anchors(target.read_text(encoding="utf-8")), f"{path}#{anchor}"
