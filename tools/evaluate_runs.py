@@ -23,7 +23,7 @@ per method summed over its seeds: the loop's own clock by stage and the final ev
 ``seconds``, or for older runs the lines of a background experiment's stderr log).
 ``table`` prints an experiment's final evaluation (``summary_final.json``) in points: every method's held-out
 success, its change from pi_0 and its budget, then the reference minus each method with intervals and p values.
-docs/RESULTS.md's validation and experiment tables and docs/BENCHMARKS.md's stage tables are this script's output.
+docs/RESULTS.md's tables, those of docs/results/ and docs/BENCHMARKS.md's stage tables are this script's output.
 """
 
 from __future__ import annotations
