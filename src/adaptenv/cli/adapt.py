@@ -10,12 +10,17 @@ import json
 import logging
 import os
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 import typer
 
 from adaptenv.cli._common import JSON_OPTION
 from adaptenv.errors import AdaptenvError, ConfigError
+
+if TYPE_CHECKING:
+    from adaptenv.sim.trajectory import Trajectory
+    from adaptenv.sim.world import NavWorld
 
 log = logging.getLogger(__name__)
 
@@ -93,7 +98,7 @@ def llm_backend(model: str | None, base_url: str | None, cache_dir: Path | None,
     return make_backend(llm_config(model, base_url, cache_dir, what, **kw))
 
 
-def load_trajectory_in(trajectory: Path, world, house: Path):
+def load_trajectory_in(trajectory: Path, world: NavWorld, house: Path) -> Trajectory:
     """The trajectory at ``trajectory``, checked to have been recorded in ``world`` (the house at ``house``)."""
     from adaptenv.adapt.analysis import trajectory_mismatch
     from adaptenv.cli._common import existing_file
@@ -188,6 +193,13 @@ def adapt(
         raise ConfigError("--trajectory: give one house file and no --diagnose (the trajectory is the episode F "
                           "analyzes)")
     names, houses, skipped = _adapt_inputs(house, strict)
+    before = None
+    if trajectory is not None:
+        from adaptenv.sim.world import compile_world
+
+        before = load_trajectory_in(trajectory, compile_world(houses[0], names[0]), house)
+        if target is not None and target != before.target_type:
+            raise ConfigError(f"--target {target}: the trajectory looks for {before.target_type}; drop --target")
     configure_torch()  # one torch thread: G's rollout checks are many tiny batches
     console = Console()
     backend = None
@@ -210,7 +222,7 @@ def adapt(
         folder = out / name if house.is_dir() else out
         try:
             s = _adapt_one(h, name, folder, pol, f, gen, steps=steps, seed=seed, target=target, diagnose=diagnose,
-                           trajectory=trajectory, house_path=house)
+                           before=before)
         except AdaptenvError as exc:
             if not house.is_dir() or strict:
                 raise
@@ -229,10 +241,10 @@ def adapt(
 
 
 def _adapt_one(h, name: str, out: Path, policy, analyzer, generator, *, steps: int, seed: int, target: str | None,
-               diagnose: int, trajectory: Path | None = None, house_path: Path | None = None) -> dict:
+               diagnose: int, before: Trajectory | None = None) -> dict:
     """Adapt one house into ``out`` with :func:`~adaptenv.adapt.step.adapt_scene`; returns its summary.
 
-    With ``trajectory`` (recorded in this house) F analyzes that episode instead of a rollout of ``policy``.
+    With ``before`` (an episode recorded in this house) F analyzes it instead of a rollout of ``policy``.
     """
     from adaptenv.adapt.diagnosis import hard_episodes
     from adaptenv.adapt.step import adapt_scene, summarize, write_outputs
@@ -242,10 +254,7 @@ def _adapt_one(h, name: str, out: Path, policy, analyzer, generator, *, steps: i
     from adaptenv.sim.world import compile_world
 
     world = compile_world(h, name)
-    before = load_trajectory_in(trajectory, world, house_path or Path(name)) if trajectory is not None else None
     if before is not None:
-        if target is not None and target != before.target_type:
-            raise ConfigError(f"--target {target}: the trajectory looks for {before.target_type}; drop --target")
         episode = Episode(before.target_type, (before.start.x, before.start.z, before.start.yaw), before.seed)
     else:
         episode = draw_episode(world, np.random.default_rng([seed, 1]), target)
@@ -256,7 +265,7 @@ def _adapt_one(h, name: str, out: Path, policy, analyzer, generator, *, steps: i
                              episodes=episodes, before=before)
     s = summarize(result, analyzer=analyzer, seed=seed)
     if before is not None:
-        s["trajectory"] = {"file": str(trajectory), "policy": before.policy, "after_policy": result.after.policy}
+        s["trajectory"] = {"policy": before.policy, "after_policy": result.after.policy}
     write_outputs(result, s, out)
     return s
 
@@ -312,8 +321,8 @@ def _print_adapt_summary(console, s: dict, h, out: Path) -> None:
     console.print(f"agent: success {ab['success']} -> {aa['success']}, SPL {ab['spl']:.3f} -> {aa['spl']:.3f}, "
                   f"steps {ab['steps']} -> {aa['steps']} (lower success or SPL: the scene got harder)")
     if t := s.get("trajectory"):
-        console.print(f"  before: {t['policy']}'s recorded episode {t['file']}; after: {t['after_policy']} in the "
-                      "edited house (a different agent: compare with care)", highlight=False)
+        console.print(f"  before: {t['policy']}'s recorded episode; after: {t['after_policy']} in the edited house "
+                      "(a different agent: compare with care)", highlight=False)
     if s.get("diagnosis"):
         before, after = (SceneDiagnosis.model_validate(s[k]) for k in ("diagnosis", "diagnosis_after"))
         console.print(f"diagnosis before: {before.summary()}", highlight=False)

@@ -29,7 +29,7 @@ def from_objathor(
     """Build the --assets table of Objaverse-asset houses (SPOC's ProcTHOR-Objaverse) from objathor's annotations.
 
     Sizes are AI2-THOR's bounding boxes from the annotations; types are mapped to the catalog's from
-    ref_category, synset, most_specific_lemma or category. Then: adaptenv --assets TABLE evaluate ...
+    ref_category, most_specific_lemma, synset or category. Then: adaptenv --assets TABLE evaluate ...
     """
     from rich.console import Console
 

@@ -9,9 +9,10 @@ use). It is a JSON object keyed by asset uid (the houses' ``assetId``); the fiel
   ``{"min": {x, y, z}, "max": {x, y, z}}`` in meters (``{x, y, z}`` extents are accepted too). This
   is the size; without it the annotator's ``width``/``depth``/``height`` (cm, x/z/y) or ``size``
   ([width, depth, height] cm) are used.
-- the type, from the first of ``ref_category``, ``synset`` (WordNet, e.g. ``straight_chair.n.01``),
-  ``most_specific_lemma`` and ``category`` (free text, e.g. ``eames chair``) that names a catalog
-  type (:func:`type_for_name`). Assets none of them maps are typed :data:`FALLBACK_TYPE` with a note,
+- the type, from the first of ``ref_category``, ``most_specific_lemma`` (the synset's most specific
+  word: ``flowerpot`` tells more than a synset ``pot.n.NN``), ``synset`` (WordNet, e.g.
+  ``straight_chair.n.01``; its sense number is not used) and ``category`` (free text, e.g.
+  ``eames chair``) that names a catalog type (:func:`type_for_name`). Assets none of them maps are typed :data:`FALLBACK_TYPE` with a note,
   or left out.
 - ``split`` (train/val/test), kept so that procedural houses of one split draw only its assets.
 
@@ -26,6 +27,7 @@ import json
 import re
 import zlib
 from dataclasses import dataclass, field
+from functools import lru_cache
 from pathlib import Path
 from typing import Any, Literal
 
@@ -36,7 +38,7 @@ from adaptenv.scene.assets import load_catalog
 #: which no task targets; the scan sees it as an obstacle of that class.
 FALLBACK_TYPE = "RoomDecor"
 #: Annotation fields that may name the type, in the order they are tried.
-TYPE_FIELDS = ("ref_category", "synset", "most_specific_lemma", "category")
+TYPE_FIELDS = ("ref_category", "most_specific_lemma", "synset", "category")
 
 #: Names (lower case, words separated by spaces) of catalog types that are not the type's own name.
 ALIASES: dict[str, str] = {
@@ -105,6 +107,12 @@ def _words(name: str) -> list[str]:
     return re.findall(r"[a-z0-9]+", name.lower())
 
 
+@lru_cache(maxsize=4)
+def _by_key(types: frozenset[str]) -> dict[str, str]:
+    """Catalog types by their lower-case name without spaces ("diningtable" -> DiningTable)."""
+    return {t.lower(): t for t in types}
+
+
 def type_for_name(name: str, types: frozenset[str] | None = None) -> str | None:
     """The catalog type ``name`` denotes, or None.
 
@@ -117,7 +125,7 @@ def type_for_name(name: str, types: frozenset[str] | None = None) -> str | None:
     name = name.strip()
     if name in types:
         return name
-    by_key = {t.lower(): t for t in types}
+    by_key = _by_key(types)
     words = _words(name)
     for i in range(len(words)):
         phrase = " ".join(words[i:])

@@ -60,6 +60,8 @@ NO_FLOOR_MOTION = frozenset({"LookUp", "LookDown", "Pass", "NoOp", "Crouch", "St
                              "yms", "zp", "zps", "zm", "zms", "wp", "wm", "p", "d", "PickupObject", "DropHandObject"})
 #: How far (m) a recorded position may lie outside every room (a body in a doorway, float noise).
 OUTSIDE_TOLERANCE = 0.3
+#: Turns smaller than this (degrees) are the small turns ``ls``/``rs`` (SPOC's 6 degrees), larger ones ``l``/``r``.
+SMALL_TURN_BELOW = (ROTATE_SMALL + ROTATE_LARGE) / 2
 #: Moves must, on the median, go within about 60 degrees of where the logged yaw faces.
 MIN_ALONG_HEADING = 0.5
 
@@ -148,7 +150,6 @@ def action_code(action: Any, before: Pose, after: Pose, where: str) -> str | Non
         raise AdaptenvError(f"{where}: \"action\" must be an action name or the dict given to controller.step")
     if action in NO_FLOOR_MOTION:
         return None
-    turn = (after.yaw - before.yaw + 180.0) % 360.0 - 180.0
     if action == "MoveAgent":
         ahead = args.get("ahead")
         if not isinstance(ahead, (int, float)) or ahead == 0:
@@ -159,13 +160,14 @@ def action_code(action: Any, before: Pose, after: Pose, where: str) -> str | Non
         if not isinstance(degrees, (int, float)) or degrees == 0:
             raise AdaptenvError(f"{where}: RotateAgent needs a non-zero \"degrees\" (log the dict given to "
                                 "controller.step)")
-        return ("r" if degrees > 0 else "l") + ("s" if abs(degrees) < (ROTATE_SMALL + ROTATE_LARGE) / 2 else "")
+        return ("r" if degrees > 0 else "l") + ("s" if abs(degrees) < SMALL_TURN_BELOW else "")
     code = _NAMES.get(action)
     if code is None:
         known = sorted({*_NAMES, "MoveAgent", "RotateAgent"})
         raise AdaptenvError(f"{where}: unknown action {action!r}; use one of {', '.join(known)}, or one that "
                             f"does not move the agent ({', '.join(sorted(NO_FLOOR_MOTION)[:4])}, ...)")
-    if code in ("l", "r") and 0 < abs(turn) < (ROTATE_SMALL + ROTATE_LARGE) / 2:
+    turn = (after.yaw - before.yaw + 180.0) % 360.0 - 180.0
+    if code in ("l", "r") and 0 < abs(turn) < SMALL_TURN_BELOW:
         code += "s"  # RotateLeft/Right with a small "degrees"
     return code
 
@@ -255,9 +257,8 @@ def convert_ai2thor_log(path: str | Path, world: NavWorld, *, target_type: str |
     if not isinstance(target, str):
         raise AdaptenvError(f"{log.source}: no target type; put \"target_type\" in the log's header line or pass "
                             "--target")
-    seed = log.header.get("seed")
-    return trajectory_from_ai2thor(log.records, world, target, house=log.header.get("house") and str(log.header["house"]),
+    house, seed = log.header.get("house"), log.header.get("seed")
+    return trajectory_from_ai2thor(log.records, world, target, house=None if house is None else str(house),
                                    policy=str(log.header.get("policy", "ai2thor")),
-                                   seed=seed if isinstance(seed, int) else None, source=log.source,
-                                   lines=log.lines)
+                                   seed=seed if isinstance(seed, int) else None, source=log.source, lines=log.lines)
 
