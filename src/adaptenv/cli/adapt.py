@@ -10,12 +10,17 @@ import json
 import logging
 import os
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 import typer
 
 from adaptenv.cli._common import JSON_OPTION
 from adaptenv.errors import AdaptenvError, ConfigError
+
+if TYPE_CHECKING:
+    from adaptenv.sim.trajectory import Trajectory
+    from adaptenv.sim.world import NavWorld
 
 log = logging.getLogger(__name__)
 
@@ -24,7 +29,8 @@ ADAPT_HOUSE_ARGUMENT = typer.Argument(..., metavar="HOUSE", show_default=False,
                                            "into OUT/NAME/; houses that cannot be used are skipped).")
 HOUSE_ARGUMENT = typer.Argument(..., metavar="HOUSE.json", help="House JSON file (ProcTHOR format).",
                                 show_default=False)
-TRAJ_ARGUMENT = typer.Argument(..., metavar="TRAJ.json", help="Trajectory JSON (from `adaptenv rollout -o`).",
+TRAJ_ARGUMENT = typer.Argument(..., metavar="TRAJ.json", help="Trajectory JSON (from `adaptenv rollout -o` or "
+                               "`adaptenv trajectory from-ai2thor`).",
                                show_default=False)
 MODEL_OPTION = typer.Option(None, "--model", help="LLM model name (default gpt-4.1-mini, the paper's model).")
 BASE_URL_OPTION = typer.Option(None, "--base-url", metavar="URL",
@@ -92,6 +98,19 @@ def llm_backend(model: str | None, base_url: str | None, cache_dir: Path | None,
     return make_backend(llm_config(model, base_url, cache_dir, what, **kw))
 
 
+def load_trajectory_in(trajectory: Path, world: NavWorld, house: Path) -> Trajectory:
+    """The trajectory at ``trajectory``, checked to have been recorded in ``world`` (the house at ``house``)."""
+    from adaptenv.adapt.analysis import trajectory_mismatch
+    from adaptenv.cli._common import existing_file
+    from adaptenv.sim.trajectory import Trajectory
+
+    traj = Trajectory.load(existing_file(trajectory, "trajectory file"))
+    if (why := trajectory_mismatch(traj, world)) is not None:
+        raise ConfigError(f"{trajectory}: recorded in house {traj.house!r}, not in {house} ({why}); "
+                          "pass the house the episode ran in")
+    return traj
+
+
 def analyze(
     house: Path = HOUSE_ARGUMENT,
     trajectory: Path = TRAJ_ARGUMENT,
@@ -106,19 +125,14 @@ def analyze(
     llm_config_file: Path | None = LLM_CONFIG_OPTION,
 ) -> None:
     """Analyze one recorded episode (the paper's F): outcome, concerns and suggestions."""
-    from adaptenv.adapt.analysis import BuiltinAnalyzer, LLMAnalyzer, trajectory_mismatch
+    from adaptenv.adapt.analysis import BuiltinAnalyzer, LLMAnalyzer
     from adaptenv.cli._common import existing_file
-    from adaptenv.errors import ConfigError
     from adaptenv.scene.house import load_house
-    from adaptenv.sim.trajectory import Trajectory
     from adaptenv.sim.world import compile_world
 
     h = load_house(existing_file(house, "house file"))
-    traj = Trajectory.load(existing_file(trajectory, "trajectory file"))
     world = compile_world(h, house.stem)
-    if (why := trajectory_mismatch(traj, world)) is not None:
-        raise ConfigError(f"{trajectory}: recorded in house {traj.house!r}, not in {house} ({why}); "
-                          "pass the house the episode ran in")
+    traj = load_trajectory_in(trajectory, world, house)
     analyzer = (LLMAnalyzer(llm_backend(model, base_url, llm_cache, "--llm", api=api, api_key_env=api_key_env,
                                         prompts=prompts, config_file=llm_config_file))
                 if llm else BuiltinAnalyzer())
@@ -153,6 +167,10 @@ def adapt(
                                  "several episodes; G aims at their failure modes; --target is then ignored)."),
     strict: bool = typer.Option(False, "--strict", help="With a folder: fail on the first house that cannot be "
                                 "used instead of skipping it with a warning."),
+    trajectory: Path | None = typer.Option(None, "--trajectory", metavar="TRAJ.json", help="An episode recorded in "
+                                           "HOUSE (adaptenv rollout -o, adaptenv trajectory from-ai2thor) for F to "
+                                           "analyze instead of rolling out --policy, which still checks G's edits "
+                                           "and runs the episode again in the edited house."),
 ) -> None:
     """One closed-loop step: roll out the policy, analyze (F), edit the house (G), validate, write OUT.
 
@@ -171,7 +189,17 @@ def adapt(
         raise ConfigError(f"--generator {generator!r}: unknown generator; use one of {', '.join(GENERATORS)}")
     if analyzer not in ("builtin", "llm"):
         raise ConfigError(f"--analyzer {analyzer!r}: unknown analyzer; use builtin or llm")
+    if trajectory is not None and (house.is_dir() or diagnose):
+        raise ConfigError("--trajectory: give one house file and no --diagnose (the trajectory is the episode F "
+                          "analyzes)")
     names, houses, skipped = _adapt_inputs(house, strict)
+    before = None
+    if trajectory is not None:
+        from adaptenv.sim.world import compile_world
+
+        before = load_trajectory_in(trajectory, compile_world(houses[0], names[0]), house)
+        if target is not None and target != before.target_type:
+            raise ConfigError(f"--target {target}: the trajectory looks for {before.target_type}; drop --target")
     configure_torch()  # one torch thread: G's rollout checks are many tiny batches
     console = Console()
     backend = None
@@ -193,7 +221,8 @@ def adapt(
     for name, h in zip(names, houses, strict=True):
         folder = out / name if house.is_dir() else out
         try:
-            s = _adapt_one(h, name, folder, pol, f, gen, steps=steps, seed=seed, target=target, diagnose=diagnose)
+            s = _adapt_one(h, name, folder, pol, f, gen, steps=steps, seed=seed, target=target, diagnose=diagnose,
+                           before=before)
         except AdaptenvError as exc:
             if not house.is_dir() or strict:
                 raise
@@ -212,22 +241,31 @@ def adapt(
 
 
 def _adapt_one(h, name: str, out: Path, policy, analyzer, generator, *, steps: int, seed: int, target: str | None,
-               diagnose: int) -> dict:
-    """Adapt one house into ``out`` with :func:`~adaptenv.adapt.step.adapt_scene`; returns its summary."""
+               diagnose: int, before: Trajectory | None = None) -> dict:
+    """Adapt one house into ``out`` with :func:`~adaptenv.adapt.step.adapt_scene`; returns its summary.
+
+    With ``before`` (an episode recorded in this house) F analyzes it instead of a rollout of ``policy``.
+    """
     from adaptenv.adapt.diagnosis import hard_episodes
     from adaptenv.adapt.step import adapt_scene, summarize, write_outputs
     from adaptenv.agents.rollout import draw_episode
     from adaptenv.progress import ProgressBar
+    from adaptenv.sim.task import Episode
     from adaptenv.sim.world import compile_world
 
     world = compile_world(h, name)
-    episode = draw_episode(world, np.random.default_rng([seed, 1]), target)
+    if before is not None:
+        episode = Episode(before.target_type, (before.start.x, before.start.z, before.start.yaw), before.seed)
+    else:
+        episode = draw_episode(world, np.random.default_rng([seed, 1]), target)
     episodes = hard_episodes(world, np.random.default_rng([seed, 2]), diagnose) if diagnose else None
     with ProgressBar(f"adapting {name}: rollout, F, G ({steps} edits), validation, rollout again"):
         result = adapt_scene(h, episode, policy=policy, analyzer=analyzer, generator=generator, steps=steps,
                              rng=np.random.default_rng(seed), name=name, render=True, render_dir=out / "steps",
-                             episodes=episodes)
+                             episodes=episodes, before=before)
     s = summarize(result, analyzer=analyzer, seed=seed)
+    if before is not None:
+        s["trajectory"] = {"policy": before.policy, "after_policy": result.after.policy}
     write_outputs(result, s, out)
     return s
 
@@ -282,6 +320,9 @@ def _print_adapt_summary(console, s: dict, h, out: Path) -> None:
                       f"{harder_or_easier(k, ob[k], oa[k])}")
     console.print(f"agent: success {ab['success']} -> {aa['success']}, SPL {ab['spl']:.3f} -> {aa['spl']:.3f}, "
                   f"steps {ab['steps']} -> {aa['steps']} (lower success or SPL: the scene got harder)")
+    if t := s.get("trajectory"):
+        console.print(f"  before: {t['policy']}'s recorded episode; after: {t['after_policy']} in the edited house "
+                      "(a different agent: compare with care)", highlight=False)
     if s.get("diagnosis"):
         before, after = (SceneDiagnosis.model_validate(s[k]) for k in ("diagnosis", "diagnosis_after"))
         console.print(f"diagnosis before: {before.summary()}", highlight=False)

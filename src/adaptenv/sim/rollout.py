@@ -59,10 +59,7 @@ def run_episode(world: NavWorld, episode: Episode, policy: Policy, *, max_steps:
             raise ValueError(f"policy returned action {a}; expected an index into spec.ACTIONS (0..{N_ACTIONS - 1})")
         step = Step(pose=Pose(x=px, z=pz, yaw=pyaw), action=ACTIONS[a])
         if record:
-            step.visible = visible_instances(world, px, pz, pyaw, t, max_distance=MAX_RANGE)
-            step.clearance = float(world.grid.clearance_at(px, pz))
-            g = geodesic_distance(world, t, px, pz)
-            step.geodesic = g if np.isfinite(g) else None
+            record_sight(world, t, step)
         if a == END:
             steps.append(step)
             break
@@ -71,15 +68,29 @@ def run_episode(world: NavWorld, episode: Episode, policy: Policy, *, max_steps:
         step.moved = moved
         collided = a in (MOVE_AHEAD, MOVE_BACK) and not moved
         steps.append(step)
-    inst = world.instances_of(t)
     traj = Trajectory(
-        house=world.name, target_type=t, target_ids=[i.object_id for i in inst],
-        target_positions=[(float(i.center[0]), float(i.center[1])) for i in inst],
+        house=world.name, target_type=t, **target_fields(world, t),
         start=Pose(x=episode.start[0], z=episode.start[1], yaw=episode.start[2] % 360.0), steps=steps,
         final_pose=Pose(x=float(x[0]), z=float(z[0]), yaw=float(yaw[0])),
         policy=policy_name or getattr(policy, "name", type(policy).__name__), seed=episode.seed)
     traj.metrics = episode_metrics(world, traj, expert_length=expert_length)
     return traj
+
+
+def record_sight(world: NavWorld, target_type: str, step: Step) -> None:
+    """Fill a step's ``visible`` target ids, ``clearance`` and ``geodesic`` at its pose."""
+    p = step.pose
+    step.visible = visible_instances(world, p.x, p.z, p.yaw, target_type, max_distance=MAX_RANGE)
+    step.clearance = float(world.grid.clearance_at(p.x, p.z))
+    g = geodesic_distance(world, target_type, p.x, p.z)
+    step.geodesic = g if np.isfinite(g) else None
+
+
+def target_fields(world: NavWorld, target_type: str) -> dict[str, list]:
+    """A trajectory's ``target_ids`` and ``target_positions``: every instance of the type in ``world``."""
+    inst = world.instances_of(target_type)
+    return {"target_ids": [i.object_id for i in inst],
+            "target_positions": [(float(i.center[0]), float(i.center[1])) for i in inst]}
 
 
 class _ExpertPolicy:
