@@ -71,8 +71,26 @@ def unusable_reason(world: NavWorld) -> str | None:
                 "solvable, so no episode can start away from a target")
     present = sorted(set(world.object_types) & set(TARGET_TYPES))
     if not present:
+        off_floor = off_floor_targets(world)
+        if off_floor:
+            return (f"the house's only ObjectNav target objects are {off_floor}, and only objects standing on the "
+                    "floor are targets")
         return f"the house has no ObjectNav target object (none of {', '.join(TARGET_TYPES)})"
     return f"no target object ({', '.join(present)}) can be seen from the reachable floor"
+
+
+def off_floor_targets(world: NavWorld) -> str:
+    """The target-type objects that are not targets because they are off the floor, as a phrase ('' if none):
+    e.g. 'wall-mounted (Television)' or 'resting on other furniture (HousePlant)'."""
+    geometry = world.geometry
+    kinds = (("wall-mounted", [f for f in geometry.footprints if f.role == "wall"]),
+             ("resting on other furniture", [c for cs in geometry.children.values() for c in cs]))
+    phrases = []
+    for kind, objects in kinds:
+        types = sorted({f.object_type for f in objects} & set(TARGET_TYPES))
+        if types:
+            phrases.append(f"{kind} ({', '.join(types)})")
+    return " or ".join(phrases)
 
 
 def usable_houses(houses: Sequence[House | NavWorld | BaseException], names: Sequence[str], *, strict: bool = False,
