@@ -106,3 +106,14 @@ def test_export_round_trips_and_a_single_house_loader_points_to_it(datasets, tmp
         load_house(packed)
     res = CliRunner().invoke(app, ["houses", "export", str(REAL_HOUSE), "-o", str(out)])
     assert isinstance(res.exception, ConfigError) and "not a house dataset" in str(res.exception)
+
+
+def test_the_gymnasium_env_takes_a_dataset(datasets):
+    import gymnasium as gym
+
+    _, packed = datasets
+    env = gym.make("adaptenv/ObjectNav-v0", houses=f"{packed}:0:1")
+    obs, _ = env.reset(seed=0)
+    assert env.unwrapped.world.name == "house_0" and obs["depth"].shape
+    with pytest.raises(ConfigError, match="is one path, not a list of houses"):
+        gym.make("adaptenv/ObjectNav-v0", houses=str(REAL_HOUSE))
