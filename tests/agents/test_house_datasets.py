@@ -117,3 +117,15 @@ def test_the_gymnasium_env_takes_a_dataset(datasets):
     assert env.unwrapped.world.name == "house_0" and obs["depth"].shape
     with pytest.raises(ConfigError, match="is one path, not a list of houses"):
         gym.make("adaptenv/ObjectNav-v0", houses=str(REAL_HOUSE))
+
+
+def test_validate_checks_every_line_and_names_the_bad_one(tmp_path):
+    doc = json.loads(_lines()[0])
+    doc["doors"][0]["wall0"] = "nope"
+    path = tmp_path / "d.jsonl"
+    path.write_text("\n".join([_lines()[0], json.dumps(doc)]) + "\n", encoding="utf-8")
+    res = CliRunner().invoke(app, ["validate", str(path)])
+    assert res.exit_code == 1
+    assert res.output.splitlines()[0].startswith(f"{path} line 2: at doors[0].wall0, ")
+    assert res.output.splitlines()[-1] == "1 problem in 1 of 2 houses"
+    assert CliRunner().invoke(app, ["validate", f"{path}:0:1"]).output.strip() == "1 house valid"

@@ -13,7 +13,6 @@ import textwrap
 from pathlib import Path
 from typing import Annotated
 
-import click
 import typer
 from typer.core import TyperCommand
 
@@ -84,13 +83,14 @@ class _GenerateCommand(TyperCommand):
     """``houses generate``, whose --preset help lists the preset registry's names when help is shown (importing
     the registry takes most of a second, too long for every command line)."""
 
-    def format_help(self, ctx: click.Context, formatter: click.HelpFormatter) -> None:
+    def format_help(self, ctx: typer.Context, formatter) -> None:
         from adaptenv.scene.procedural.presets import PRESETS
 
         names = "\n".join(textwrap.wrap(", ".join(PRESETS), 40, break_on_hyphens=False))
         for param in self.params:
             if param.name == "preset":  # \b: click keeps the lines, so no name is split at its hyphen
-                param.help = f"A named house set (ignores --n, --seed and --rooms; docs/houses.md), one of:\n\n\b\n{names}"
+                param.help = ("A named house set (ignores --n, --seed and --rooms; docs/houses.md), one of:"
+                              f"\n\n\b\n{names}")
         super().format_help(ctx, formatter)
 
 
@@ -100,8 +100,7 @@ def generate(
     n: Annotated[int, typer.Option("--n", help="Number of houses (ignored with --preset).")] = 1,
     seed: Annotated[int, typer.Option("--seed", help="Root seed: the same seed gives byte-identical houses.")] = 0,
     rooms: Annotated[str | None, typer.Option("--rooms", help=_ROOMS_HELP)] = None,
-    preset: Annotated[str | None, typer.Option("--preset", help="A named house set (listed when help is shown).",
-                                               )] = None,
+    preset: Annotated[str | None, typer.Option("--preset", help="A named house set (listed by --help).")] = None,
     split: Annotated[str, typer.Option("--split", help="ProcTHOR asset split the furniture comes from.")] = "train",
 ) -> None:
     """Generate procedural ProcTHOR-format houses (loadable in AI2-THOR >= 5.0)."""

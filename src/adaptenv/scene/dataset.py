@@ -28,8 +28,6 @@ from adaptenv.errors import ConfigError, HouseError
 from adaptenv.scene.house import House, parse_house
 from adaptenv.scene.validate import validate_house
 
-#: File name endings of house datasets.
-DATASET_SUFFIXES = (".jsonl", ".jsonl.gz")
 _SPEC = re.compile(r"^(?P<path>.*?\.jsonl(?:\.gz)?)(?::(?P<slice>.*))?$", re.IGNORECASE)
 
 
