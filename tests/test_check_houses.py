@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import importlib.util
+import json
 import sys
 from pathlib import Path
 
@@ -38,3 +39,12 @@ def test_counts_every_stage_and_fails_the_check_on_a_broken_house(tmp_path, caps
     assert "round trip" in out and "3/3 (100.0%)" in out and "c_broken" in out
     (d / "c_broken.json").unlink()
     assert tool.main([str(d), "--episodes", "2", "--agent", "none", "--check"]) == 0
+
+
+def test_reads_a_sliced_house_dataset(tmp_path):
+    tool = _tool()
+    path = tmp_path / "houses.jsonl"
+    docs = [H.corridor_house().to_dict(), json.loads(REAL_HOUSE.read_text(encoding="utf-8"))]
+    path.write_text("\n".join([*map(json.dumps, docs), "{"]) + "\n", encoding="utf-8")  # a broken line past the slice
+    rep = tool.check_set(f"{path}:0:2", episodes=2, seed=0, agent=None)
+    assert (rep.houses, rep.loaded, rep.round_trip, rep.usable, rep.solvable) == (2, 2, 2, 2, 2)

@@ -57,3 +57,12 @@ def test_houses_generate_errors_name_the_flag_and_print_nothing_first(args, flag
     assert isinstance(result.exception, ConfigError)
     assert str(result.exception).startswith(flag + ":")
     assert result.output == ""
+
+
+def test_houses_generate_help_names_every_preset():
+    from adaptenv.scene.procedural import PRESETS
+
+    result = runner.invoke(app, ["houses", "generate", "--help"], env={"COLUMNS": "80"})
+    assert result.exit_code == 0, result.output
+    listed = set(re.findall(r"[\w-]+", result.output))
+    assert set(PRESETS) <= listed, sorted(set(PRESETS) - listed)

@@ -4,7 +4,8 @@ Usage:
     python tools/check_houses.py HOUSES [HOUSES ...] [--episodes N] [--seed S] [--agent pretrained|none]
                                  [--assets FILE] [--check]
 
-HOUSES is a folder of house JSON files, one house file, or preset:NAME. For each set the script
+HOUSES is a folder of house JSON files, one house file, a dataset FILE.jsonl[.gz] (one house per line,
+optionally sliced: FILE.jsonl.gz:0:100), or preset:NAME. For each set the script
 runs, per house: load (parse and the semantic checks of ``adaptenv validate``), a save/load round
 trip (the written document must parse back to the same JSON), compile and episode availability
 (the ``load_house_set`` rule), then ``--episodes`` sampled episodes over the usable houses
@@ -33,6 +34,7 @@ from adaptenv.agents.policy import ExpertPolicy
 from adaptenv.agents.registry import resolve_policy
 from adaptenv.errors import AdaptenvError, HouseError
 from adaptenv.scene.assets import use_assets
+from adaptenv.scene.dataset import dataset_houses, parse_dataset_spec
 from adaptenv.scene.house import House, parse_house, read_house_document, save_house
 from adaptenv.scene.procedural import PRESETS, generate_preset
 from adaptenv.scene.validate import validate_house
@@ -58,22 +60,30 @@ class SetReport:
     skipped: list[SkippedHouse] = field(default_factory=list)
 
 
-def house_files(spec: str) -> list[tuple[str, House | Path]]:
-    """(name, generated house or file path) of every house a spec names."""
+def house_files(spec: str) -> list[tuple[str, House | Path | HouseError]]:
+    """(name, house, file path, or the HouseError of a dataset line that is no house) of every house a spec names."""
     if spec.startswith("preset:"):
         name = spec.partition(":")[2]
         if name not in PRESETS:
             raise SystemExit(f"{spec}: unknown preset; use one of {', '.join('preset:' + p for p in PRESETS)}")
         return list(generate_preset(name))
+    try:
+        if (dataset := parse_dataset_spec(spec)) is not None:
+            return list(dataset_houses(dataset, validate=False))  # load_one validates
+    except AdaptenvError as exc:
+        raise SystemExit(str(exc)) from None
     path = Path(spec)
     files = sorted(path.glob("*.json")) if path.is_dir() else [path]
     if not files or not all(f.is_file() for f in files):
-        raise SystemExit(f"{spec}: no house JSON files there; pass a folder, a file or preset:NAME")
+        raise SystemExit(f"{spec}: no house JSON files there; pass a folder, a file, a FILE.jsonl.gz dataset or "
+                         "preset:NAME")
     return [(f.stem, f) for f in files]
 
 
-def load_one(item: House | Path) -> House:
+def load_one(item: House | Path | HouseError) -> House:
     """Parse and validate one house (HouseError lists its problems)."""
+    if isinstance(item, HouseError):
+        raise item
     if isinstance(item, House):
         problems = validate_house(item)
         house = item
@@ -181,7 +191,8 @@ def failed(reports: list[SetReport], min_expert: float) -> list[str]:
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("houses", nargs="+", help="folders of house JSON files, house files, or preset:NAME")
+    parser.add_argument("houses", nargs="+", help="folders of house JSON files, house files, "
+                        "datasets FILE.jsonl[.gz][:START:STOP], or preset:NAME")
     parser.add_argument("--episodes", type=int, default=100, help="episodes per set (default 100)")
     parser.add_argument("--seed", type=int, default=0, help="seed of the episode draw (default 0)")
     parser.add_argument("--agent", default="pretrained",

@@ -89,3 +89,16 @@ def test_loop_and_experiment_check_house_sets_up_front(mixed_folder, tmp_path):
     res = CliRunner().invoke(app, ["loop", "--houses", str(mixed_folder), "-o", str(tmp_path / "run"), "--strict"])
     assert res.exit_code != 0 and isinstance(res.exception, ConfigError)
     assert not (tmp_path / "run").exists()
+
+
+def test_a_house_whose_only_targets_hang_on_the_wall_says_so(tmp_path):
+    from adaptenv.scene.assets import load_catalog
+
+    tv = next(a for a in load_catalog().assets.values() if a.object_type == "Television")
+    house = H.one_room(objects=[H.Obj(tv.asset_id, 2.0, 0.2)])
+    house.objects[0].position.y += 1.2  # mounted on the wall, its bottom well above the floor
+    save_house(house, tmp_path / "wall_tv.json")
+    with pytest.raises(ConfigError) as err:
+        load_house_set(tmp_path)
+    assert "only ObjectNav target objects are wall-mounted (Television)" in str(err.value)
+    assert "has no ObjectNav target" not in str(err.value)

@@ -15,7 +15,7 @@ class TrainConfig:
     """Settings of one imitation-learning run (``adaptenv train``)."""
 
     houses: str = "preset:pretrain-train"
-    """Training houses: a folder of house JSON files, one house file, or preset:NAME."""
+    """Training houses: a folder of house JSON files, one house file, a dataset FILE.jsonl[.gz][:START:STOP], or preset:NAME."""
     frames: int = 1_200_000
     """Labelled environment frames to collect (the training budget)."""
     output: str = "runs/policy.pt"
@@ -102,7 +102,7 @@ class PPOConfig:
     """Settings of one PPO run (``adaptenv ppo``): the simulator's SPOC-style reward, warm-started from a checkpoint."""
 
     houses: str = "preset:pretrain-train"
-    """Training houses: a folder of house JSON files, one house file, or preset:NAME."""
+    """Training houses: a folder of house JSON files, one house file, a dataset FILE.jsonl[.gz][:START:STOP], or preset:NAME."""
     frames: int = 1_000_000
     """Environment frames to collect (the training budget)."""
     init: str = "pretrained"

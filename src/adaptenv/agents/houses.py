@@ -1,4 +1,8 @@
-"""Resolve a ``--houses`` value (a folder, a file, ``preset:NAME`` or ``suite:NAME``) into named compiled worlds.
+"""Resolve a ``--houses`` value (a folder, a file, a dataset, ``preset:NAME`` or ``suite:NAME``) into named compiled worlds.
+
+A dataset is a ``.jsonl`` or ``.jsonl.gz`` file of houses, one per line (ProcTHOR-10K, SPOC), optionally
+sliced: ``train.jsonl.gz:0:100`` (see :mod:`adaptenv.scene.dataset`); its houses are named
+``house-000042`` by line index and read line by line.
 
 ``suite:NAME`` (see :mod:`adaptenv.agents.suites`) loads the suite's houses and attaches its episode
 floor to ``HouseSet.worlds``, so :func:`adaptenv.agents.evaluate.sample_episodes` draws the suite's
@@ -20,6 +24,7 @@ from pathlib import Path
 
 from adaptenv.agents.suites import SuiteWorlds, suite_spec
 from adaptenv.errors import AdaptenvError, ConfigError
+from adaptenv.scene.dataset import dataset_houses, parse_dataset_spec
 from adaptenv.scene.house import House, load_house
 from adaptenv.scene.procedural import PRESETS, generate_preset
 from adaptenv.sim.spec import TARGET_TYPES
@@ -28,8 +33,9 @@ from adaptenv.sim.world import NavWorld, compile_world
 
 log = logging.getLogger(__name__)
 
-HOUSES_HELP = ("Houses: a folder of house JSON files, one house file, preset:NAME (e.g. preset:pretrain-train) "
-               "or suite:NAME (e.g. suite:long-unseen).")
+HOUSES_HELP = ("Houses: a folder of house JSON files, one house file, a dataset FILE.jsonl[.gz] with an optional "
+               "slice FILE.jsonl.gz:0:100, preset:NAME (e.g. preset:pretrain-train) or suite:NAME (e.g. "
+               "suite:long-unseen).")
 STRICT_HELP = "Fail on the first house that cannot be used instead of skipping it with a warning."
 
 
@@ -65,8 +71,26 @@ def unusable_reason(world: NavWorld) -> str | None:
                 "solvable, so no episode can start away from a target")
     present = sorted(set(world.object_types) & set(TARGET_TYPES))
     if not present:
+        off_floor = off_floor_targets(world)
+        if off_floor:
+            return (f"the house's only ObjectNav target objects are {off_floor}, and only objects standing on the "
+                    "floor are targets")
         return f"the house has no ObjectNav target object (none of {', '.join(TARGET_TYPES)})"
     return f"no target object ({', '.join(present)}) can be seen from the reachable floor"
+
+
+def off_floor_targets(world: NavWorld) -> str:
+    """The target-type objects that are not targets because they are off the floor, as a phrase ('' if none):
+    e.g. 'wall-mounted (Television)' or 'resting on other furniture (HousePlant)'."""
+    geometry = world.geometry
+    kinds = (("wall-mounted", [f for f in geometry.footprints if f.role == "wall"]),
+             ("resting on other furniture", [c for cs in geometry.children.values() for c in cs]))
+    phrases = []
+    for kind, objects in kinds:
+        types = sorted({f.object_type for f in objects} & set(TARGET_TYPES))
+        if types:
+            phrases.append(f"{kind} ({', '.join(types)})")
+    return " or ".join(phrases)
 
 
 def usable_houses(houses: Sequence[House | NavWorld | BaseException], names: Sequence[str], *, strict: bool = False,
@@ -119,23 +143,28 @@ def load_house_set(spec: str | Path, *, strict: bool = False) -> HouseSet:
             raise ConfigError(f"--houses {text!r}: unknown preset; choose one of "
                               + ", ".join(f"preset:{p}" for p in PRESETS))
         pairs = generate_preset(name)
-        names = [n for n, _ in pairs]
-        houses = [h for _, h in pairs]
+    elif (dataset := parse_dataset_spec(text)) is not None:
+        pairs = list(dataset_houses(dataset))
     else:
-        path = Path(text)
-        if path.is_dir():
-            files = sorted(path.glob("*.json"))
-            if not files:
-                raise ConfigError(f"--houses {path}: the folder holds no *.json house files")
-        elif path.is_file():
-            files = [path]
-        else:
-            raise ConfigError(f"--houses {text!r}: no such folder or file; pass a folder of house JSON "
-                              "files or preset:NAME")
-        houses = [_try_load(load_house, f) for f in files]
-        names = [f.stem for f in files]
+        pairs = [(f.stem, _try_load(load_house, f)) for f in _house_files(text)]
+    names = [n for n, _ in pairs]
+    houses = [h for _, h in pairs]
     houses, worlds, skipped = usable_houses(houses, names, strict=strict, spec=text)
     return HouseSet(text, houses, worlds, skipped)
+
+
+def _house_files(text: str) -> list[Path]:
+    """The house files of a folder (its ``*.json``, sorted) or of one file; ConfigError when there are none."""
+    path = Path(text)
+    if path.is_dir():
+        files = sorted(path.glob("*.json"))
+        if not files:
+            raise ConfigError(f"--houses {path}: the folder holds no *.json house files")
+        return files
+    if path.is_file():
+        return [path]
+    raise ConfigError(f"--houses {text!r}: no such folder or file; pass a folder of house JSON files, a "
+                      "FILE.jsonl.gz dataset or preset:NAME")
 
 
 def _try_load(load, path: Path) -> House | AdaptenvError:

@@ -4,10 +4,13 @@ Each module in this package owns one group of commands and exposes ``register(ap
 they are discovered here, so adding a command never means editing this file. Commands keep heavy
 imports inside their functions so that ``adaptenv --help`` stays fast. Errors adaptenv raises on
 purpose (:class:`~adaptenv.errors.AdaptenvError`) are printed as one line, without a traceback.
+Global options (``--assets``) are accepted before the command and after it: :class:`_Root` gives
+every command a copy of them.
 """
 
 from __future__ import annotations
 
+import copy
 import importlib
 import pkgutil
 import sys
@@ -15,6 +18,7 @@ from pathlib import Path
 
 import typer
 from rich.console import Console
+from typer.core import TyperGroup
 
 from adaptenv.errors import AdaptenvError
 
@@ -22,8 +26,39 @@ HELP_STYLE = {"rich_markup_mode": None}
 """Plain (click) help for every command group: it wraps each option's help across the whole terminal
 width, where rich's six-column option table leaves the help a few words wide in 80 columns."""
 
+ASSETS_HELP = ("A JSON table of your own assets (asset id -> object type, bounding box, optional footprint) that "
+               "extends the ProcTHOR catalog for every command; repeatable. Give it before or after the command: "
+               "adaptenv --assets my_assets.json evaluate ... or adaptenv evaluate ... --assets my_assets.json")
+
+
+def _use_assets(assets) -> None:
+    """Extend the asset catalog with the ``--assets`` tables, for this process and its workers."""
+    if assets:
+        from adaptenv.scene.assets import use_assets
+
+        use_assets(*assets)
+
+
+class _Root(TyperGroup):
+    """The ``adaptenv`` group: every command below it also takes the global options, after its name."""
+
+    def __init__(self, **attrs) -> None:
+        super().__init__(**attrs)
+        assets = copy.copy(next(p for p in self.params if p.name == "assets"))  # the callback's --assets
+        assets.expose_value, assets.help = False, "As adaptenv --assets FILE: your own asset table (repeatable)."
+        assets.callback = lambda ctx, param, value: _use_assets(value)
+        groups = [self]
+        while groups:
+            for command in groups.pop().commands.values():
+                if isinstance(command, TyperGroup):
+                    groups.append(command)
+                else:
+                    command.params.append(assets)
+
+
 app = typer.Typer(
     name="adaptenv",
+    cls=_Root,
     help="Closed-loop, adaptive environment generation for embodied navigation agents.",
     no_args_is_help=True,
     add_completion=False,
@@ -38,15 +73,9 @@ err_console = Console(stderr=True)
 
 
 @app.callback()
-def _options(assets: list[Path] = typer.Option(
-        None, "--assets", metavar="FILE", help="A JSON table of your own assets (asset id -> object type, bounding "
-        "box, optional footprint) that extends the ProcTHOR catalog for every command; repeatable. Give it "
-        "before the command: adaptenv --assets my_assets.json evaluate ...")) -> None:
+def _options(assets: list[Path] = typer.Option(None, "--assets", metavar="FILE", help=ASSETS_HELP)) -> None:
     """Closed-loop, adaptive environment generation for embodied navigation agents."""
-    if assets:
-        from adaptenv.scene.assets import use_assets
-
-        use_assets(*assets)
+    _use_assets(assets)
 
 
 def _register_all() -> None:

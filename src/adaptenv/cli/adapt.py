@@ -25,8 +25,9 @@ if TYPE_CHECKING:
 log = logging.getLogger(__name__)
 
 ADAPT_HOUSE_ARGUMENT = typer.Argument(..., metavar="HOUSE", show_default=False,
-                                      help="House JSON file (ProcTHOR format), or a folder of them (each adapted "
-                                           "into OUT/NAME/; houses that cannot be used are skipped).")
+                                      help="House JSON file (ProcTHOR format), or a folder of them or a dataset "
+                                           "FILE.jsonl[.gz][:START:STOP] (each house adapted into OUT/NAME/; houses "
+                                           "that cannot be used are skipped).")
 HOUSE_ARGUMENT = typer.Argument(..., metavar="HOUSE.json", help="House JSON file (ProcTHOR format).",
                                 show_default=False)
 TRAJ_ARGUMENT = typer.Argument(..., metavar="TRAJ.json", help="Trajectory JSON (from `adaptenv rollout -o` or "
@@ -174,8 +175,9 @@ def adapt(
 ) -> None:
     """One closed-loop step: roll out the policy, analyze (F), edit the house (G), validate, write OUT.
 
-    HOUSE may be a folder: each usable house is adapted into OUT/NAME/ and OUT/summary.json counts
-    the adapted, valid and skipped houses (exit 0 when at least one valid house was made).
+    HOUSE may be a folder or a dataset (FILE.jsonl.gz[:START:STOP]): each usable house is adapted
+    into OUT/NAME/ and OUT/summary.json counts the adapted, valid and skipped houses (exit 0 when
+    at least one valid house was made).
     """
     from rich.console import Console
 
@@ -189,10 +191,11 @@ def adapt(
         raise ConfigError(f"--generator {generator!r}: unknown generator; use one of {', '.join(GENERATORS)}")
     if analyzer not in ("builtin", "llm"):
         raise ConfigError(f"--analyzer {analyzer!r}: unknown analyzer; use builtin or llm")
-    if trajectory is not None and (house.is_dir() or diagnose):
+    many = _is_house_set(house)
+    if trajectory is not None and (many or diagnose):
         raise ConfigError("--trajectory: give one house file and no --diagnose (the trajectory is the episode F "
                           "analyzes)")
-    names, houses, skipped = _adapt_inputs(house, strict)
+    names, houses, skipped = _adapt_inputs(house, many, strict)
     before = None
     if trajectory is not None:
         from adaptenv.sim.world import compile_world
@@ -219,22 +222,22 @@ def adapt(
     pol = resolve_policy(policy, seed=seed)
     summaries = []
     for name, h in zip(names, houses, strict=True):
-        folder = out / name if house.is_dir() else out
+        folder = out / name if many else out
         try:
             s = _adapt_one(h, name, folder, pol, f, gen, steps=steps, seed=seed, target=target, diagnose=diagnose,
                            before=before)
         except AdaptenvError as exc:
-            if not house.is_dir() or strict:
+            if not many or strict:
                 raise
             log.warning("skipping house %s: %s", name, exc)
             skipped.append(SkippedHouse(name, str(exc)))
             continue
         summaries.append(s)
-        if as_json and not house.is_dir():
+        if as_json and not many:
             typer.echo(json.dumps(s, indent=1, default=str))
         elif not as_json:
             _print_adapt_summary(console, s, h, folder)
-    if house.is_dir():
+    if many:
         _finish_folder(house, out, summaries, skipped, as_json)
     elif not summaries[0]["valid"]:
         raise typer.Exit(1)
@@ -270,13 +273,20 @@ def _adapt_one(h, name: str, out: Path, policy, analyzer, generator, *, steps: i
     return s
 
 
-def _adapt_inputs(house: Path, strict: bool) -> tuple[list[str], list, list]:
-    """(names, houses, skipped): one file (its errors stay errors) or a folder (unusable houses skipped)."""
+def _is_house_set(house: Path) -> bool:
+    """Whether HOUSE names several houses (a folder or a dataset) rather than one house file."""
+    from adaptenv.scene.dataset import parse_dataset_spec
+
+    return house.is_dir() or parse_dataset_spec(house) is not None
+
+
+def _adapt_inputs(house: Path, many: bool, strict: bool) -> tuple[list[str], list, list]:
+    """(names, houses, skipped): one file (its errors stay errors) or a set (unusable houses skipped)."""
     from adaptenv.agents.houses import load_house_set
     from adaptenv.cli._common import existing_file
     from adaptenv.scene.house import load_house
 
-    if house.is_dir():
+    if many:
         hs = load_house_set(house, strict=strict)
         return hs.names, hs.houses, list(hs.skipped)
     return [house.stem], [load_house(existing_file(house, "house file"))], []

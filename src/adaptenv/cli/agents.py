@@ -16,7 +16,8 @@ import typer
 from adaptenv.cli._common import JSON_OPTION
 
 _SHORT = {"output": ["-o"], "seed": ["-s"]}
-_HOUSES_OPTION = typer.Option(..., "--houses", help="Folder of house JSON files, a house file, preset:NAME or "
+_HOUSES_OPTION = typer.Option(..., "--houses", help="Folder of house JSON files, a house file, a dataset "
+                              "FILE.jsonl[.gz] (a slice such as FILE.jsonl.gz:0:100 picks lines), preset:NAME or "
                               "suite:NAME; "
                               "repeat to compare sets (the first is the baseline of the drop).")
 _OUT_OPTION = typer.Option(Path("runs/eval"), "-o", "--out", help="Output folder (one subfolder per house set).")

@@ -74,7 +74,8 @@ def check_house_sets(specs: list[str], strict: bool, say) -> dict[str, int]:
 
 def loop(
     policy: str = typer.Option("pretrained", "--policy", help="Starting policy: pretrained or a checkpoint path."),
-    houses: str = typer.Option("preset:pretrain-train", "--houses", help="Training scenes: a folder or preset:NAME."),
+    houses: str = typer.Option("preset:pretrain-train", "--houses", help="Training scenes: a folder of house "
+                                "JSON files, a house file, a dataset FILE.jsonl[.gz][:START:STOP] or preset:NAME."),
     iterations: int = typer.Option(3, "--iterations", "-T", min=1, help="Loop iterations."),
     method: str = typer.Option("ours", "--method", help="none, random, dr, plr, accel, ours, ours-noselect, "
                                 "ours-randomscene, ours-nof, ours-dr or ours-llm."),

@@ -1,4 +1,5 @@
-"""``adaptenv houses``: generate procedural ProcTHOR-format houses and rearranged variants.
+"""``adaptenv houses``: generate procedural ProcTHOR-format houses and rearranged variants, and split
+house datasets (one house JSON per line) into house files.
 
 Also registers ``adaptenv bench houses`` (generation speed).
 
@@ -8,15 +9,18 @@ torch or numba.
 
 from __future__ import annotations
 
+import textwrap
 from pathlib import Path
 from typing import Annotated
 
 import typer
+from typer.core import TyperCommand
 
 from adaptenv.cli._common import JSON_OPTION, existing_file
 from adaptenv.errors import ConfigError
 
-houses_app = typer.Typer(help="Procedural ProcTHOR-format houses: generate new ones, rearrange existing ones.",
+houses_app = typer.Typer(help="ProcTHOR-format houses: generate new ones, rearrange existing ones, split datasets "
+                              "into house files.",
                          no_args_is_help=True, rich_markup_mode=None)  # plain help, like adaptenv.cli.HELP_STYLE
 
 _ROOMS_HELP = ("Rooms per house: a count from 1 to 10 (e.g. 5) or a comma-separated list of types "
@@ -75,15 +79,28 @@ def _print_summary(rows: list[tuple[str, str, str, str]], out: Path) -> None:
     console.print("rooms: K kitchen, L living room, B bedroom, b bathroom", style="dim")
 
 
-@houses_app.command("generate")
+class _GenerateCommand(TyperCommand):
+    """``houses generate``, whose --preset help lists the preset registry's names when help is shown (importing
+    the registry takes most of a second, too long for every command line)."""
+
+    def format_help(self, ctx: typer.Context, formatter) -> None:
+        from adaptenv.scene.procedural.presets import PRESETS
+
+        names = "\n".join(textwrap.wrap(", ".join(PRESETS), 40, break_on_hyphens=False))
+        for param in self.params:
+            if param.name == "preset":  # \b: click keeps the lines, so no name is split at its hyphen
+                param.help = ("A named house set (ignores --n, --seed and --rooms; docs/houses.md), one of:"
+                              f"\n\n\b\n{names}")
+        super().format_help(ctx, formatter)
+
+
+@houses_app.command("generate", cls=_GenerateCommand)
 def generate(
     out: Annotated[Path, typer.Option("-o", "--out", help="Folder to write house_0000.json, ... (or the preset's names) to.")],
     n: Annotated[int, typer.Option("--n", help="Number of houses (ignored with --preset).")] = 1,
     seed: Annotated[int, typer.Option("--seed", help="Root seed: the same seed gives byte-identical houses.")] = 0,
     rooms: Annotated[str | None, typer.Option("--rooms", help=_ROOMS_HELP)] = None,
-    preset: Annotated[str | None, typer.Option("--preset", help="A named house set: pretrain-train, "
-                                               "pretrain-rearranged, pretrain-unseen or tiny (ignores --n, --seed "
-                                               "and --rooms).")] = None,
+    preset: Annotated[str | None, typer.Option("--preset", help="A named house set (listed by --help).")] = None,
     split: Annotated[str, typer.Option("--split", help="ProcTHOR asset split the furniture comes from.")] = "train",
 ) -> None:
     """Generate procedural ProcTHOR-format houses (loadable in AI2-THOR >= 5.0)."""
@@ -140,6 +157,34 @@ def rearrange(
     old = {o.id: o.position for o in house.objects}
     moved = sum(1 for o in new.objects if o.id in old and old[o.id] != o.position)
     Console().print(f"wrote [bold]{out}[/]: {len(new.objects)} objects, {moved} moved")
+
+
+@houses_app.command("export")
+def export(
+    dataset: Annotated[str, typer.Argument(metavar="DATASET", help="A house dataset FILE.jsonl or FILE.jsonl.gz (one "
+                                           "house JSON per line), optionally sliced by 0-based line index as in "
+                                           "Python: FILE.jsonl.gz:0:100 is lines 0 to 99.", show_default=False)],
+    out: Annotated[Path, typer.Option("-o", "--out", help="Folder to write house-000042.json, ... to (named by "
+                                      "line index).")],
+) -> None:
+    """Split a house dataset (ProcTHOR-10K, SPOC: one house JSON per line) into a folder of house files."""
+    from rich.console import Console
+
+    from adaptenv.scene.dataset import dataset_documents, house_name, line_label, parse_dataset_spec
+    from adaptenv.scene.house import parse_house, save_house
+
+    ds = parse_dataset_spec(dataset)
+    if ds is None:
+        raise ConfigError(f"{dataset}: not a house dataset; pass a .jsonl or .jsonl.gz file, optionally sliced as "
+                          "in FILE.jsonl.gz:0:100")
+    if out.exists() and not out.is_dir():
+        raise ConfigError(f"{out}: exists and is not a folder; pass a folder to -o")
+    names = []
+    for index, doc in dataset_documents(ds):
+        names.append(house_name(index))
+        save_house(parse_house(doc, line_label(ds.path, index)), out / f"{names[-1]}.json")
+    Console().print(f"wrote {len(names)} house files to [bold]{out}[/] ({names[0]}.json to {names[-1]}.json)",
+                    highlight=False)
 
 
 def bench_houses(as_json: bool = JSON_OPTION,

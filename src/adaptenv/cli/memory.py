@@ -16,8 +16,8 @@ import typer
 def memory_check(
     policy: str = typer.Option("pretrained", "--policy", "-p", help="Policy: pretrained, a checkpoint path (.pt), "
                                "or module:attribute with forget(state, indices) or an array state."),
-    houses: str = typer.Option(..., "--houses", help="Folder of house JSON files, a house file, preset:NAME or "
-                               "suite:NAME."),
+    houses: str = typer.Option(..., "--houses", help="Folder of house JSON files, a house file, a dataset "
+                               "FILE.jsonl[.gz][:START:STOP], preset:NAME or suite:NAME."),
     episodes: int = typer.Option(200, "--episodes", "-n", min=1, help="Episodes per interval (the same episodes "
                                  "for every interval)."),
     seed: int = typer.Option(0, "--seed", "-s", help="Seed of the episodes (same seed, same results)."),

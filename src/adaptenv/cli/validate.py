@@ -13,7 +13,8 @@ import typer
 
 from adaptenv.cli._common import JSON_OPTION
 
-HOUSES_ARGUMENT = typer.Argument(..., metavar="HOUSE.json", help="House files to check.", show_default=False)
+HOUSES_ARGUMENT = typer.Argument(..., metavar="HOUSE.json", help="House files to check, or house datasets "
+                                 "FILE.jsonl[.gz][:START:STOP] (every selected line is checked).", show_default=False)
 HOUSE_ARGUMENT = typer.Argument(..., metavar="HOUSE.json", help="A house file to validate repeatedly.")
 VALIDATE_JSON_OPTION = typer.Option(False, "--json", help="Print the problems as one JSON object.")
 
@@ -23,10 +24,12 @@ def validate(
     as_json: bool = VALIDATE_JSON_OPTION,
 ) -> None:
     """Check ProcTHOR house files; print every problem and exit 1 if there is any."""
-    from adaptenv.scene.validate import validate_house_file
+    from adaptenv.scene.dataset import parse_dataset_spec
 
-    problems = [p for path in houses for p in validate_house_file(path)]
-    bad_files = len({p.file for p in problems})
+    checked = [problems for path in houses for problems in _house_problems(path)]
+    problems = [p for ps in checked for p in ps]
+    bad_files = sum(bool(ps) for ps in checked)
+    unit = "house" if any(parse_dataset_spec(path) for path in houses) else "file"
     if as_json:
         doc = {"files": [str(p) for p in houses], "valid": not problems,
                "problems": [{"file": p.file, "path": p.path, "message": p.message} for p in problems]}
@@ -34,14 +37,26 @@ def validate(
     else:
         for p in problems:
             typer.echo(str(p))
-        n = len(houses)
+        n = len(checked)
         if problems:
             typer.echo(f"{len(problems)} problem{'s' if len(problems) != 1 else ''} in {bad_files} of {n} "
-                       f"file{'s' if n != 1 else ''}")
+                       f"{unit}{'s' if n != 1 else ''}")
         else:
-            typer.echo(f"{n} file{'s' if n != 1 else ''} valid")
+            typer.echo(f"{n} {unit}{'s' if n != 1 else ''} valid")
     if problems:
         raise typer.Exit(1)
+
+
+def _house_problems(path: Path) -> list[list]:
+    """The problems of each house a HOUSE argument names: one file, or every selected line of a dataset."""
+    from adaptenv.errors import HouseError
+    from adaptenv.scene.dataset import dataset_houses, parse_dataset_spec
+    from adaptenv.scene.validate import validate_house_file
+
+    dataset = parse_dataset_spec(path)
+    if dataset is None:
+        return [validate_house_file(path)]
+    return [house.problems if isinstance(house, HouseError) else [] for _, house in dataset_houses(dataset)]
 
 
 def bench_validate(

@@ -87,10 +87,10 @@ class LoopConfig:
     policy: str = "pretrained"
     """Starting policy pi_0: pretrained or a checkpoint path (it must be a neural policy to fine-tune)."""
     houses: str = "preset:pretrain-train"
-    """Training scenes e_0: a folder of house JSON files or preset:NAME."""
+    """Training scenes e_0: a folder of house JSON files, a dataset FILE.jsonl[.gz][:START:STOP] or preset:NAME."""
     heldout: dict[str, str] = field(default_factory=lambda: {"rearranged": "preset:pretrain-rearranged",
                                                              "unseen": "preset:pretrain-unseen"})
-    """Held-out sets, never trained on: name -> folder or preset:NAME."""
+    """Held-out sets, never trained on: name -> folder, dataset (FILE.jsonl.gz[:START:STOP]) or preset:NAME."""
     iterations: int = 3
     """Loop iterations T."""
     seed: int = 0

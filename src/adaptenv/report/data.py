@@ -29,6 +29,7 @@ from adaptenv.curriculum.records import (
     RunInfo,
 )
 from adaptenv.errors import AdaptenvError
+from adaptenv.scene.dataset import parse_dataset_spec
 
 SUMMARY = "summary.json"
 FINAL_SUMMARY = "summary_final.json"
@@ -316,6 +317,10 @@ def house_sets(run: RunData) -> list[HouseSetFiles]:
         if spec.startswith("preset:"):
             out.append(HouseSetFiles(name, spec, [], f"the named set {spec} (regenerate with adaptenv houses "
                                                      f"generate --preset {spec.partition(':')[2]})"))
+            continue
+        if parse_dataset_spec(spec) is not None:
+            out.append(HouseSetFiles(name, spec, [], f"the dataset {spec} (split it into house files with adaptenv "
+                                                     "houses export)"))
             continue
         path = find_path(run.path, spec)
         files = sorted(path.glob("*.json")) if path is not None and path.is_dir() else [path] if path else []

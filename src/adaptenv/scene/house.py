@@ -210,12 +210,17 @@ def parse_house(doc: Any, file: str | None = None) -> House:
 def read_house_document(path: str | Path) -> Any:
     """Read a JSON file, turning unreadable or non-JSON content into a HouseError."""
     p = Path(path)
+    if p.name.lower().endswith((".jsonl", ".jsonl.gz")):
+        raise HouseError([Problem("$", "this is a house dataset (one house per line), not one house file; pass it "
+                                  "to --houses (FILE.jsonl.gz:0:100 picks lines) or split it into files with "
+                                  "`adaptenv houses export`", str(p))])
     try:
         text = p.read_text(encoding="utf-8")
     except FileNotFoundError:
         raise HouseError([Problem("$", "the file does not exist; check the path", str(p))]) from None
     except (OSError, UnicodeDecodeError) as exc:
-        raise HouseError([Problem("$", f"the file cannot be read ({exc}); check it is a UTF-8 JSON file", str(p))]) from None
+        raise HouseError([Problem("$", f"the file cannot be read ({exc}); check it is a UTF-8 JSON file "
+                                  "(a gzip dataset of houses, one per line, must be named .jsonl.gz)", str(p))]) from None
     try:
         return json.loads(text)
     except json.JSONDecodeError as exc:

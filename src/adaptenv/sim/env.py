@@ -2,7 +2,8 @@
 
 ``reset(seed=..., options={"house": ..., "target_type": ..., "start": ...})`` resets to a level
 (JaxUED style): the house may be a ``House``, a path to a house JSON, or a compiled ``NavWorld``.
-Without a house the env draws one of the houses it was built with, or, when built with none,
+Without a house the env draws one of the houses it was built with (a list, or a house dataset
+``FILE.jsonl.gz[:START:STOP]``, see :mod:`adaptenv.scene.dataset`), or, when built with none,
 one of a small built-in set of procedural houses (generated once, from ``builtin_seed``).
 ``terminated`` means the agent issued ``end``; ``truncated`` means it ran out of steps.
 """
@@ -19,7 +20,8 @@ from gymnasium import spaces
 from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
-from adaptenv.errors import ConfigError
+from adaptenv.errors import ConfigError, HouseError
+from adaptenv.scene.dataset import dataset_houses, parse_dataset_spec
 from adaptenv.scene.house import House, load_house
 from adaptenv.scene.procedural import generate_houses
 from adaptenv.sim import task
@@ -34,6 +36,8 @@ FrameRenderer = Callable[[Any, Any, Any], np.ndarray]
 
 HouseLike = House | str | Path | NavWorld
 """A ``House``, a path to a house JSON file, or a compiled ``NavWorld``."""
+Houses = Sequence[HouseLike] | str | Path
+"""Houses an env is built with: a list of them, or a house dataset spec ``FILE.jsonl.gz[:START:STOP]``."""
 
 BUILTIN_HOUSES = 8
 """Size of the built-in procedural house set used when an env is built without houses."""
@@ -72,11 +76,27 @@ def _to_world(item: HouseLike, name: str) -> tuple[NavWorld, House | None]:
                       "pass one of those")
 
 
+def _house_items(houses: Houses) -> list[HouseLike]:
+    """The houses an env is built with: a list as given, or the houses of a dataset (an invalid one is an error)."""
+    if not isinstance(houses, str | Path):
+        return list(houses)
+    dataset = parse_dataset_spec(houses)
+    if dataset is None:
+        raise ConfigError(f"houses: {str(houses)!r} is one path, not a list of houses; pass [path] or a house "
+                          "dataset FILE.jsonl.gz[:START:STOP]")
+    items = []
+    for _, house in dataset_houses(dataset):
+        if isinstance(house, HouseError):
+            raise house
+        items.append(house)
+    return items
+
+
 class _HouseSet:
     """Houses given at construction, compiled lazily (or the built-in procedural set)."""
 
-    def __init__(self, houses: Sequence[HouseLike] | None, builtin_seed: int) -> None:
-        self._items = list(houses) if houses is not None else None
+    def __init__(self, houses: Houses | None, builtin_seed: int) -> None:
+        self._items = _house_items(houses) if houses is not None else None
         self._builtin_seed = builtin_seed
         self._compiled: dict[int, tuple[Any, Any]] = {}
 
@@ -101,7 +121,8 @@ class NavEnv(gymnasium.Env):
     """ObjectNav in one house at a time: the ``spec`` observation, ``spec`` actions, SPOC's reward.
 
     Args:
-        houses: houses to draw from on ``reset()`` without a house option (default: built-in set).
+        houses: houses to draw from on ``reset()`` without a house option (default: built-in set): a list, or
+            a house dataset ``FILE.jsonl.gz[:START:STOP]``.
         target_types: target types to draw from (default: every reachable ObjectNav target type).
         max_steps: episode cap (truncation).
         render_mode: None or ``"rgb_array"`` (a top-down image of the house and the agent).
@@ -121,7 +142,7 @@ class NavEnv(gymnasium.Env):
 
     metadata = {"render_modes": ["rgb_array"], "render_fps": 5}
 
-    def __init__(self, houses: Sequence[HouseLike] | None = None, target_types: Sequence[str] | None = None,
+    def __init__(self, houses: Houses | None = None, target_types: Sequence[str] | None = None,
                  max_steps: int = MAX_STEPS, render_mode: str | None = None, builtin_seed: int = 0,
                  renderer: FrameRenderer | None = None, map: bool = False) -> None:
         if render_mode not in (None, "rgb_array"):
@@ -267,7 +288,7 @@ class NavVectorEnv(VectorEnv):
 
     metadata = {"render_modes": [], "autoreset_mode": AutoresetMode.NEXT_STEP}
 
-    def __init__(self, num_envs: int = 8, houses: Sequence[HouseLike] | None = None,
+    def __init__(self, num_envs: int = 8, houses: Houses | None = None,
                  target_types: Sequence[str] | None = None, max_steps: int = MAX_STEPS,
                  builtin_seed: int = 0, render_mode: str | None = None, map: bool = False) -> None:
         if num_envs < 1:

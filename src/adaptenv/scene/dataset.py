@@ -1,0 +1,143 @@
+"""House datasets: one ProcTHOR house JSON per line, plain (``.jsonl``) or gzip-compressed (``.jsonl.gz``).
+
+ProcTHOR-10K and SPOC ship their houses this way. A dataset spec is the file, optionally followed by a
+slice of its line indices with Python's slice semantics (``START:STOP`` or ``START:STOP:STEP``, 0-based,
+STOP excluded, bounds non-negative): ``train.jsonl.gz:0:100`` is lines 0-99, ``train.jsonl.gz:100:``
+line 100 to the end, ``train.jsonl.gz:::10`` every tenth line. The file is read line by line and reading
+stops at the slice's end, so a slice of a large file costs only its own lines. The house on line index
+``i`` is named ``house-{i:06d}`` (line ``i + 1`` in an editor). Blank lines are skipped; a slice that
+selects no house (e.g. one starting past the end) is an error that gives the file's line count.
+
+A line that is not JSON, or JSON but not an object, is an error naming its line number; a line that is
+a JSON object but not a valid house comes back as the :class:`~adaptenv.errors.HouseError` naming its
+line, for the caller to report or skip like an invalid house file.
+"""
+
+from __future__ import annotations
+
+import gzip
+import json
+import re
+import zlib
+from collections.abc import Iterator
+from dataclasses import dataclass
+from pathlib import Path
+from typing import IO, Any
+
+from adaptenv.errors import ConfigError, HouseError
+from adaptenv.scene.house import House, parse_house
+from adaptenv.scene.validate import validate_house
+
+_SPEC = re.compile(r"^(?P<path>.*?\.jsonl(?:\.gz)?)(?::(?P<slice>.*))?$", re.IGNORECASE)
+
+
+@dataclass(frozen=True)
+class DatasetSlice:
+    """A house dataset file and the slice of its line indices to read."""
+
+    path: Path
+    start: int = 0
+    stop: int | None = None
+    step: int = 1
+
+    @property
+    def spec(self) -> str:
+        """The spec as a user writes it: the file, then ``:START:STOP[:STEP]`` when it is sliced."""
+        if (self.start, self.stop, self.step) == (0, None, 1):
+            return str(self.path)
+        stop = "" if self.stop is None else str(self.stop)
+        return f"{self.path}:{self.start}:{stop}" + (f":{self.step}" if self.step != 1 else "")
+
+
+def parse_dataset_spec(spec: str | Path) -> DatasetSlice | None:
+    """The dataset a spec names (``FILE.jsonl[.gz][:START:STOP[:STEP]]``), or None when it names none."""
+    m = _SPEC.match(str(spec))
+    if m is None:
+        return None
+    path, text = Path(m["path"]), m["slice"]
+    if text is None:
+        return DatasetSlice(path)
+    parts = text.split(":")
+    if len(parts) not in (2, 3) or not all(p.strip().isdigit() for p in parts if p.strip()):
+        raise ConfigError(f"{spec}: {text!r} is not a slice START:STOP or START:STOP:STEP of non-negative line "
+                          f"indices; write e.g. {path}:0:100 (lines 0 to 99)")
+    start, stop, step = (int(p) if p.strip() else None for p in parts + [""] * (3 - len(parts)))
+    if step == 0:
+        raise ConfigError(f"{spec}: the slice step is 0; use a step of 1 or more")
+    ds = DatasetSlice(path, start or 0, stop, step or 1)
+    if ds.stop is not None and ds.stop <= ds.start:
+        raise ConfigError(f"{spec}: the slice selects no line (STOP {ds.stop} is not above START {ds.start}); "
+                          "give a STOP above START")
+    return ds
+
+
+def house_name(index: int) -> str:
+    """The name of the house on line index ``index`` (also its file stem in ``adaptenv houses export``)."""
+    return f"house-{index:06d}"
+
+
+def line_label(path: Path, index: int) -> str:
+    """How errors name the line of index ``index`` (1-based, as editors count)."""
+    return f"{path} line {index + 1}"
+
+
+def _open_text(path: Path) -> IO[str]:
+    """The file as UTF-8 text, decompressed on the fly when it is gzip (by its magic bytes, not its name)."""
+    with open(path, "rb") as f:
+        gzipped = f.read(2) == b"\x1f\x8b"
+    return gzip.open(path, "rt", encoding="utf-8") if gzipped else open(path, encoding="utf-8")  # noqa: SIM115
+
+
+def dataset_lines(ds: DatasetSlice) -> Iterator[tuple[int, str]]:
+    """(line index, text) of every non-blank line the slice selects, read lazily; stops at the slice's end."""
+    if not ds.path.is_file():
+        raise ConfigError(f"{ds.spec}: no such dataset file; pass a .jsonl or .jsonl.gz file of houses, one per line")
+    total, found = 0, 0
+    try:
+        with _open_text(ds.path) as f:
+            for index, line in enumerate(f):
+                total = index + 1
+                if index >= ds.start and (index - ds.start) % ds.step == 0 and line.strip():
+                    found += 1
+                    yield index, line
+                if ds.stop is not None and total >= ds.stop:
+                    break
+    except (OSError, EOFError, UnicodeDecodeError, zlib.error) as exc:
+        raise ConfigError(f"{line_label(ds.path, total)}: cannot read the dataset there ({exc}); the file must be "
+                          "UTF-8 JSON lines, gzip-compressed or not, and complete") from None
+    if not found and total > ds.start:
+        raise ConfigError(f"{ds.spec}: the slice selects only blank lines; pick lines that hold houses")
+    if not found:
+        raise ConfigError(f"{ds.spec}: the slice selects no house ({ds.path} has {total} lines); pick line indices "
+                          f"below {total}")
+
+
+def dataset_documents(ds: DatasetSlice) -> Iterator[tuple[int, dict[str, Any]]]:
+    """(line index, parsed JSON object) of the selected lines; ConfigError names a line that is not one."""
+    for index, line in dataset_lines(ds):
+        try:
+            doc = json.loads(line)
+        except json.JSONDecodeError as exc:
+            raise ConfigError(f"{line_label(ds.path, index)}: not valid JSON ({exc.msg} at column {exc.colno}); "
+                              "a house dataset holds one house JSON object per line") from None
+        if not isinstance(doc, dict):
+            raise ConfigError(f"{line_label(ds.path, index)}: a JSON {type(doc).__name__}, not a house object; a "
+                              "house dataset holds one house JSON object per line")
+        yield index, doc
+
+
+def dataset_houses(ds: DatasetSlice, *, validate: bool = True, catalog: Any = None,
+                   ) -> Iterator[tuple[str, House | HouseError]]:
+    """(name, House) per selected line; a line that is no valid house gives its HouseError in place of the house.
+
+    ``validate`` and ``catalog`` are :func:`~adaptenv.scene.house.load_house`'s.
+    """
+    for index, doc in dataset_documents(ds):
+        label = line_label(ds.path, index)
+        try:
+            house = parse_house(doc, label)
+            problems = validate_house(house, file=label, catalog=catalog) if validate else []
+            item = HouseError(problems) if problems else house
+        except HouseError as exc:
+            item = exc
+        yield house_name(index), item
