@@ -144,7 +144,7 @@ def test_load_llm_config_names_file_and_field(tmp_path):
     assert cfg.model == "m" and cfg.cache_dir == tmp_path / "c"
     bad = tmp_path / "bad.json"
     bad.write_text(json.dumps({"timeout_s": -1}))
-    with pytest.raises(ConfigError, match="bad.json: LLM config field timeout_s"):
+    with pytest.raises(ConfigError, match=r"bad.json \(LLM config\): timeout_s should be greater than 0"):
         load_llm_config(bad)
     secret = tmp_path / "secret.json"
     secret.write_text(json.dumps({"model": "m", "api_key": KEY}))
@@ -153,7 +153,7 @@ def test_load_llm_config_names_file_and_field(tmp_path):
     assert KEY not in str(info.value) and "api_key_env" in str(info.value)
     typo = tmp_path / "typo.json"
     typo.write_text(json.dumps({"modle": "x"}))
-    with pytest.raises(ConfigError, match="field modle"):
+    with pytest.raises(ConfigError, match="modle is not a known field; did you mean .model."):
         load_llm_config(typo)
 
 

@@ -36,7 +36,7 @@ def test_committed_configs_load():
 def test_config_errors_name_file_and_field(tmp_path):
     bad = tmp_path / "bad.json"
     bad.write_text(json.dumps({"methods": ["ours", "magic"]}))
-    with pytest.raises(ConfigError, match="bad.json: methods: 'magic' is unknown"):
+    with pytest.raises(ConfigError, match=r"bad.json: methods\[1\] 'magic' is unknown"):
         ExperimentConfig.load(bad)
     bad.write_text(json.dumps({"loop": {"itterations": 3}}))
     with pytest.raises(ConfigError, match="itterations"):

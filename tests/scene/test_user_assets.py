@@ -104,7 +104,7 @@ def test_cli_assets_flag_validates_and_adapts(objaverse_house, table_file, tmp_p
 def test_bad_tables_are_one_clear_error(tmp_path):
     p = tmp_path / "t.json"
     for doc, words in [({"assets": {"x": {"type": "Spaceship", "size": [1, 1, 1]}}}, "not a ProcTHOR object type"),
-                       ({"assets": {"x": {"type": "Sofa", "size": [1, 1]}}}, "three positive extents"),
+                       ({"assets": {"x": {"type": "Sofa", "size": [1, 1]}}}, r"size\[2\] is missing"),
                        ({"assets": {"x": {"type": "Sofa", "size": [1, 1, 1], "footprint": [[0, 0]]}}}, "at least 3"),
                        ([], "expected a JSON object")]:
         p.write_text(json.dumps(doc), encoding="utf-8")

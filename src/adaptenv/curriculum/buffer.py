@@ -25,11 +25,12 @@ from __future__ import annotations
 import json
 import math
 from collections.abc import Sequence
-from dataclasses import asdict, dataclass, field, fields, replace
+from dataclasses import asdict, dataclass, field, replace
 from typing import Any, Literal
 
 import numpy as np
 
+from adaptenv.configfile import STRICT, parse_config
 from adaptenv.errors import ConfigError
 
 ScoreName = Literal["regret", "spl_regret", "mixed"]
@@ -103,6 +104,8 @@ class LevelBufferState:
     version: int = field(default=STATE_VERSION)
     """Format version of the JSON checkpoint."""
 
+    __pydantic_config__ = STRICT
+
     @property
     def size(self) -> int:
         """Levels currently held."""
@@ -125,23 +128,11 @@ class LevelBufferState:
 
     @classmethod
     def from_dict(cls, data: dict[str, Any], source: str = "level buffer state") -> LevelBufferState:
-        """Rebuild a state from :meth:`to_dict` data, checking every field; ConfigError names the bad one."""
-        known = {f.name for f in fields(cls)}
-        unknown = sorted(set(data) - known)
-        if unknown:
-            raise ConfigError(f"{source}: unknown field {unknown[0]!r}; expected only {', '.join(sorted(known))}")
-        if data.get("version", STATE_VERSION) != STATE_VERSION:
+        """Rebuild a state from :meth:`to_dict` data, checking every field's type; ConfigError names the bad one."""
+        if isinstance(data, dict) and data.get("version", STATE_VERSION) != STATE_VERSION:
             raise ConfigError(f"{source}: version {data['version']!r} is not supported (expected {STATE_VERSION}); "
                               "re-create the buffer with this adaptenv version")
-        try:
-            state = cls(level_ids=tuple(str(x) for x in data.get("level_ids", ())),
-                        scores=tuple(float(x) for x in data.get("scores", ())),
-                        last_seen=tuple(int(x) for x in data.get("last_seen", ())),
-                        parent_ids=tuple(None if x is None else str(x) for x in data.get("parent_ids", ())),
-                        n_inserted=int(data.get("n_inserted", 0)))
-        except (TypeError, ValueError) as exc:
-            raise ConfigError(f"{source}: a field has the wrong type ({exc}); expected lists of ids, numbers "
-                              "and integers as written by LevelBufferState.to_json") from exc
+        state = parse_config(cls, data, source, fix="restore the checkpoint file (written by LevelBufferState.to_json)")
         problem = state_problem(state)
         if problem:
             raise ConfigError(f"{source}: {problem}")
@@ -154,8 +145,6 @@ class LevelBufferState:
             data = json.loads(text)
         except json.JSONDecodeError as exc:
             raise ConfigError(f"{source}: not valid JSON ({exc}); restore the checkpoint file") from exc
-        if not isinstance(data, dict):
-            raise ConfigError(f"{source}: expected a JSON object with level_ids, scores, ..., got {type(data).__name__}")
         return cls.from_dict(data, source)
 
 

@@ -23,7 +23,7 @@ import shutil
 import sys
 import time
 from collections.abc import Callable
-from dataclasses import asdict, dataclass, field, fields
+from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -37,6 +37,7 @@ from scipy import stats
 
 from adaptenv.adapt.llm.accounting import check_llm_section
 from adaptenv.agents.checkpoint import load_checkpoint
+from adaptenv.configfile import STRICT, parse_config, read_json
 from adaptenv.curriculum.executor import InProcessExecutor
 from adaptenv.curriculum.jobs import PolicyWeights
 from adaptenv.curriculum.loop import METHODS, LoopConfig, evaluate_sets, run_loop
@@ -56,6 +57,8 @@ METRICS = ("success", "spl", "collisions")
 #: Figures of the summary table and its tests: the held-out metrics and the paper's Delta R
 #: (``success_gain``: final held-out success minus that of pi_0 on the same episodes).
 TESTED = (*METRICS, "success_gain")
+#: The fix an experiment config's type errors suggest.
+CONFIG_FIX = "write it as in configs/experiment-small.json (docs/curriculum.md lists the loop fields)"
 
 
 @dataclass
@@ -71,32 +74,37 @@ class ExperimentConfig:
     reference: str = "ours"
     """The method tested against every other one."""
 
+    __pydantic_config__ = STRICT
+
     @classmethod
     def load(cls, path: str | Path) -> ExperimentConfig:
-        """Read a config file; errors name the file and the field."""
+        """Read and check a config file (before any work); one ConfigError names the file and the field."""
         p = Path(path)
-        try:
-            data = json.loads(p.read_text(encoding="utf-8"))
-        except FileNotFoundError:
-            raise ConfigError(f"{p}: no such experiment config; see configs/ for examples") from None
-        except json.JSONDecodeError as exc:
-            raise ConfigError(f"{p}: not valid JSON (line {exc.lineno}, column {exc.colno}); fix the syntax") from None
-        known = {f.name for f in fields(cls)}
-        unknown = sorted(set(data) - known)
-        if unknown:
-            raise ConfigError(f"{p}: unknown field(s) {', '.join(unknown)}; use {', '.join(sorted(known))}")
-        cfg = cls(**data)
-        loop_known = {f.name for f in fields(LoopConfig)} - {"method", "seed"}
-        bad = sorted(set(cfg.loop) - loop_known)
-        if bad:
-            raise ConfigError(f"{p}: loop field(s) {', '.join(bad)} unknown; use {', '.join(sorted(loop_known))}")
-        for m in cfg.methods:
+        return parse_config(cls, read_json(p, "experiment config (see configs/)"), str(p), fix=CONFIG_FIX).check(str(p))
+
+    def check(self, source: str = "experiment config") -> ExperimentConfig:
+        """Return self, or raise one ConfigError naming the first bad field: types (the loop section's too),
+        known methods, no method or seed twice, and every run's loop settings."""
+        parse_config(ExperimentConfig, asdict(self), source, fix=CONFIG_FIX)
+        per_run = sorted({"method", "seed"} & set(self.loop))
+        if per_run:
+            raise ConfigError(f"{source}: loop.{per_run[0]} is set per run from methods and seeds; remove it "
+                              "from the loop section")
+        parse_config(LoopConfig, self.loop, source, prefix="loop", fix=CONFIG_FIX)
+        check_llm_section(self.loop.get("llm") or {}, source, "loop.llm")
+        for where, m in [*((f"methods[{i}]", m) for i, m in enumerate(self.methods)), ("reference", self.reference)]:
             if m not in METHODS:
-                raise ConfigError(f"{p}: methods: {m!r} is unknown; use {', '.join(METHODS)}")
-        if not cfg.seeds:
-            raise ConfigError(f"{p}: seeds is empty; list at least one seed")
-        check_llm_section(cfg.loop.get("llm") or {}, f"{p}: loop.llm")
-        return cfg
+                raise ConfigError(f"{source}: {where} {m!r} is unknown; use one of {', '.join(METHODS)}")
+        for name, values in (("methods", self.methods), ("seeds", self.seeds)):
+            if not values:
+                raise ConfigError(f"{source}: {name} is empty; list at least one")
+            twice = next((v for i, v in enumerate(values) if v in values[:i]), None)
+            if twice is not None:
+                raise ConfigError(f"{source}: {name} lists {twice!r} twice; list each once (runs share a folder)")
+        for m in self.methods:
+            for seed in self.seeds:
+                self.loop_config(m, seed).check(f"{source}: loop")
+        return self
 
     def loop_config(self, method: str, seed: int) -> LoopConfig:
         return LoopConfig(**{**self.loop, "method": method, "seed": seed})
@@ -139,7 +147,7 @@ def run_experiment(cfg: ExperimentConfig, out: str | Path, *, executor: Any = No
     ``final_episodes`` > 0: each run is evaluated on that many held-out episodes per set as soon as it
     finishes (its ``final_eval.json``; see :func:`final_evaluation`)."""
     out = Path(out)
-    check_llm_section(cfg.loop.get("llm") or {}, "experiment config: loop.llm")  # before anything is saved
+    cfg.check()  # before anything is saved
     out.mkdir(parents=True, exist_ok=True)
     atomic_write_text(out / "experiment.json", json.dumps(asdict(cfg), indent=1))
     # seed by seed: an experiment stopped early leaves whole seeds (every method), the unit of the paired tests

@@ -49,6 +49,7 @@ from adaptenv.agents.network import NeuralPolicy, torch_threads
 from adaptenv.agents.registry import resolve_policy
 from adaptenv.agents.teachers import TEACHERS
 from adaptenv.agents.train import check_precision, finetune
+from adaptenv.configfile import STRICT, parse_config, read_json
 from adaptenv.curriculum import buffer as lb
 from adaptenv.curriculum.executor import Executor, InProcessExecutor
 from adaptenv.curriculum.jobs import (
@@ -76,6 +77,9 @@ from adaptenv.curriculum.records import (
     write_iterations,
 )
 from adaptenv.errors import ConfigError
+
+#: The fix a corrupt state.json's errors suggest.
+STATE_FIX = "the file is damaged: restore it, or start the run again in a new folder"
 
 
 @dataclass
@@ -141,35 +145,42 @@ class LoopConfig:
     """The failure-mode G may answer search failures by relocating a target instance to a far room of a type
     where it plausibly stands (the methods with the failure-mode G: ours, ours-randomscene, ours-dr)."""
 
-    def check(self) -> LoopConfig:
-        """Return self or raise one ConfigError naming the field and the fix."""
+    __pydantic_config__ = STRICT
+
+    def check(self, source: str = "loop config") -> LoopConfig:
+        """Return self or raise one ConfigError naming the field and the fix (``source`` starts the message)."""
+        parse_config(LoopConfig, asdict(self), source)
         if self.method not in METHODS:
-            raise ConfigError(f"loop config: method {self.method!r} is unknown; use one of {', '.join(METHODS)}")
+            raise ConfigError(f"{source}: method {self.method!r} is unknown; use one of {', '.join(METHODS)}")
+        if self.seed < 0:
+            raise ConfigError(f"{source}: seed must be >= 0, got {self.seed}")
         for name in ("iterations", "scenes_per_iteration", "finetune_frames", "heldout_episodes", "finetune_envs"):
             if getattr(self, name) < 1:
-                raise ConfigError(f"loop config: {name} must be at least 1, got {getattr(self, name)}")
+                raise ConfigError(f"{source}: {name} must be at least 1, got {getattr(self, name)}")
         if self.edit_steps < 0 or self.diagnose_episodes < 1 or not 0.0 <= self.replay_fraction < 1.0:
-            raise ConfigError("loop config: edit_steps must be >= 0, diagnose_episodes >= 1 and replay_fraction "
+            raise ConfigError(f"{source}: edit_steps must be >= 0, diagnose_episodes >= 1 and replay_fraction "
                               "in [0, 1)")
-        check_precision(self.finetune_precision, "loop config: finetune_precision")
+        check_precision(self.finetune_precision, f"{source}: finetune_precision")
         if not 0.0 <= self.finetune_beta <= 1.0 or self.finetune_max_steps < 1:
-            raise ConfigError(f"loop config: finetune_beta must lie in [0, 1] and finetune_max_steps be positive, got "
+            raise ConfigError(f"{source}: finetune_beta must lie in [0, 1] and finetune_max_steps be positive, got "
                               f"{self.finetune_beta} and {self.finetune_max_steps}")
         if self.finetune_min_start < 0:
-            raise ConfigError(f"loop config: finetune_min_start must be >= 0 metres, got {self.finetune_min_start}")
+            raise ConfigError(f"{source}: finetune_min_start must be >= 0 metres, got {self.finetune_min_start}")
         if self.finetune_teacher not in TEACHERS:
-            raise ConfigError(f"loop config: finetune_teacher {self.finetune_teacher!r} is unknown; use one of "
+            raise ConfigError(f"{source}: finetune_teacher {self.finetune_teacher!r} is unknown; use one of "
                               f"{', '.join(TEACHERS)}")
         if self.method == "ours-llm" and not self.llm:
-            raise ConfigError("loop config: method ours-llm needs an llm section (provider, model, base_url); "
+            raise ConfigError(f"{source}: method ours-llm needs an llm section (provider, model, base_url); "
                               "see docs/llm.md")
-        check_llm_section(self.llm, "loop config: llm")
+        check_llm_section(self.llm, source)
         return self
 
 
 @dataclass
 class LoopState:
     """Where a run stands after a finished iteration (state.json); scenes live in RUN_DIR/scenes/."""
+
+    __pydantic_config__ = STRICT
 
     iteration: int = 0
     pool: list[str] = field(default_factory=list)
@@ -353,12 +364,17 @@ def _open_run(cfg: LoopConfig, run_dir: Path, resume: bool, command: str
     """The state, records and command to continue from: a resumed run's, or a fresh run's in an empty folder."""
     state_path = run_dir / STATE
     if resume and state_path.is_file():
-        saved = json.loads(state_path.read_text(encoding="utf-8"))
-        old = saved.get("config")  # a field added to LoopConfig since the run started counts as its default
-        if old is None or not same_run({**asdict(LoopConfig()), **old}, asdict(cfg)):
+        saved = read_json(state_path, "loop state (written by the loop)")
+        if not isinstance(saved, dict) or not isinstance(saved.get("config"), dict):
+            raise ConfigError(f"{state_path}: expected {{\"config\": ..., \"state\": ...}} as the loop writes it; "
+                              f"{STATE_FIX}")
+        old = saved["config"]  # a field added to LoopConfig since the run started counts as its default
+        if not same_run({**asdict(LoopConfig()), **old}, asdict(cfg)):
             raise ConfigError(f"{run_dir}: --resume with a different config than the interrupted run; "
                               "use the same config or a new output folder")
-        state = LoopState(**saved["state"])
+        state = parse_config(LoopState, saved.get("state"), str(state_path), prefix="state", fix=STATE_FIX)
+        if state.buffer:
+            lb.LevelBufferState.from_dict(state.buffer, f"{state_path}: state.buffer")
         records = read_iterations(run_dir)[: state.iteration + 1]
         info = run_dir / "run.json"
         if info.is_file():  # keep the command that started the run

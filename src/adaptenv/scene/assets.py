@@ -22,8 +22,11 @@ from dataclasses import dataclass, field, replace
 from functools import lru_cache
 from importlib import resources
 from pathlib import Path
-from typing import Any, Literal
+from typing import Annotated, Any, Literal
 
+from pydantic import BaseModel, ConfigDict, Field
+
+from adaptenv.configfile import parse_config, read_json
 from adaptenv.errors import ConfigError
 
 ROOM_TYPES = ("Kitchen", "LivingRoom", "Bedroom", "Bathroom")
@@ -193,50 +196,65 @@ def _catalog_with(tables: tuple[str, ...]) -> AssetCatalog:
     return replace(base, assets={**base.assets, **extra}) if extra else base
 
 
+Extent = Annotated[float, Field(gt=0, allow_inf_nan=False)]
+Coordinate = Annotated[float, Field(allow_inf_nan=False)]
+
+
+class BoundingBox(BaseModel):
+    """ProcTHOR's ``boundingBox: {x, y, z}`` (full extents, m)."""
+
+    model_config = ConfigDict(extra="forbid")
+
+    x: Extent
+    y: Extent
+    z: Extent
+
+
+class UserAsset(BaseModel):
+    """One row of a user asset table as written in the file (``type``/``size`` or ProcTHOR's
+    ``objectType``/``boundingBox``); checked in strict JSON mode, unknown keys refused."""
+
+    model_config = ConfigDict(extra="forbid")
+
+    type: str | None = None
+    objectType: str | None = None
+    size: tuple[Extent, Extent, Extent] | None = None
+    boundingBox: BoundingBox | None = None
+    footprint: list[tuple[Coordinate, Coordinate]] | None = Field(None, min_length=3)
+    """Floor outline, local (x, z) about the box centre; at least 3 points."""
+    primary: str | None = None
+    split: Literal["train", "val", "test"] | None = None
+
+
 def read_asset_table(path: str | Path, known_types: frozenset[str] | None = None) -> dict[str, AssetInfo]:
     """Parse a user asset table (see the module docstring); ConfigError names the file, asset and field."""
     p = Path(path)
-    try:
-        doc = json.loads(p.read_text(encoding="utf-8"))
-    except FileNotFoundError:
-        raise ConfigError(f"--assets {p}: no such file; pass a JSON asset table (see docs/scene.md)") from None
-    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
-        raise ConfigError(f"--assets {p}: cannot read it as JSON ({exc}); fix the file") from None
+    doc = read_json(p, "asset table (see docs/scene.md)", source=f"--assets {p}")
     table = doc.get("assets", doc) if isinstance(doc, dict) else None
     if not isinstance(table, dict) or not table:
         raise ConfigError(f"--assets {p}: expected a JSON object {{\"assets\": {{ASSET_ID: {{\"type\": ..., "
-                          "\"size\": [x, y, z]}}}}}} with at least one asset")
+                          '"size": [x, y, z]}}} with at least one asset')
+    if "assets" in doc and len(doc) > 1:
+        other = next(k for k in doc if k != "assets")
+        raise ConfigError(f"--assets {p}: {other} is not a known field next to \"assets\"; remove it")
     known = known_types if known_types is not None else frozenset(_shipped_catalog().types)
-    return {str(aid): _user_asset(p, str(aid), entry, known) for aid, entry in table.items()}
+    return {aid: _user_asset(p, aid, entry, known) for aid, entry in table.items()}
 
 
 def _user_asset(path: Path, asset_id: str, entry: Any, known: frozenset[str]) -> AssetInfo:
     """One row of a user asset table as an AssetInfo."""
     where = f"--assets {path}: asset {asset_id!r}"
-    if not isinstance(entry, dict):
-        raise ConfigError(f"{where} is not an object; give it \"type\" and \"size\"")
-    object_type = entry.get("type", entry.get("objectType"))
+    row = parse_config(UserAsset, entry, where, fix="fix that value (the table format is in docs/scene.md)")
+    object_type = row.type or row.objectType
     if object_type not in known:
         raise ConfigError(f"{where} has type {object_type!r}, not a ProcTHOR object type (the type decides its "
                           f"semantic class); use one of the catalog's types, e.g. Sofa, Chair, Bed, Fridge")
-    size = entry.get("size", entry.get("boundingBox"))
-    if isinstance(size, dict):
-        size = [size.get(k) for k in "xyz"]
-    try:
-        size = tuple(float(v) for v in size)
-    except (TypeError, ValueError):
-        size = ()
-    if len(size) != 3 or min(size) <= 0:
+    box = row.boundingBox
+    size = row.size or ((box.x, box.y, box.z) if box is not None else None)
+    if size is None:
         raise ConfigError(f"{where} needs \"size\": [x, y, z], three positive extents in meters")
-    outline = entry.get("footprint")
-    if outline is not None:
-        try:
-            outline = tuple((float(x), float(z)) for x, z in outline)
-        except (TypeError, ValueError):
-            outline = ()
-        if len(outline) < 3:
-            raise ConfigError(f"{where} has a \"footprint\" that is not a list of at least 3 [x, z] points")
-    return AssetInfo(asset_id, str(object_type), size, entry.get("primary"), (), entry.get("split"), None, outline)
+    outline = tuple(row.footprint) if row.footprint is not None else None
+    return AssetInfo(asset_id, object_type, size, row.primary, (), row.split, None, outline)
 
 
 @lru_cache(maxsize=1)

@@ -11,11 +11,9 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING, Any
 
-from pydantic import ValidationError
-
-from adaptenv.adapt.llm.config import LLMConfig, refuse_secrets
+from adaptenv.adapt.llm.config import LLM_FIX, LLMConfig, refuse_secrets
 from adaptenv.adapt.llm.usage import Usage
-from adaptenv.errors import ConfigError
+from adaptenv.configfile import parse_config
 
 if TYPE_CHECKING:
     from adaptenv.adapt.analysis import Analysis
@@ -36,16 +34,12 @@ def llm_config_of(llm: dict[str, Any] | LLMConfig | None) -> LLMConfig | None:
     return LLMConfig(**llm) if llm else None
 
 
-def check_llm_section(llm: dict[str, Any], where: str) -> None:
-    """Refuse an API key in a run config's ``llm`` section and check its fields (one ConfigError naming them)."""
-    refuse_secrets(llm, where)
-    if not llm:
-        return
-    try:
-        LLMConfig(**llm).budget()
-    except ValidationError as exc:
-        err = exc.errors(include_url=False, include_input=False)[0]
-        raise ConfigError(f"{where}.{'.'.join(map(str, err['loc']))}: {err['msg']}; fix that value") from None
+def check_llm_section(llm: dict[str, Any], source: str, prefix: str = "llm") -> None:
+    """Refuse an API key in a run config's ``llm`` section and check its fields' types and values (one
+    ConfigError ``source: prefix.field ...``)."""
+    refuse_secrets(llm, f"{source}: {prefix}")
+    if llm:
+        parse_config(LLMConfig, llm, source, prefix=prefix, fix=LLM_FIX).budget()
 
 
 #: LLM fields a resumed run may change: budgets can be raised to continue a run that used them up.

@@ -2,14 +2,14 @@
 
 from __future__ import annotations
 
-import json
 import os
 from pathlib import Path
 from typing import Literal
 
-from pydantic import BaseModel, ConfigDict, Field, SecretStr, ValidationError
+from pydantic import BaseModel, ConfigDict, Field, SecretStr
 
 from adaptenv.adapt.llm.usage import Budget, Prices
+from adaptenv.configfile import parse_config, read_json
 from adaptenv.errors import ConfigError
 
 Provider = Literal["openai", "openai-compatible"]
@@ -25,6 +25,8 @@ COMPATIBLE_KEY_ENV = "ADAPTENV_LLM_API_KEY"
 BASE_URL_ENV = "OPENAI_BASE_URL"
 #: Config keys that hold secrets; a config file or run config holding one is refused.
 SECRET_FIELDS = ("api_key",)
+#: The fix an LLM config's type errors suggest.
+LLM_FIX = "fix that value (docs/llm.md lists the fields)"
 
 
 class LLMConfig(BaseModel):
@@ -145,18 +147,8 @@ def refuse_secrets(data: object, where: str) -> None:
 
 
 def load_llm_config(path: str | Path) -> LLMConfig:
-    """Read an LLMConfig from a JSON file; errors name the file and the field."""
+    """Read an LLMConfig from a JSON file (exact JSON types, unknown fields refused); errors name the file and field."""
     path = Path(path)
-    try:
-        data = json.loads(path.read_text(encoding="utf-8"))
-    except OSError as exc:
-        raise ConfigError(f"{path}: cannot read the LLM config ({exc.strerror}); check the path") from None
-    except json.JSONDecodeError as exc:
-        raise ConfigError(f"{path}: the LLM config is not valid JSON (line {exc.lineno}); fix the syntax") from None
+    data = read_json(path, "LLM config (docs/llm.md)")
     refuse_secrets(data, f"{path}")
-    try:
-        return LLMConfig.model_validate(data)
-    except ValidationError as exc:
-        err = exc.errors(include_url=False, include_input=False)[0]
-        field = ".".join(str(p) for p in err["loc"]) or "(top level)"
-        raise ConfigError(f"{path}: LLM config field {field}: {err['msg']}; fix that value") from None
+    return parse_config(LLMConfig, data, f"{path} (LLM config)", fix=LLM_FIX)
