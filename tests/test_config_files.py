@@ -128,7 +128,8 @@ def test_bad_asset_table_on_the_cli_is_one_line(tmp_path, monkeypatch, capsys):
         main()
     err = capsys.readouterr().err.strip()
     assert exit_.value.code == 1 and "\n" not in err
-    assert err == f'error: --assets {path}: license is not a known field next to "assets"; remove it'
+    assert err == (f'error: --assets {path}: license is not a known field next to "assets" (allowed: assets, note, '
+                   'source); remove it')
 
 
 @pytest.mark.parametrize("doc,words", [

@@ -196,6 +196,8 @@ def _catalog_with(tables: tuple[str, ...]) -> AssetCatalog:
     return replace(base, assets={**base.assets, **extra}) if extra else base
 
 
+TABLE_METADATA = frozenset({"assets", "source", "note"})
+"""Top-level keys of an asset table; ``source`` and ``note`` are free text for the reader."""
 Extent = Annotated[float, Field(gt=0, allow_inf_nan=False)]
 Coordinate = Annotated[float, Field(allow_inf_nan=False)]
 
@@ -224,6 +226,10 @@ class UserAsset(BaseModel):
     """Floor outline, local (x, z) about the box centre; at least 3 points."""
     primary: str | None = None
     split: Literal["train", "val", "test"] | None = None
+    from_: str | None = Field(None, alias="from")
+    """Provenance only (which annotation field gave the type); not read."""
+    note: str | None = None
+    """Free text for the reader; not read."""
 
 
 def read_asset_table(path: str | Path, known_types: frozenset[str] | None = None) -> dict[str, AssetInfo]:
@@ -234,9 +240,11 @@ def read_asset_table(path: str | Path, known_types: frozenset[str] | None = None
     if not isinstance(table, dict) or not table:
         raise ConfigError(f"--assets {p}: expected a JSON object {{\"assets\": {{ASSET_ID: {{\"type\": ..., "
                           '"size": [x, y, z]}}} with at least one asset')
-    if "assets" in doc and len(doc) > 1:
-        other = next(k for k in doc if k != "assets")
-        raise ConfigError(f"--assets {p}: {other} is not a known field next to \"assets\"; remove it")
+    if "assets" in doc:
+        other = next((k for k in doc if k not in TABLE_METADATA), None)
+        if other is not None:
+            raise ConfigError(f"--assets {p}: {other} is not a known field next to \"assets\" (allowed: "
+                              f"{', '.join(sorted(TABLE_METADATA))}); remove it")
     known = known_types if known_types is not None else frozenset(_shipped_catalog().types)
     return {aid: _user_asset(p, aid, entry, known) for aid, entry in table.items()}
 

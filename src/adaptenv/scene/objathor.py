@@ -95,7 +95,8 @@ class ObjathorTable:
 
     def to_json(self, source: str) -> dict[str, Any]:
         """The table document ``--assets`` reads (extra keys say where it came from)."""
-        return {"source": source, "fallback_type": FALLBACK_TYPE, "assets": self.assets}
+        return {"source": source, "note": f"assets no annotation field maps to a catalog type are typed "
+                                          f"{FALLBACK_TYPE}", "assets": self.assets}
 
 
 def _words(name: str) -> list[str]:
