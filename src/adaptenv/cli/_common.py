@@ -48,4 +48,13 @@ def writable_file(path: Path, flag: str) -> Path:
     return path
 
 
+def interrupted(how: str = "") -> None:
+    """After Ctrl-C: one line saying how to continue (when there is a way), then exit 130."""
+    if how:
+        from rich.console import Console
+
+        Console(stderr=True).print(f"interrupted; {how}", highlight=False, soft_wrap=True)
+    raise typer.Exit(130)
+
+
 JSON_OPTION = typer.Option(False, "--json", help="Print the figures as one JSON object instead of a table.")

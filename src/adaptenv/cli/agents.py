@@ -13,7 +13,7 @@ from pathlib import Path
 
 import typer
 
-from adaptenv.cli._common import JSON_OPTION, writable_file, writable_folder
+from adaptenv.cli._common import JSON_OPTION, interrupted, writable_file, writable_folder
 
 _SHORT = {"output": ["-o"], "seed": ["-s"]}
 _HOUSES_OPTION = typer.Option(..., "--houses", help="Folder of house JSON files, a house file, a dataset "
@@ -92,11 +92,9 @@ def _train_command():
             result = run_training(cfg, command=command)
         except KeyboardInterrupt:
             run_dir = default_run_dir(cfg)
-            if run_dir is not None and (run_dir / "state.pt").is_file():
-                resume = command if cfg.resume else f"{command} --resume"
-                Console(stderr=True).print(f"interrupted; the run is saved in {run_dir}, continue it with: {resume}",
-                                           highlight=False, soft_wrap=True)
-            raise typer.Exit(130) from None
+            saved = run_dir is not None and (run_dir / "state.pt").is_file()
+            again = command if cfg.resume else f"{command} --resume"
+            interrupted(f"the run is saved in {run_dir}, continue it with: {again}" if saved else "")
         card = result.card
         Console().print(
             f"trained on {card['n_houses']} houses ({card['houses']}): {card['frames']:,} frames in "

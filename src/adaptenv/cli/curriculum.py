@@ -12,7 +12,7 @@ from pathlib import Path
 
 import typer
 
-from adaptenv.cli._common import writable_folder
+from adaptenv.cli._common import interrupted, writable_folder
 from adaptenv.cli.adapt import (
     API_OPTION,
     CACHE_OPTION,
@@ -72,14 +72,6 @@ def check_house_sets(specs: list[str], strict: bool, say) -> dict[str, int]:
             say(f"{spec}: skipping {len(skipped)} house(s) that cannot be used: "
                 + ", ".join(f"{h.name} ({h.reason})" for h in skipped[:3]) + (", ..." if len(skipped) > 3 else ""))
     return counts
-
-
-def interrupted(how: str) -> None:
-    """After Ctrl-C: one line saying how to continue, then exit 130."""
-    from rich.console import Console
-
-    Console(stderr=True).print(f"interrupted; {how}", highlight=False, soft_wrap=True)
-    raise typer.Exit(130)
 
 
 def check_resumable(out: Path) -> None:

@@ -23,9 +23,7 @@ def prepare_out(out: Path) -> None:
     from adaptenv.cli._common import writable_folder
     from adaptenv.errors import ConfigError
 
-    writable_folder(out, "-o")
-    if out.exists() and not out.is_dir():
-        raise ConfigError(f"-o {out}: is a file, not a folder; pass a new or empty folder with -o")
+    writable_folder(out, "-o")  # also refuses a file
     if out.is_dir() and any(out.iterdir()):
         if not (out / MARKER).is_file():
             raise ConfigError(f"-o {out}: the folder is not empty and was not written by adaptenv demo, so nothing "
