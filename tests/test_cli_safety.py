@@ -195,7 +195,10 @@ def test_ctrl_c_during_the_loop_says_how_to_resume(tmp_path, monkeypatch):
     (["demo", "-o", "{bad}"], "-o"),
     ([*TINY_TRAIN, "--frames", "64", "-o", "{bad}/p.pt"], "--output"),
     ([*TINY_TRAIN, "--frames", "64", "-o", "{ok}/p.pt", "--run-dir", "{bad}"], "--run-dir"),
-], ids=["houses", "rollout", "rollout-render", "render", "report", "adapt", "loop", "demo", "train", "train-run-dir"])
+    (["evaluate", "--houses", "preset:tiny", "-o", "{bad}"], "-o"),
+    (["memory-check", "--houses", "preset:tiny", "-o", "{bad}"], "-o"),
+], ids=["houses", "rollout", "rollout-render", "render", "report", "adapt", "loop", "demo", "train", "train-run-dir",
+        "evaluate", "memory-check"])
 def test_an_unwritable_output_is_refused_before_any_work(tmp_path, command, flag):
     a_file = tmp_path / "a_file"
     a_file.write_text("a regular file: nothing can be created under it, not even by root")
