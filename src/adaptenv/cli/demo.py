@@ -45,6 +45,7 @@ def demo(
     policy: str = typer.Option("pretrained", "--policy", help="Starting policy: pretrained or a checkpoint path."),
 ) -> None:
     """Generate houses, run the pretrained agent, analyze and adapt its scenes, fine-tune, write the report."""
+    prepare_out(out)  # before any work: a folder the demo did not write is refused, not emptied
     from rich.console import Console
 
     from adaptenv.curriculum.loop import LoopConfig, run_loop
@@ -54,7 +55,6 @@ def demo(
     from adaptenv.scene.procedural import generate_houses, rearrange_house
 
     console = Console()
-    prepare_out(out)
     train, heldout_re, heldout_new = out / "houses" / "train", out / "houses" / "rearranged", out / "houses" / "unseen"
     console.print(f"[bold]1/4[/] generating {houses} training houses, their rearranged variants and "
                   f"{houses} unseen houses")
