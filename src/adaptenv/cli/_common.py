@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import os
 from pathlib import Path
+from typing import NoReturn
 
 import typer
 
@@ -48,7 +49,7 @@ def writable_file(path: Path, flag: str) -> Path:
     return path
 
 
-def interrupted(how: str = "") -> None:
+def interrupted(how: str = "") -> NoReturn:
     """After Ctrl-C: one line saying how to continue (when there is a way), then exit 130."""
     if how:
         from rich.console import Console

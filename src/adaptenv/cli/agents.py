@@ -10,10 +10,14 @@ import inspect
 import shlex
 from dataclasses import MISSING, fields
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import typer
 
 from adaptenv.cli._common import JSON_OPTION, interrupted, writable_file, writable_folder
+
+if TYPE_CHECKING:
+    from adaptenv.agents.config import PPOConfig, TrainConfig
 
 _SHORT = {"output": ["-o"], "seed": ["-s"]}
 _HOUSES_OPTION = typer.Option(..., "--houses", help="Folder of house JSON files, a house file, a dataset "
@@ -48,7 +52,7 @@ def final_eval_text(card: dict) -> str:
     return f"success on fresh training episodes {card['final_train_success']:.1%} (n={n})"
 
 
-def check_frames(cfg, command: str) -> None:
+def check_frames(cfg: TrainConfig | PPOConfig, command: str) -> None:
     """Refuse a --frames budget below one collection block (num_envs x rollout_steps); say when it is rounded up."""
     from adaptenv.errors import ConfigError
 
@@ -63,7 +67,7 @@ def check_frames(cfg, command: str) -> None:
                    f"{total:,} frames (the card records them)")
 
 
-def check_outputs(cfg, run_dir: Path | None) -> None:
+def check_outputs(cfg: TrainConfig | PPOConfig, run_dir: Path | None) -> None:
     """Check before any work that the checkpoint (--output) and the run folder (--run-dir) can be written."""
     if cfg.output:
         writable_file(Path(cfg.output), "--output")
