@@ -45,8 +45,11 @@ def test_beta_schedule_and_config_checks(tmp_path):
     assert beta_at(cfg, 4096) == pytest.approx(0.2)
     with pytest.raises(ConfigError, match="multiple of --chunk-len"):
         train(tiny_config(tmp_path, rollout_steps=20))
-    with pytest.raises(ConfigError, match="--resume"):
+    with pytest.raises(ConfigError, match="--resume: the run folder .*nothing does not exist"):
         train(tiny_config(tmp_path, run_dir=str(tmp_path / "nothing"), resume=True))
+    (tmp_path / "empty").mkdir()
+    with pytest.raises(ConfigError, match="--resume: no saved state at .*state.pt"):
+        train(tiny_config(tmp_path, run_dir=str(tmp_path / "empty"), resume=True))
 
 
 def test_buffer_samples_aligned_chunks():
@@ -108,9 +111,7 @@ def test_resume_after_interruption_continues_from_the_checkpoint(tmp_path, monke
     with pytest.raises(KeyboardInterrupt):
         train(cfg)
     monkeypatch.setattr(SequenceBuffer, "add", real_add)
-    import torch
-
-    saved = torch.load(tmp_path / "run" / "state.pt", weights_only=False)
+    saved = torch.load(tmp_path / "run" / "state.pt", weights_only=True)  # tensors and plain data: no code runs
     assert saved["frames"] == 3 * 512 and saved["iteration"] == 3 and saved["buffer"]["size"] == 3
     result = train(tiny_config(tmp_path, resume=True))
     iterations = [r["iteration"] for r in result.rows if "losses/loss" in r]

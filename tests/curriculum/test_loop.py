@@ -158,7 +158,7 @@ def test_resume_takes_fields_added_since_the_run_as_defaults_and_refuses_other_c
     del state["config"]["relocate_targets"]  # as written before the field existed
     (tmp_path / "r" / STATE).write_text(json.dumps(state))
     assert figures(run_loop(cfg, tmp_path / "r", resume=True)) == figures(first)
-    with pytest.raises(ConfigError, match="different config"):
+    with pytest.raises(ConfigError, match=r"other settings than the interrupted run: relocate_targets \(was False, now True\)"):
         run_loop(tiny_config(tiny_policy, "none", iterations=1, relocate_targets=True), tmp_path / "r", resume=True)
 
 

@@ -4,7 +4,9 @@ from __future__ import annotations
 
 import ast
 import inspect
+from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import Any
 
 PRECISIONS = ("fp32", "bf16")
 """Arithmetics of DAgger's gradient steps: fp32 or bfloat16 autocast (forward in bf16, loss and weights in fp32)."""
@@ -232,3 +234,15 @@ def field_docs(cls: type) -> dict[str, str]:
                 and isinstance(nxt, ast.Expr) and isinstance(getattr(nxt, "value", None), ast.Constant)):
             docs[node.target.id] = str(nxt.value.value)
     return docs
+
+
+def changed_settings(saved: dict[str, Any], current: dict[str, Any], may_change: Sequence[str] = ()) -> list[str]:
+    """``name (was A, now B)`` for each setting that differs between two config dicts, except ``may_change``."""
+    unset = object()
+    changed = []
+    for k in sorted(set(saved) | set(current)):
+        old, new = saved.get(k, unset), current.get(k, unset)
+        if k not in may_change and old != new:
+            changed.append(f"{k} (was {'unset' if old is unset else repr(old)}, now "
+                           f"{'unset' if new is unset else repr(new)})")
+    return changed

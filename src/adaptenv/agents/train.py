@@ -53,7 +53,14 @@ import torch
 import torch.nn.functional as F
 
 from adaptenv.agents.checkpoint import atomic_torch_save, load_checkpoint, save_checkpoint
-from adaptenv.agents.config import PRECISIONS, FinetuneConfig, PPOConfig, TrainConfig, field_docs
+from adaptenv.agents.config import (
+    PRECISIONS,
+    FinetuneConfig,
+    PPOConfig,
+    TrainConfig,
+    changed_settings,
+    field_docs,
+)
 from adaptenv.agents.evaluate import run_episodes, sample_episodes, summarize
 from adaptenv.agents.houses import compile_houses, load_house_set
 from adaptenv.agents.network import (
@@ -236,6 +243,42 @@ class RunLogger:
             self.writer.close()
 
 
+# -- the resume state -----------------------------------------------------------------------------
+
+STATE_KEYS = ("net", "optimizer", "buffer", "frames", "updates", "iteration", "wall_time", "numpy_rng", "torch_rng",
+              "config")
+"""What ``state.pt`` must hold (and ``learn_rng``): tensors, numbers, strings and plain dicts only, so it loads with
+``weights_only=True`` and never runs code."""
+RESUME_MAY_CHANGE = ("resume", "frames", "output", "save_every", "final_eval_episodes", "threads", "progress",
+                     "tensorboard")
+"""TrainConfig fields a resumed run may set differently from the interrupted one (budget and bookkeeping)."""
+
+
+def load_resume_state(cfg: TrainConfig, state_path: Path | None) -> dict[str, Any]:
+    """Read ``state.pt`` for ``--resume`` (never unpickling code) and check it belongs to this config."""
+    if state_path is None:
+        raise ConfigError("--resume: this run writes no run folder; pass the --run-dir of the interrupted run")
+    if not state_path.parent.is_dir():
+        raise ConfigError(f"--resume: the run folder {state_path.parent} does not exist; pass the --run-dir of the "
+                          "interrupted run, or start without --resume")
+    if not state_path.is_file():
+        raise ConfigError(f"--resume: no saved state at {state_path}; start without --resume or pass the "
+                          "--run-dir of the interrupted run")
+    try:
+        saved = torch.load(state_path, map_location="cpu", weights_only=True)
+    except Exception as exc:  # torch raises many types for corrupt or foreign files
+        raise ConfigError(f"{state_path}: not a resume state adaptenv train wrote ({type(exc).__name__}); start "
+                          "the run again without --resume, in a new --run-dir") from None
+    if not isinstance(saved, dict) or not set(STATE_KEYS) <= set(saved) or not isinstance(saved["config"], dict):
+        raise ConfigError(f"{state_path}: not a resume state adaptenv train wrote (missing fields); start the run "
+                          "again without --resume, in a new --run-dir")
+    changed = changed_settings({**asdict(TrainConfig()), **saved["config"]}, asdict(cfg), RESUME_MAY_CHANGE)
+    if changed:
+        raise ConfigError(f"--resume: {state_path} was saved with other settings: {', '.join(changed)}; pass the "
+                          "interrupted run's values (its config.json) or start a new --run-dir")
+    return saved
+
+
 # -- training -------------------------------------------------------------------------------------
 
 @dataclass
@@ -274,9 +317,7 @@ def _train(cfg: TrainConfig, worlds: Sequence[NavWorld] | None, init_net: NavNet
            threads: int) -> TrainResult:
     run_dir = default_run_dir(cfg)
     state_path = run_dir / "state.pt" if run_dir else None
-    if cfg.resume and (state_path is None or not state_path.is_file()):
-        raise ConfigError(f"--resume: no saved state at {state_path}; start without --resume or pass the "
-                          "--run-dir of the interrupted run")
+    saved = load_resume_state(cfg, state_path) if cfg.resume else None  # checked before anything is written
     if run_dir:
         run_dir.mkdir(parents=True, exist_ok=True)
         (run_dir / "config.json").write_text(json.dumps(asdict(cfg), indent=1) + "\n", encoding="utf-8")
@@ -304,15 +345,19 @@ def _train(cfg: TrainConfig, worlds: Sequence[NavWorld] | None, init_net: NavNet
                             net.config.map_crop if net.config.map_channels else 0)
     frames, updates, iteration, wall_before = 0, 0, 0, 0.0
     learn_rng = np.random.default_rng([cfg.seed, 1])  # minibatches (its own stream: the learner may run in a thread)
-    if cfg.resume:
-        saved = torch.load(state_path, map_location="cpu", weights_only=False)
-        net.load_state_dict(saved["net"])
-        optimizer.load_state_dict(saved["optimizer"])
-        buffer.load_state_dict(saved["buffer"])
-        frames, updates, iteration, wall_before = saved["frames"], saved["updates"], saved["iteration"], saved["wall_time"]
-        rng.bit_generator.state = saved["numpy_rng"]
-        learn_rng.bit_generator.state = saved.get("learn_rng", learn_rng.bit_generator.state)
-        torch.set_rng_state(saved["torch_rng"])
+    if saved is not None:
+        try:
+            net.load_state_dict(saved["net"])
+            optimizer.load_state_dict(saved["optimizer"])
+            buffer.load_state_dict(saved["buffer"])
+            frames, updates, iteration = int(saved["frames"]), int(saved["updates"]), int(saved["iteration"])
+            wall_before = float(saved["wall_time"])
+            rng.bit_generator.state = saved["numpy_rng"]
+            learn_rng.bit_generator.state = saved.get("learn_rng", learn_rng.bit_generator.state)
+            torch.set_rng_state(saved["torch_rng"])
+        except (KeyError, RuntimeError, TypeError, ValueError) as exc:
+            raise ConfigError(f"{state_path}: the saved state does not fit this run ({type(exc).__name__}); start the "
+                              "run again without --resume, in a new --run-dir") from None
         del saved  # the dataset copy in it is large
 
     def save_state() -> None:

@@ -3,7 +3,8 @@
 Each module in this package owns one group of commands and exposes ``register(app, bench)``;
 they are discovered here, so adding a command never means editing this file. Commands keep heavy
 imports inside their functions so that ``adaptenv --help`` stays fast. Errors adaptenv raises on
-purpose (:class:`~adaptenv.errors.AdaptenvError`) are printed as one line, without a traceback.
+purpose (:class:`~adaptenv.errors.AdaptenvError`), and as a last resort file-system errors (``OSError``),
+are printed as one line, without a traceback.
 Global options (``--assets``) are accepted before the command and after it: :class:`_Root` gives
 every command a copy of them.
 """
@@ -89,7 +90,7 @@ _register_all()
 
 
 def main() -> None:
-    """Console entry point: run the app, turning adaptenv errors into one red line and exit code 1."""
+    """Console entry point: run the app, turning adaptenv and file-system errors into one red line and exit code 1."""
     try:
         app()
     except AdaptenvError as exc:
@@ -98,3 +99,12 @@ def main() -> None:
     except KeyboardInterrupt:
         err_console.print("[yellow]interrupted[/]")
         sys.exit(130)
+    except OSError as exc:  # a last resort: the commands check their output paths before any work
+        err_console.print(f"[bold red]error:[/] {escape(os_error_text(exc))}", highlight=False, soft_wrap=True)
+        sys.exit(1)
+
+
+def os_error_text(exc: OSError) -> str:
+    """One sentence for a file-system error: the path, what went wrong and what to do."""
+    where = f"{exc.filename}: " if exc.filename is not None else ""
+    return f"{where}{exc.strerror or exc}; check that the path exists and that you can read and write it"

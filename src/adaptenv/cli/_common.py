@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
+import os
 from pathlib import Path
+from typing import NoReturn
 
 import typer
 
@@ -14,6 +16,46 @@ def existing_file(path: Path, what: str = "file") -> Path:
     if not path.is_file():
         raise ConfigError(f"{path}: no such {what}; check the path")
     return path
+
+
+def _nearest_existing(path: Path) -> Path:
+    """``path`` itself or its closest ancestor that exists (a path under a regular file stops at the file)."""
+    return next((p for p in (path, *path.parents) if p.exists()), Path("."))
+
+
+def _check_writable_base(folder: Path, flag: str, given: Path) -> None:
+    """Raise a ConfigError naming ``flag`` unless ``folder`` can be created, or written in, by this user."""
+    base = _nearest_existing(folder)
+    if not base.is_dir():
+        raise ConfigError(f"{flag} {given}: {base} is a file, not a folder; pass another {flag}")
+    if not os.access(base, os.W_OK | os.X_OK):
+        raise ConfigError(f"{flag} {given}: the folder {base} is not writable; pass a {flag} you can write to")
+
+
+def writable_folder(path: Path, flag: str) -> Path:
+    """Return ``path`` if it is, or can be created as, a folder this user can write in (checked before any work)."""
+    _check_writable_base(Path(path), flag, path)
+    return path
+
+
+def writable_file(path: Path, flag: str) -> Path:
+    """Return ``path`` if this user can create or overwrite the file there (checked before any work)."""
+    path = Path(path)
+    if path.is_dir():
+        raise ConfigError(f"{flag} {path}: is a folder; pass a file name")
+    if path.exists() and not os.access(path, os.W_OK):
+        raise ConfigError(f"{flag} {path}: the file is not writable; pass a {flag} you can write to")
+    _check_writable_base(path.parent, flag, path)
+    return path
+
+
+def interrupted(how: str = "") -> NoReturn:
+    """After Ctrl-C: one line saying how to continue (when there is a way), then exit 130."""
+    if how:
+        from rich.console import Console
+
+        Console(stderr=True).print(f"interrupted; {how}", highlight=False, soft_wrap=True)
+    raise typer.Exit(130)
 
 
 JSON_OPTION = typer.Option(False, "--json", help="Print the figures as one JSON object instead of a table.")

@@ -15,7 +15,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 import typer
 
-from adaptenv.cli._common import JSON_OPTION
+from adaptenv.cli._common import JSON_OPTION, writable_folder
 from adaptenv.errors import AdaptenvError, ConfigError
 
 if TYPE_CHECKING:
@@ -191,6 +191,7 @@ def adapt(
         raise ConfigError(f"--generator {generator!r}: unknown generator; use one of {', '.join(GENERATORS)}")
     if analyzer not in ("builtin", "llm"):
         raise ConfigError(f"--analyzer {analyzer!r}: unknown analyzer; use builtin or llm")
+    writable_folder(out, "-o")
     many = _is_house_set(house)
     if trajectory is not None and (many or diagnose):
         raise ConfigError("--trajectory: give one house file and no --diagnose (the trajectory is the episode F "

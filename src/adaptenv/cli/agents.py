@@ -10,10 +10,14 @@ import inspect
 import shlex
 from dataclasses import MISSING, fields
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import typer
 
-from adaptenv.cli._common import JSON_OPTION
+from adaptenv.cli._common import JSON_OPTION, interrupted, writable_file, writable_folder
+
+if TYPE_CHECKING:
+    from adaptenv.agents.config import PPOConfig, TrainConfig
 
 _SHORT = {"output": ["-o"], "seed": ["-s"]}
 _HOUSES_OPTION = typer.Option(..., "--houses", help="Folder of house JSON files, a house file, a dataset "
@@ -48,6 +52,29 @@ def final_eval_text(card: dict) -> str:
     return f"success on fresh training episodes {card['final_train_success']:.1%} (n={n})"
 
 
+def check_frames(cfg: TrainConfig | PPOConfig, command: str) -> None:
+    """Refuse a --frames budget below one collection block (num_envs x rollout_steps); say when it is rounded up."""
+    from adaptenv.errors import ConfigError
+
+    block = cfg.num_envs * cfg.rollout_steps
+    if cfg.frames < block:
+        raise ConfigError(f"--frames {cfg.frames} is less than one collection block (--num-envs {cfg.num_envs} x "
+                          f"--rollout-steps {cfg.rollout_steps} = {block:,} frames); pass --frames {block} or more, "
+                          "or lower --num-envs or --rollout-steps")
+    if cfg.frames % block:
+        total = -(-cfg.frames // block) * block
+        typer.echo(f"{command} collects whole blocks of {block:,} frames: --frames {cfg.frames} trains "
+                   f"{total:,} frames (the card records them)")
+
+
+def check_outputs(cfg: TrainConfig | PPOConfig, run_dir: Path | None) -> None:
+    """Check before any work that the checkpoint (--output) and the run folder (--run-dir) can be written."""
+    if cfg.output:
+        writable_file(Path(cfg.output), "--output")
+    if run_dir is not None:
+        writable_folder(run_dir, "--run-dir")
+
+
 def _train_command():
     """Build ``adaptenv train`` from TrainConfig: one option per field, its docstring as the help."""
     from adaptenv.agents.config import TrainConfig
@@ -58,12 +85,20 @@ def _train_command():
         """Train a navigation policy by behaviour cloning + DAgger from the shortest-path expert."""
         from rich.console import Console
 
-        from adaptenv.agents.train import TrainConfig
+        from adaptenv.agents.train import TrainConfig, default_run_dir
         from adaptenv.agents.train import train as run_training
 
         cfg = TrainConfig(**kwargs)
+        check_frames(cfg, "adaptenv train")
+        check_outputs(cfg, default_run_dir(cfg))
         command = train_command_line(cfg)
-        result = run_training(cfg, command=command)
+        try:
+            result = run_training(cfg, command=command)
+        except KeyboardInterrupt:
+            run_dir = default_run_dir(cfg)
+            saved = run_dir is not None and (run_dir / "state.pt").is_file()
+            again = command if cfg.resume else f"{command} --resume"
+            interrupted(f"the run is saved in {run_dir}, continue it with: {again}" if saved else "")
         card = result.card
         Console().print(
             f"trained on {card['n_houses']} houses ({card['houses']}): {card['frames']:,} frames in "
@@ -82,9 +117,11 @@ def _ppo_command():
         """Fine-tune a navigation policy by PPO on the simulator's SPOC-style reward (warm start: --init)."""
         from rich.console import Console
 
-        from adaptenv.agents.ppo import train_ppo
+        from adaptenv.agents.ppo import default_ppo_run_dir, train_ppo
 
         cfg = PPOConfig(**kwargs)
+        check_frames(cfg, "adaptenv ppo")
+        check_outputs(cfg, default_ppo_run_dir(cfg))
         result = train_ppo(cfg, command=config_command_line("ppo", cfg))
         card = result.card
         Console().print(
@@ -131,6 +168,7 @@ def evaluate(
     from adaptenv.agents.suites import EpisodeFloor
     from adaptenv.progress import ProgressBar
 
+    writable_folder(out, "-o")
     configure_torch()
     console = Console()
     command = shlex.join(["adaptenv", "evaluate", "--policy", policy, *[a for h in houses for a in ("--houses", h)],

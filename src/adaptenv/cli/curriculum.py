@@ -6,11 +6,13 @@ torch or numba.
 
 from __future__ import annotations
 
+import shlex
 import sys
 from pathlib import Path
 
 import typer
 
+from adaptenv.cli._common import interrupted, writable_folder
 from adaptenv.cli.adapt import (
     API_OPTION,
     CACHE_OPTION,
@@ -72,6 +74,18 @@ def check_house_sets(specs: list[str], strict: bool, say) -> dict[str, int]:
     return counts
 
 
+def check_resumable(out: Path) -> None:
+    """Refuse ``--resume`` unless ``out`` holds a loop run (its state.json, or run.json of a run cut short before)."""
+    from adaptenv.curriculum.records import RUN_INFO, STATE
+
+    if not out.is_dir():
+        raise ConfigError(f"--resume: the run folder {out} does not exist; pass the -o of the interrupted run, or "
+                          "start without --resume")
+    if not (out / STATE).is_file() and not (out / RUN_INFO).is_file():
+        raise ConfigError(f"--resume: {out} holds no loop run (no {STATE}); pass the -o of the interrupted run, or "
+                          "start without --resume in a new folder")
+
+
 def loop(
     policy: str = typer.Option("pretrained", "--policy", help="Starting policy: pretrained or a checkpoint path."),
     houses: str = typer.Option("preset:pretrain-train", "--houses", help="Training scenes: a folder of house "
@@ -131,6 +145,9 @@ def loop(
     from adaptenv.curriculum.executor import ExecutorOptions
     from adaptenv.curriculum.loop import LoopConfig, run_loop
 
+    writable_folder(out, "-o")
+    if resume:
+        check_resumable(out)
     console = Console()
     llm = loop_llm_section(llm_config_file, model=model, base_url=base_url, api=api, api_key_env=api_key_env,
                            cache_dir=str(llm_cache) if llm_cache else None, prompts=prompts, price_in=price_in,
@@ -143,9 +160,14 @@ def loop(
                      finetune_beta=finetune_beta, finetune_max_steps=finetune_max_steps, relocate_targets=relocate_targets, focus_training=focus_training,
                      heldout_episodes=heldout_episodes, llm=llm, **({"heldout": h} if (h := _heldout(heldout)) else {}))
     check_house_sets([cfg.houses, *cfg.heldout.values()], strict, console.print)
-    with ExecutorOptions(executor, workers, address).make() as ex:
-        records = run_loop(cfg, out, resume=resume, executor=ex, progress=lambda text: console.print(f"[dim]{text}[/]"),
-                           command=" ".join(["adaptenv"] + sys.argv[1:]))
+    command = shlex.join(["adaptenv", *sys.argv[1:]])
+    try:
+        with ExecutorOptions(executor, workers, address).make() as ex:
+            records = run_loop(cfg, out, resume=resume, executor=ex, progress=lambda text: console.print(f"[dim]{text}[/]"),
+                               command=command)
+    except KeyboardInterrupt:
+        again = command if resume else f"{command} --resume"
+        interrupted(f"the finished iterations are saved in {out}; continue the run with: {again}")
     from rich.table import Table
 
     table = Table(title=f"{method} seed {seed}: held-out success per iteration (Delta R against pi_0)")
@@ -182,7 +204,7 @@ def experiment(
 
     console = Console()
     cfg = ExperimentConfig.load(config)
-    out = out or Path("runs") / config.stem
+    out = writable_folder(out or Path("runs") / config.stem, "-o")
     ref = cfg.loop_config(cfg.reference, cfg.seeds[0])
     check_house_sets([ref.houses, *ref.heldout.values()], strict, console.print)
     ex = None if executor == "inprocess" else make_executor(executor, workers, address)
@@ -199,6 +221,8 @@ def experiment(
             final_evaluation(out, cfg, final_episodes, executor=ex, progress=say)
             console.print(f"[bold]final evaluation on {final_episodes} episodes per set[/]")
             console.print((out / "summary_final.md").read_text(encoding="utf-8"))
+    except KeyboardInterrupt:
+        interrupted(f"the finished runs and iterations are kept in {out}; run the same command again to continue")
     finally:
         if ex is not None:
             ex.close()

@@ -10,17 +10,42 @@ from pathlib import Path
 
 import typer
 
+MARKER = ".adaptenv-demo"
+"""The file the demo writes into its output folder: a later demo may replace only a folder that holds it."""
+OWNED = ("houses", "run")
+"""The demo's sub-folders, replaced when the demo runs again into its own folder (nothing else there is touched)."""
+
+
+def prepare_out(out: Path) -> None:
+    """Make ``out`` ready for the demo: new, empty or an earlier demo's (its outputs removed); refuse anything else."""
+    import shutil
+
+    from adaptenv.cli._common import writable_folder
+    from adaptenv.errors import ConfigError
+
+    writable_folder(out, "-o")  # also refuses a file
+    if out.is_dir() and any(out.iterdir()):
+        if not (out / MARKER).is_file():
+            raise ConfigError(f"-o {out}: the folder is not empty and was not written by adaptenv demo, so nothing "
+                              "in it is replaced; pass a new or empty folder with -o")
+        for name in OWNED:
+            if (out / name).is_dir():
+                shutil.rmtree(out / name)
+    out.mkdir(parents=True, exist_ok=True)
+    (out / MARKER).write_text("written by adaptenv demo; a later demo with the same -o replaces houses/ and run/\n",
+                              encoding="utf-8")
+
 
 def demo(
-    out: Path = typer.Option(Path("runs/demo"), "-o", "--out", help="Folder for the demo's outputs."),
+    out: Path = typer.Option(Path("runs/demo"), "-o", "--out", help="Folder for the demo's outputs: new, empty, or "
+                             "an earlier demo's (whose houses/ and run/ are replaced)."),
     houses: int = typer.Option(4, "--houses", min=1, max=50, help="Procedural training houses to generate."),
     iterations: int = typer.Option(2, "--iterations", min=1, max=20, help="Closed-loop iterations."),
     seed: int = typer.Option(0, "--seed", help="Root seed: the same seed gives the same outputs."),
     policy: str = typer.Option("pretrained", "--policy", help="Starting policy: pretrained or a checkpoint path."),
 ) -> None:
     """Generate houses, run the pretrained agent, analyze and adapt its scenes, fine-tune, write the report."""
-    import shutil
-
+    prepare_out(out)  # before any work: a folder the demo did not write is refused, not emptied
     from rich.console import Console
 
     from adaptenv.curriculum.loop import LoopConfig, run_loop
@@ -30,8 +55,6 @@ def demo(
     from adaptenv.scene.procedural import generate_houses, rearrange_house
 
     console = Console()
-    if out.exists():
-        shutil.rmtree(out)
     train, heldout_re, heldout_new = out / "houses" / "train", out / "houses" / "rearranged", out / "houses" / "unseen"
     console.print(f"[bold]1/4[/] generating {houses} training houses, their rearranged variants and "
                   f"{houses} unseen houses")

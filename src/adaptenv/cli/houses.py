@@ -16,7 +16,7 @@ from typing import Annotated
 import typer
 from typer.core import TyperCommand
 
-from adaptenv.cli._common import JSON_OPTION, existing_file
+from adaptenv.cli._common import JSON_OPTION, existing_file, writable_file, writable_folder
 from adaptenv.errors import ConfigError
 
 houses_app = typer.Typer(help="ProcTHOR-format houses: generate new ones, rearrange existing ones, split datasets "
@@ -115,6 +115,7 @@ def generate(
         raise ConfigError(f"--seed: expected a non-negative integer, got {seed}")
     if out.exists() and not out.is_dir():
         raise ConfigError(f"{out}: exists and is not a folder; pass a folder to -o")
+    writable_folder(out, "-o")
     if preset is not None and preset not in PRESETS:
         raise ConfigError(f"--preset: unknown preset {preset!r}; use one of {', '.join(PRESETS)}")
     cfg = _config_for(rooms, split) if preset is None else None  # check the options before any output
@@ -151,6 +152,7 @@ def rearrange(
         raise ConfigError(f"--seed: expected a non-negative integer, got {seed}")
     if out.suffix.lower() != ".json":
         raise ConfigError(f"{out}: the output must be a .json file; pass e.g. -o rearranged.json")
+    writable_file(out, "-o")
     house = load_house(existing_file(house_path, "house file"))
     new = rearrange_house(house, seed)
     save_house(new, out)

@@ -38,9 +38,12 @@ def memory_check(
     from adaptenv.agents.memory import memory_check as run_check
     from adaptenv.agents.memory import wipe_intervals
     from adaptenv.agents.network import configure_torch
+    from adaptenv.cli._common import writable_folder
     from adaptenv.progress import ProgressBar
 
     ks = wipe_intervals(every, "--every")
+    if out is not None:
+        writable_folder(out, "-o")
     configure_torch()
     command = shlex.join(["adaptenv", "memory-check", "--policy", policy, "--houses", houses, "-n", str(episodes),
                           "--seed", str(seed), *[a for k in ks[1:] for a in ("--every", str(k))],

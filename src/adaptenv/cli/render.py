@@ -10,7 +10,7 @@ from pathlib import Path
 
 import typer
 
-from adaptenv.cli._common import JSON_OPTION
+from adaptenv.cli._common import JSON_OPTION, writable_file
 
 HOUSE_ARGUMENT = typer.Argument(..., metavar="HOUSE.json", help="House JSON file (ProcTHOR format).",
                                 show_default=False)
@@ -43,6 +43,7 @@ def render(
     from adaptenv.scene.house import load_house
     from adaptenv.sim.trajectory import Trajectory
 
+    writable_file(out, "-o")
     h = load_house(house)
     traj = Trajectory.load(trajectory) if trajectory is not None else None
     colours = {}

@@ -19,8 +19,10 @@ OUT_OPTION = typer.Option(None, "-o", "--out", metavar="OUT_DIR",
 
 def report(folder: Path = FOLDER_ARGUMENT, out: Path | None = OUT_OPTION) -> None:
     """Write an HTML report (curves, results table, before/after gallery) and print index.html's path."""
+    from adaptenv.cli._common import writable_folder
     from adaptenv.report import build_report
 
+    writable_folder(out if out is not None else folder / "report", "-o")
     print(build_report(folder, out))
 
 

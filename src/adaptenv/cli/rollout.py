@@ -10,7 +10,7 @@ from pathlib import Path
 
 import typer
 
-from adaptenv.cli._common import JSON_OPTION, existing_file
+from adaptenv.cli._common import JSON_OPTION, existing_file, writable_file
 
 POLICIES = ("expert", "random")
 _HOUSE = typer.Argument(..., help="A ProcTHOR house JSON file.")
@@ -51,6 +51,9 @@ def rollout(
     from adaptenv.sim.world import compile_world
 
     existing_file(house, "house file")
+    writable_file(out, "-o")
+    if render is not None:
+        writable_file(render, "--render")
     house_model = load_house(house)
     world = compile_world(house_model, name=str(house))
     pol = resolve_policy(policy, seed)

@@ -40,7 +40,7 @@ from typing import Any
 
 import numpy as np
 
-from adaptenv.adapt.llm.accounting import check_llm_section, same_run, scenes_usage
+from adaptenv.adapt.llm.accounting import check_llm_section, run_changes, scenes_usage
 from adaptenv.agents.checkpoint import load_checkpoint, save_checkpoint
 from adaptenv.agents.config import FinetuneConfig
 from adaptenv.agents.evaluate import EpisodeResult, EvalReport, mean_se, summarize, write_report
@@ -369,9 +369,10 @@ def _open_run(cfg: LoopConfig, run_dir: Path, resume: bool, command: str
             raise ConfigError(f"{state_path}: expected {{\"config\": ..., \"state\": ...}} as the loop writes it; "
                               f"{STATE_FIX}")
         old = saved["config"]  # a field added to LoopConfig since the run started counts as its default
-        if not same_run({**asdict(LoopConfig()), **old}, asdict(cfg)):
-            raise ConfigError(f"{run_dir}: --resume with a different config than the interrupted run; "
-                              "use the same config or a new output folder")
+        changed = run_changes({**asdict(LoopConfig()), **old}, asdict(cfg))
+        if changed:
+            raise ConfigError(f"{run_dir}: --resume with other settings than the interrupted run: {', '.join(changed)}; "
+                              "pass the same options (its run.json lists them) or a new output folder")
         state = parse_config(LoopState, saved.get("state"), str(state_path), prefix="state", fix=STATE_FIX)
         if state.buffer:
             lb.LevelBufferState.from_dict(state.buffer, f"{state_path}: state.buffer")

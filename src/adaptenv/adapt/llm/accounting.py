@@ -2,8 +2,8 @@
 
 For one adapted scene, :func:`scene_usage` adds F's calls (``Analysis.usage``) to G's
 (``GenerationResult.usage``); :func:`scenes_usage` sums a batch. :func:`check_llm_section` refuses an
-API key in a run config (before anything is saved) and validates the fields; :func:`same_run` lets a
-resumed run raise its budget. The closed loop's per-iteration ledger is
+API key in a run config (before anything is saved) and validates the fields; :func:`run_changes` names
+what a resumed run changed (it may raise its budget). The closed loop's per-iteration ledger is
 :mod:`adaptenv.curriculum.llm_usage`.
 """
 
@@ -46,15 +46,16 @@ def check_llm_section(llm: dict[str, Any], source: str, prefix: str = "llm") -> 
 RESUMABLE_LLM_FIELDS = ("max_tokens", "max_cost")
 
 
-def same_run(saved: dict[str, Any] | None, current: dict[str, Any]) -> bool:
-    """Whether a saved run config and the current one describe the same run (budgets may differ)."""
-    def strip(cfg: dict[str, Any] | None) -> dict[str, Any] | None:
-        if cfg is None:
-            return None
-        llm = {k: v for k, v in (cfg.get("llm") or {}).items() if k not in RESUMABLE_LLM_FIELDS}
-        return {**cfg, "llm": llm}
+def run_changes(saved: dict[str, Any], current: dict[str, Any]) -> list[str]:
+    """``name (was A, now B)`` for each setting in which two run configs differ (``llm.NAME`` inside the llm
+    section); the budgets a resumed run may raise are left out."""
+    from adaptenv.agents.config import changed_settings
 
-    return strip(saved) == strip(current)
+    def spread(cfg: dict[str, Any]) -> dict[str, Any]:
+        llm = {f"llm.{k}": v for k, v in (cfg.get("llm") or {}).items() if k not in RESUMABLE_LLM_FIELDS}
+        return {**{k: v for k, v in cfg.items() if k != "llm"}, **llm}
+
+    return changed_settings(spread(saved), spread(current))
 
 
 def scenes_usage(made: list[Any]) -> Usage:
