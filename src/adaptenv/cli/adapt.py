@@ -106,9 +106,8 @@ def analyze(
     llm_config_file: Path | None = LLM_CONFIG_OPTION,
 ) -> None:
     """Analyze one recorded episode (the paper's F): outcome, concerns and suggestions."""
-    from adaptenv.adapt.analysis import BuiltinAnalyzer, LLMAnalyzer, trajectory_mismatch
-    from adaptenv.cli._common import existing_file
-    from adaptenv.errors import ConfigError
+    from adaptenv.adapt.analysis import BuiltinAnalyzer, LLMAnalyzer
+    from adaptenv.cli._common import check_recorded_in, existing_file
     from adaptenv.scene.house import load_house
     from adaptenv.sim.trajectory import Trajectory
     from adaptenv.sim.world import compile_world
@@ -116,9 +115,7 @@ def analyze(
     h = load_house(existing_file(house, "house file"))
     traj = Trajectory.load(existing_file(trajectory, "trajectory file"))
     world = compile_world(h, house.stem)
-    if (why := trajectory_mismatch(traj, world)) is not None:
-        raise ConfigError(f"{trajectory}: recorded in house {traj.house!r}, not in {house} ({why}); "
-                          "pass the house the episode ran in")
+    check_recorded_in(traj, world, trajectory, house)
     analyzer = (LLMAnalyzer(llm_backend(model, base_url, llm_cache, "--llm", api=api, api_key_env=api_key_env,
                                         prompts=prompts, config_file=llm_config_file))
                 if llm else BuiltinAnalyzer())

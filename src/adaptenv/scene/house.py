@@ -10,7 +10,9 @@ from __future__ import annotations
 import json
 import math
 from collections.abc import Iterator
+from itertools import chain
 from pathlib import Path
+from statistics import median
 from typing import Any
 
 from pydantic import BaseModel, ConfigDict, Field, ValidationError
@@ -20,9 +22,19 @@ from adaptenv.errors import HouseError, Problem
 SCHEMA_VERSION = "1.0.0"
 AGENT_POSE_KINDS = ("default", "arm", "locobot", "stretch")
 
+#: The widest house (m, along any axis, over rooms, walls, objects and agent starts) that is accepted.
+#: ProcTHOR-10K houses are at most a few tens of metres across (the 10-room house in tests/data spans
+#: 15.8 x 17.5 m); at the simulator's 5 cm cells 100 m is a 2000 x 2000 raster, so a house in the
+#: wrong units (mm, or scaled by 1e6) is refused instead of exhausting memory.
+MAX_HOUSE_SIZE = 100.0
+#: The farthest (m) any world coordinate may lie from the origin (ProcTHOR houses start at (0, 0)).
+MAX_COORDINATE = 1000.0
+#: The largest angle (degrees, rotations and camera horizon) accepted; real files use 0..360.
+MAX_ANGLE = 3600.0
+
 
 class _Model(BaseModel):
-    model_config = ConfigDict(extra="allow", populate_by_name=True)
+    model_config = ConfigDict(extra="allow", populate_by_name=True, allow_inf_nan=False)
 
 
 class Vec3(_Model):
@@ -182,6 +194,17 @@ def json_path(loc: tuple[Any, ...] | list[Any]) -> str:
     return out or "$"
 
 
+def short(value: Any) -> str:
+    """A value for a one-line message: numbers to 3 significant digits, anything else a short repr."""
+    if isinstance(value, int | float) and not isinstance(value, bool):
+        try:
+            return f"{value:.3g}"
+        except OverflowError:
+            return "an integer too large for a float"
+    text = repr(value)
+    return text if len(text) <= 40 else text[:37] + "..."
+
+
 def _problems_from_validation(err: ValidationError, file: str | None) -> list[Problem]:
     problems = []
     for e in err.errors():
@@ -190,21 +213,103 @@ def _problems_from_validation(err: ValidationError, file: str | None) -> list[Pr
         if e["type"] == "missing":
             text = f"the required key '{loc[-1]}' is missing; add it as the ProcTHOR format requires"
             loc = loc[:-1]
+        elif e["type"] == "finite_number":
+            text = f"the value {short(e.get('input'))} is not a finite number; write a plain number (meters or degrees)"
         else:
-            text = f"the value {e.get('input')!r} is invalid ({msg}); fix it to match the ProcTHOR format"
+            text = f"the value {short(e.get('input'))} is invalid ({msg}); fix it to match the ProcTHOR format"
         problems.append(Problem(json_path(loc), text, file))
     return problems
 
 
+def _world_points(house: House) -> Iterator[tuple[tuple[Any, ...], Vec3]]:
+    """Every point in world coordinates (room and wall corners, objects, agent starts) with its location."""
+    for i, room in enumerate(house.rooms):
+        for j, p in enumerate(room.floorPolygon):
+            yield ("rooms", i, "floorPolygon", j), p
+    for i, wall in enumerate(house.walls):
+        for j, p in enumerate(wall.polygon):
+            yield ("walls", i, "polygon", j), p
+    for i, obj in enumerate(house.objects):
+        yield ("objects", i, "position"), obj.position
+        for j, child in enumerate(obj.children):
+            yield ("objects", i, "children", j, "position"), child.position
+    for loc, pose in _agent_poses(house):
+        yield (*loc, "position"), pose.position
+
+
+def _agent_poses(house: House) -> Iterator[tuple[tuple[Any, ...], AgentPose]]:
+    if house.metadata.agent is not None:
+        yield ("metadata", "agent"), house.metadata.agent
+    for kind, pose in (house.metadata.agentPoses or {}).items():
+        yield ("metadata", "agentPoses", kind), pose
+
+
+def _bounded_values(house: House) -> Iterator[tuple[tuple[Any, ...], float, float, str]]:
+    """Angles and wall-local lengths with their location, limit and unit."""
+    for kind in ("doors", "windows"):
+        for i, op in enumerate(getattr(house, kind)):
+            points = [(("holePolygon", j), p) for j, p in enumerate(op.holePolygon)]
+            points += [(("assetPosition",), op.assetPosition)] if op.assetPosition is not None else []
+            for sub, p in points:
+                for axis in "xyz":
+                    yield (kind, i, *sub, axis), getattr(p, axis), MAX_HOUSE_SIZE, "m"
+    rotations = [(("objects", i), o.rotation) for i, o in enumerate(house.objects)]
+    rotations += [(("objects", i, "children", j), c.rotation)
+                  for i, o in enumerate(house.objects) for j, c in enumerate(o.children)]
+    rotations += [(loc, pose.rotation) for loc, pose in _agent_poses(house)]
+    for loc, r in rotations:
+        for axis in "xyz":
+            yield (*loc, "rotation", axis), getattr(r, axis), MAX_ANGLE, "degrees"
+    for loc, pose in _agent_poses(house):
+        if pose.horizon is not None:
+            yield (*loc, "horizon"), pose.horizon, MAX_ANGLE, "degrees"
+
+
+def number_problems(house: House, file: str | None = None) -> list[Problem]:
+    """Numbers no real house has: coordinates spanning more than MAX_HOUSE_SIZE or lying farther than
+    MAX_COORDINATE from the origin, angles and wall-local lengths beyond their limits, NaN and infinity."""
+    points = list(_world_points(house))
+    by_axis = {axis: [((*loc, axis), getattr(p, axis)) for loc, p in points] for axis in "xyz"}
+    bounded = list(_bounded_values(house))
+    out = [Problem(json_path(loc), f"the value {short(v)} is not a finite number; write a plain number "
+                   "(meters or degrees)", file)
+           for loc, v in chain(*by_axis.values(), ((loc, v) for loc, v, _, _ in bounded)) if not math.isfinite(v)]
+    if out:  # only a house edited in code gets here: the parser refuses NaN and infinity
+        return out
+    for axis, values in by_axis.items():
+        if not values:
+            continue
+        lo, hi = min(v for _, v in values), max(v for _, v in values)
+        if hi - lo > MAX_HOUSE_SIZE:
+            mid = median(v for _, v in values)
+            loc, v = max(values, key=lambda lv: abs(lv[1] - mid))
+            out.append(Problem(json_path(loc), f"the value {short(v)} makes the house {short(hi - lo)} m across "
+                               f"along {axis}, more than any real house (the limit is {MAX_HOUSE_SIZE:.0f} m); "
+                               "give every coordinate in meters", file))
+        elif max(-lo, hi) > MAX_COORDINATE:
+            loc, v = max(values, key=lambda lv: abs(lv[1]))
+            out.append(Problem(json_path(loc), f"the value {short(v)} m is more than {MAX_COORDINATE:.0f} m from "
+                               "the origin; move the house near (0, 0)", file))
+    for loc, v, limit, unit in bounded:
+        if abs(v) > limit:
+            out.append(Problem(json_path(loc), f"the value {short(v)} {unit} is beyond the limit of {short(limit)} "
+                               f"{unit}; give a value between {short(-limit)} and {short(limit)}", file))
+    return out
+
+
 def parse_house(doc: Any, file: str | None = None) -> House:
-    """Build a House from a parsed JSON document; HouseError lists every structural problem."""
+    """Build a House from a parsed JSON document; HouseError lists every structural problem, including
+    numbers that are not finite or make the house larger than any real one."""
     if not isinstance(doc, dict):
         raise HouseError([Problem("$", f"the document is a JSON {type(doc).__name__}, not an object; "
                                   "a house is a JSON object with 'rooms', 'walls', 'doors', ...", file)])
     try:
-        return House.model_validate(doc)
+        house = House.model_validate(doc)
     except ValidationError as err:
         raise HouseError(_problems_from_validation(err, file)) from None
+    if problems := number_problems(house, file):
+        raise HouseError(problems)
+    return house
 
 
 def read_house_document(path: str | Path) -> Any:
@@ -221,6 +326,12 @@ def read_house_document(path: str | Path) -> Any:
     except json.JSONDecodeError as exc:
         raise HouseError([Problem("$", f"the file is not valid JSON ({exc.msg} at line {exc.lineno}, "
                                   f"column {exc.colno}); fix the syntax", str(p))]) from None
+    except ValueError as exc:  # an integer of more than 4300 digits
+        raise HouseError([Problem("$", f"the file is not valid JSON ({str(exc).split(';')[0]}); "
+                                  "fix the number", str(p))]) from None
+    except RecursionError:
+        raise HouseError([Problem("$", "the file nests JSON arrays or objects too deeply to read; "
+                                  "write a ProcTHOR house JSON file", str(p))]) from None
 
 
 def load_house(path: str | Path, *, validate: bool = True, catalog: Any = None) -> House:
