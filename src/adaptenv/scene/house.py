@@ -3,6 +3,8 @@
 Every model keeps keys it does not declare (``extra="allow"``) and is written back with
 ``exclude_unset``, so ``save_house(load_house(p), q)`` reproduces the original document as parsed
 JSON. Coordinates are meters with y up; yaw is ``rotation.y`` in degrees (0 faces +z, 90 faces +x).
+Parsing refuses numbers no real house has (NaN, infinity, a house wider than ``MAX_HOUSE_SIZE``; see
+:func:`number_problems`), so nothing downstream meets them.
 """
 
 from __future__ import annotations
@@ -10,11 +12,10 @@ from __future__ import annotations
 import json
 import math
 from collections.abc import Iterator
-from itertools import chain
 from pathlib import Path
-from statistics import median
 from typing import Any
 
+import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, ValidationError
 
 from adaptenv.errors import HouseError, Problem
@@ -238,6 +239,7 @@ def _world_points(house: House) -> Iterator[tuple[tuple[Any, ...], Vec3]]:
 
 
 def _agent_poses(house: House) -> Iterator[tuple[tuple[Any, ...], AgentPose]]:
+    """The agent start poses in metadata with their location."""
     if house.metadata.agent is not None:
         yield ("metadata", "agent"), house.metadata.agent
     for kind, pose in (house.metadata.agentPoses or {}).items():
@@ -269,27 +271,27 @@ def number_problems(house: House, file: str | None = None) -> list[Problem]:
     """Numbers no real house has: coordinates spanning more than MAX_HOUSE_SIZE or lying farther than
     MAX_COORDINATE from the origin, angles and wall-local lengths beyond their limits, NaN and infinity."""
     points = list(_world_points(house))
-    by_axis = {axis: [((*loc, axis), getattr(p, axis)) for loc, p in points] for axis in "xyz"}
+    xyz = np.array([(p.x, p.y, p.z) for _, p in points], dtype=float).reshape(-1, 3)
     bounded = list(_bounded_values(house))
-    out = [Problem(json_path(loc), f"the value {short(v)} is not a finite number; write a plain number "
-                   "(meters or degrees)", file)
-           for loc, v in chain(*by_axis.values(), ((loc, v) for loc, v, _, _ in bounded)) if not math.isfinite(v)]
-    if out:  # only a house edited in code gets here: the parser refuses NaN and infinity
-        return out
-    for axis, values in by_axis.items():
-        if not values:
-            continue
-        lo, hi = min(v for _, v in values), max(v for _, v in values)
-        if hi - lo > MAX_HOUSE_SIZE:
-            mid = median(v for _, v in values)
-            loc, v = max(values, key=lambda lv: abs(lv[1] - mid))
-            out.append(Problem(json_path(loc), f"the value {short(v)} makes the house {short(hi - lo)} m across "
-                               f"along {axis}, more than any real house (the limit is {MAX_HOUSE_SIZE:.0f} m); "
-                               "give every coordinate in meters", file))
-        elif max(-lo, hi) > MAX_COORDINATE:
-            loc, v = max(values, key=lambda lv: abs(lv[1]))
-            out.append(Problem(json_path(loc), f"the value {short(v)} m is more than {MAX_COORDINATE:.0f} m from "
-                               "the origin; move the house near (0, 0)", file))
+    bad = [((*points[i][0], "xyz"[a]), xyz[i, a]) for i, a in zip(*np.nonzero(~np.isfinite(xyz)), strict=True)]
+    bad += [(loc, v) for loc, v, _, _ in bounded if not math.isfinite(v)]
+    if bad:  # only a house edited in code gets here: the parser refuses NaN and infinity
+        return [Problem(json_path(loc), f"the value {short(v)} is not a finite number; write a plain number "
+                        "(meters or degrees)", file) for loc, v in bad]
+    out: list[Problem] = []
+    for a, axis in enumerate("xyz" if len(xyz) else ""):
+        col = xyz[:, a]
+        span = float(col.max()) - float(col.min())  # Python floats: 1e308 - -1e308 is inf, no warning
+        if span > MAX_HOUSE_SIZE:
+            with np.errstate(over="ignore"):
+                i = int(np.argmax(np.abs(col - np.median(col))))
+            out.append(Problem(json_path((*points[i][0], axis)), f"the value {short(col[i])} makes the house "
+                               f"{short(span)} m across along {axis}, more than any real house (the limit is "
+                               f"{MAX_HOUSE_SIZE:.0f} m); give every coordinate in meters", file))
+        elif np.abs(col).max() > MAX_COORDINATE:
+            i = int(np.argmax(np.abs(col)))
+            out.append(Problem(json_path((*points[i][0], axis)), f"the value {short(col[i])} m is more than "
+                               f"{MAX_COORDINATE:.0f} m from the origin; move the house near (0, 0)", file))
     for loc, v, limit, unit in bounded:
         if abs(v) > limit:
             out.append(Problem(json_path(loc), f"the value {short(v)} {unit} is beyond the limit of {short(limit)} "
