@@ -129,6 +129,12 @@ def test_mutated_houses_raise_only_house_errors(data):
         assert_one_short_line(str(problem))
 
 
+def test_a_huge_integer_inside_a_value_of_the_wrong_type_is_not_printed():
+    """Found by the fuzz: the message quoted the whole value, 25 digits included."""
+    with pytest.raises(HouseError, match=r"^house.json: at doors, the value \{\.\.\.\} is invalid"):
+        parse_house({"rooms": [], "doors": {"": 10**24}}, "house.json")
+
+
 @FUZZ
 @given(doc=JSON)
 def test_random_documents_raise_only_house_errors(doc):

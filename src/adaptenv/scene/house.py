@@ -196,12 +196,15 @@ def json_path(loc: tuple[Any, ...] | list[Any]) -> str:
 
 
 def short(value: Any) -> str:
-    """A value for a one-line message: numbers to 3 significant digits, anything else a short repr."""
+    """A value for a one-line message: numbers to 3 significant digits, objects and arrays as ``{...}``
+    and ``[...]``, anything else a repr of at most 40 characters."""
     if isinstance(value, int | float) and not isinstance(value, bool):
         try:
             return f"{value:.3g}"
         except OverflowError:
             return "an integer too large for a float"
+    if isinstance(value, dict | list):
+        return "{...}" if isinstance(value, dict) else "[...]"
     text = repr(value)
     return text if len(text) <= 40 else text[:37] + "..."
 
