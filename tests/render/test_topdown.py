@@ -221,7 +221,8 @@ def test_render_to_file_writes_png(house, tmp_path):
 
 # ---------------------------------------------------------------- CLI
 def test_cli_render_writes_png_with_trajectory(real_house_path, tmp_path):
-    traj = kitchen_walk(collide_at=2).save(tmp_path / "t.json")
+    in_real_house = {"target_ids": ["Fridge|2|1"], "target_positions": [(15.403, 2.205)]}  # its real fridge
+    traj = kitchen_walk(collide_at=2).model_copy(update=in_real_house).save(tmp_path / "t.json")
     out = tmp_path / "map.png"
     result = runner.invoke(app, ["render", str(real_house_path), "-o", str(out), "--trajectory", str(traj),
                                  "--grid", "--size", "600", "--highlight", "Sofa|3|3=red"])

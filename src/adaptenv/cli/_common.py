@@ -58,4 +58,13 @@ def interrupted(how: str = "") -> NoReturn:
     raise typer.Exit(130)
 
 
+def check_recorded_in(traj, world, trajectory: Path, house: Path) -> None:
+    """Raise a one-sentence error when the trajectory ``traj`` was not recorded in ``world``."""
+    from adaptenv.adapt.analysis import trajectory_mismatch
+
+    if (why := trajectory_mismatch(traj, world)) is not None:
+        raise ConfigError(f"{trajectory}: recorded in house {traj.house!r}, not in {house} ({why}); "
+                          "pass the house the episode ran in")
+
+
 JSON_OPTION = typer.Option(False, "--json", help="Print the figures as one JSON object instead of a table.")

@@ -101,14 +101,11 @@ def llm_backend(model: str | None, base_url: str | None, cache_dir: Path | None,
 
 def load_trajectory_in(trajectory: Path, world: NavWorld, house: Path) -> Trajectory:
     """The trajectory at ``trajectory``, checked to have been recorded in ``world`` (the house at ``house``)."""
-    from adaptenv.adapt.analysis import trajectory_mismatch
-    from adaptenv.cli._common import existing_file
+    from adaptenv.cli._common import check_recorded_in, existing_file
     from adaptenv.sim.trajectory import Trajectory
 
     traj = Trajectory.load(existing_file(trajectory, "trajectory file"))
-    if (why := trajectory_mismatch(traj, world)) is not None:
-        raise ConfigError(f"{trajectory}: recorded in house {traj.house!r}, not in {house} ({why}); "
-                          "pass the house the episode ran in")
+    check_recorded_in(traj, world, trajectory, house)
     return traj
 
 

@@ -39,13 +39,17 @@ def render(
     """Render a house top-down (rooms, walls, doors, furniture with ids), optionally with an episode."""
     from rich.console import Console
 
+    from adaptenv.cli._common import check_recorded_in
     from adaptenv.render.topdown import render_to_file
     from adaptenv.scene.house import load_house
     from adaptenv.sim.trajectory import Trajectory
+    from adaptenv.sim.world import compile_world
 
     writable_file(out, "-o")
     h = load_house(house)
     traj = Trajectory.load(trajectory) if trajectory is not None else None
+    if traj is not None:
+        check_recorded_in(traj, compile_world(h, house.stem), trajectory, house)
     colours = {}
     for item in highlight:
         oid, _, colour = item.partition("=")

@@ -3,6 +3,8 @@
 Every model keeps keys it does not declare (``extra="allow"``) and is written back with
 ``exclude_unset``, so ``save_house(load_house(p), q)`` reproduces the original document as parsed
 JSON. Coordinates are meters with y up; yaw is ``rotation.y`` in degrees (0 faces +z, 90 faces +x).
+Parsing refuses numbers no real house has (NaN, infinity, a house wider than ``MAX_HOUSE_SIZE``; see
+:func:`number_problems`), so nothing downstream meets them.
 """
 
 from __future__ import annotations
@@ -13,6 +15,7 @@ from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
+import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, ValidationError
 
 from adaptenv.errors import HouseError, Problem
@@ -20,9 +23,19 @@ from adaptenv.errors import HouseError, Problem
 SCHEMA_VERSION = "1.0.0"
 AGENT_POSE_KINDS = ("default", "arm", "locobot", "stretch")
 
+#: The widest house (m, along any axis, over rooms, walls, objects and agent starts) that is accepted.
+#: ProcTHOR-10K houses are at most a few tens of metres across (the 10-room house in tests/data spans
+#: 15.8 x 17.5 m); at the simulator's 5 cm cells 100 m is a 2000 x 2000 raster, so a house in the
+#: wrong units (mm, or scaled by 1e6) is refused instead of exhausting memory.
+MAX_HOUSE_SIZE = 100.0
+#: The farthest (m) any world coordinate may lie from the origin (ProcTHOR houses start at (0, 0)).
+MAX_COORDINATE = 1000.0
+#: The largest angle (degrees, rotations and camera horizon) accepted; real files use 0..360.
+MAX_ANGLE = 3600.0
+
 
 class _Model(BaseModel):
-    model_config = ConfigDict(extra="allow", populate_by_name=True)
+    model_config = ConfigDict(extra="allow", populate_by_name=True, allow_inf_nan=False)
 
 
 class Vec3(_Model):
@@ -182,6 +195,20 @@ def json_path(loc: tuple[Any, ...] | list[Any]) -> str:
     return out or "$"
 
 
+def short(value: Any) -> str:
+    """A value for a one-line message: numbers to 3 significant digits, objects and arrays as ``{...}``
+    and ``[...]``, anything else a repr of at most 40 characters."""
+    if isinstance(value, int | float) and not isinstance(value, bool):
+        try:
+            return f"{value:.3g}"
+        except OverflowError:
+            return "an integer too large for a float"
+    if isinstance(value, dict | list):
+        return "{...}" if isinstance(value, dict) else "[...]"
+    text = repr(value)
+    return text if len(text) <= 40 else text[:37] + "..."
+
+
 def _problems_from_validation(err: ValidationError, file: str | None) -> list[Problem]:
     problems = []
     for e in err.errors():
@@ -190,21 +217,104 @@ def _problems_from_validation(err: ValidationError, file: str | None) -> list[Pr
         if e["type"] == "missing":
             text = f"the required key '{loc[-1]}' is missing; add it as the ProcTHOR format requires"
             loc = loc[:-1]
+        elif e["type"] == "finite_number":
+            text = f"the value {short(e.get('input'))} is not a finite number; write a plain number (meters or degrees)"
         else:
-            text = f"the value {e.get('input')!r} is invalid ({msg}); fix it to match the ProcTHOR format"
+            text = f"the value {short(e.get('input'))} is invalid ({msg}); fix it to match the ProcTHOR format"
         problems.append(Problem(json_path(loc), text, file))
     return problems
 
 
+def _world_points(house: House) -> Iterator[tuple[tuple[Any, ...], Vec3]]:
+    """Every point in world coordinates (room and wall corners, objects, agent starts) with its location."""
+    for i, room in enumerate(house.rooms):
+        for j, p in enumerate(room.floorPolygon):
+            yield ("rooms", i, "floorPolygon", j), p
+    for i, wall in enumerate(house.walls):
+        for j, p in enumerate(wall.polygon):
+            yield ("walls", i, "polygon", j), p
+    for i, obj in enumerate(house.objects):
+        yield ("objects", i, "position"), obj.position
+        for j, child in enumerate(obj.children):
+            yield ("objects", i, "children", j, "position"), child.position
+    for loc, pose in _agent_poses(house):
+        yield (*loc, "position"), pose.position
+
+
+def _agent_poses(house: House) -> Iterator[tuple[tuple[Any, ...], AgentPose]]:
+    """The agent start poses in metadata with their location."""
+    if house.metadata.agent is not None:
+        yield ("metadata", "agent"), house.metadata.agent
+    for kind, pose in (house.metadata.agentPoses or {}).items():
+        yield ("metadata", "agentPoses", kind), pose
+
+
+def _bounded_values(house: House) -> Iterator[tuple[tuple[Any, ...], float, float, str]]:
+    """Angles and wall-local lengths with their location, limit and unit."""
+    for kind in ("doors", "windows"):
+        for i, op in enumerate(getattr(house, kind)):
+            points = [(("holePolygon", j), p) for j, p in enumerate(op.holePolygon)]
+            points += [(("assetPosition",), op.assetPosition)] if op.assetPosition is not None else []
+            for sub, p in points:
+                for axis in "xyz":
+                    yield (kind, i, *sub, axis), getattr(p, axis), MAX_HOUSE_SIZE, "m"
+    rotations = [(("objects", i), o.rotation) for i, o in enumerate(house.objects)]
+    rotations += [(("objects", i, "children", j), c.rotation)
+                  for i, o in enumerate(house.objects) for j, c in enumerate(o.children)]
+    rotations += [(loc, pose.rotation) for loc, pose in _agent_poses(house)]
+    for loc, r in rotations:
+        for axis in "xyz":
+            yield (*loc, "rotation", axis), getattr(r, axis), MAX_ANGLE, "degrees"
+    for loc, pose in _agent_poses(house):
+        if pose.horizon is not None:
+            yield (*loc, "horizon"), pose.horizon, MAX_ANGLE, "degrees"
+
+
+def number_problems(house: House, file: str | None = None) -> list[Problem]:
+    """Numbers no real house has: coordinates spanning more than MAX_HOUSE_SIZE or lying farther than
+    MAX_COORDINATE from the origin, angles and wall-local lengths beyond their limits, NaN and infinity."""
+    points = list(_world_points(house))
+    xyz = np.array([(p.x, p.y, p.z) for _, p in points], dtype=float).reshape(-1, 3)
+    bounded = list(_bounded_values(house))
+    bad = [((*points[i][0], "xyz"[a]), xyz[i, a]) for i, a in zip(*np.nonzero(~np.isfinite(xyz)), strict=True)]
+    bad += [(loc, v) for loc, v, _, _ in bounded if not math.isfinite(v)]
+    if bad:  # only a house edited in code gets here: the parser refuses NaN and infinity
+        return [Problem(json_path(loc), f"the value {short(v)} is not a finite number; write a plain number "
+                        "(meters or degrees)", file) for loc, v in bad]
+    out: list[Problem] = []
+    for a, axis in enumerate("xyz" if len(xyz) else ""):
+        col = xyz[:, a]
+        span = float(col.max()) - float(col.min())  # Python floats: 1e308 - -1e308 is inf, no warning
+        if span > MAX_HOUSE_SIZE:
+            with np.errstate(over="ignore"):
+                i = int(np.argmax(np.abs(col - np.median(col))))
+            out.append(Problem(json_path((*points[i][0], axis)), f"the value {short(col[i])} makes the house "
+                               f"{short(span)} m across along {axis}, more than any real house (the limit is "
+                               f"{MAX_HOUSE_SIZE:.0f} m); give every coordinate in meters", file))
+        elif np.abs(col).max() > MAX_COORDINATE:
+            i = int(np.argmax(np.abs(col)))
+            out.append(Problem(json_path((*points[i][0], axis)), f"the value {short(col[i])} m is more than "
+                               f"{MAX_COORDINATE:.0f} m from the origin; move the house near (0, 0)", file))
+    for loc, v, limit, unit in bounded:
+        if abs(v) > limit:
+            out.append(Problem(json_path(loc), f"the value {short(v)} {unit} is beyond the limit of {short(limit)} "
+                               f"{unit}; give a value between {short(-limit)} and {short(limit)}", file))
+    return out
+
+
 def parse_house(doc: Any, file: str | None = None) -> House:
-    """Build a House from a parsed JSON document; HouseError lists every structural problem."""
+    """Build a House from a parsed JSON document; HouseError lists every structural problem, including
+    numbers that are not finite or make the house larger than any real one."""
     if not isinstance(doc, dict):
         raise HouseError([Problem("$", f"the document is a JSON {type(doc).__name__}, not an object; "
                                   "a house is a JSON object with 'rooms', 'walls', 'doors', ...", file)])
     try:
-        return House.model_validate(doc)
+        house = House.model_validate(doc)
     except ValidationError as err:
         raise HouseError(_problems_from_validation(err, file)) from None
+    if problems := number_problems(house, file):
+        raise HouseError(problems)
+    return house
 
 
 def read_house_document(path: str | Path) -> Any:
@@ -226,6 +336,12 @@ def read_house_document(path: str | Path) -> Any:
     except json.JSONDecodeError as exc:
         raise HouseError([Problem("$", f"the file is not valid JSON ({exc.msg} at line {exc.lineno}, "
                                   f"column {exc.colno}); fix the syntax", str(p))]) from None
+    except ValueError as exc:  # an integer of more than 4300 digits
+        raise HouseError([Problem("$", f"the file is not valid JSON ({str(exc).split(';')[0]}); "
+                                  "fix the number", str(p))]) from None
+    except RecursionError:
+        raise HouseError([Problem("$", "the file nests JSON arrays or objects too deeply to read; "
+                                  "write a ProcTHOR house JSON file", str(p))]) from None
 
 
 def load_house(path: str | Path, *, validate: bool = True, catalog: Any = None) -> House:

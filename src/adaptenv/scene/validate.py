@@ -28,6 +28,7 @@ from adaptenv.scene.house import (
     HouseObject,
     Opening,
     json_path,
+    number_problems,
     parse_house,
     read_house_document,
 )
@@ -45,7 +46,8 @@ WALL_ID = re.compile(rf"^wall\|(?:\d+|exterior)\|{_NUM}\|{_NUM}\|{_NUM}\|{_NUM}$
 
 
 def validate_house(house: House, file: str | None = None, catalog: AssetCatalog | None = None) -> list[Problem]:
-    """Every semantic problem of a parsed house, grouped by check (empty when the house is valid).
+    """Every semantic problem of a parsed house, grouped by check (empty when the house is valid); a
+    house larger than any real one gets only those problems.
 
     Args:
         house: a house that passed structural parsing (:func:`~adaptenv.scene.house.parse_house`).
@@ -53,7 +55,8 @@ def validate_house(house: House, file: str | None = None, catalog: AssetCatalog 
         catalog: the asset catalog (default: the shipped ProcTHOR catalog).
     """
     catalog = catalog or load_catalog()
-    out: list[Problem] = []
+    if out := number_problems(house, file):  # a house edited in code may hold coordinates no file may
+        return out
 
     def add(loc: tuple, message: str) -> None:
         out.append(Problem(json_path(loc), message, file))

@@ -96,7 +96,9 @@ class Trajectory(BaseModel):
             return cls.model_validate(json.loads(p.read_text(encoding="utf-8")))
         except FileNotFoundError:
             raise AdaptenvError(f"{p}: no such trajectory file; check the path") from None
-        except (json.JSONDecodeError, ValueError) as exc:
-            first = str(exc).splitlines()[0]
+        except OSError as exc:
+            raise AdaptenvError(f"{p}: the trajectory file cannot be read ({exc.strerror}); check the path") from None
+        except (ValueError, RecursionError) as exc:  # not JSON, not a trajectory, nested too deeply
+            first = (str(exc).splitlines() or [type(exc).__name__])[0]
             raise AdaptenvError(f"{p}: not a valid adaptenv trajectory ({first}); write it with "
                                 "`adaptenv rollout ... -o traj.json`") from None
