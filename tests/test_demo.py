@@ -1,4 +1,4 @@
-"""The README's main job, `adaptenv demo`, runs the closed loop end to end and writes a report."""
+"""The README's main job, `adaptenv demo`: the closed loop against DR end to end, a report with a verdict."""
 
 from __future__ import annotations
 
@@ -9,25 +9,6 @@ import sys
 from pathlib import Path
 
 import pytest
-from typer.testing import CliRunner
-
-from adaptenv.cli import app
-
-
-@pytest.mark.slow
-def test_demo_runs_the_closed_loop_and_writes_the_report(tmp_path):
-    out = tmp_path / "demo"
-    result = CliRunner().invoke(app, ["demo", "-o", str(out), "--houses", "2", "--iterations", "1"])
-    assert result.exit_code == 0, result.output
-    index = out / "run" / "report" / "index.html"
-    assert index.is_file() and str(index) in result.output.replace("\n", "")
-    records = [json.loads(line) for line in (out / "run" / "iterations.jsonl").read_text().splitlines()]
-    assert [r["iteration"] for r in records] == [0, 1]
-    assert records[1]["edits"] > 0 and records[1]["grad_updates"] > 0
-    assert set(records[1]["heldout"]) == {"rearranged", "unseen"}
-    gallery = records[1]["gallery"][0]
-    assert (out / "run" / gallery["after_png"]).is_file()
-
 
 DEV_EXTRAS = ("ray", "tensorboard", "minigrid", "pytest", "hypothesis", "ruff", "xdist")
 
@@ -46,12 +27,31 @@ print(json.dumps(sorted({{m.split(".")[0] for m in sys.modules}} & {extras!r})))
 
 
 @pytest.mark.slow
-def test_demo_imports_none_of_the_dev_extras(tmp_path):
-    """What `make demo` installs is enough: the whole demo never imports a dev extra."""
+def test_demo_compares_the_loop_with_dr_and_imports_none_of_the_dev_extras(tmp_path):
+    """One fresh process, as `make demo` runs it: ours and dr on the same houses, seed and budget, a report that
+    opens with the verdict, and no dev extra imported (what `make demo` installs is enough)."""
     src = Path(__file__).resolve().parents[1] / "src"
-    code = DEMO_AND_LIST_IMPORTS.format(extras=set(DEV_EXTRAS), out=str(tmp_path / "demo"))
-    env = dict(os.environ, PYTHONPATH=str(src))
+    out = tmp_path / "demo"
+    code = DEMO_AND_LIST_IMPORTS.format(extras=set(DEV_EXTRAS), out=str(out))
+    env = dict(os.environ, PYTHONPATH=str(src), COLUMNS="400")  # no wrapped console lines
     proc = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, timeout=1800)
     assert proc.returncode == 0, proc.stderr[-3000:]
-    assert (tmp_path / "demo" / "run" / "report" / "index.html").is_file()
-    assert json.loads(proc.stdout.strip().splitlines()[-1]) == []
+    *printed, extras = proc.stdout.strip().splitlines()
+    assert json.loads(extras) == []
+
+    runs = {m: [json.loads(line) for line in (out / "run" / m / "seed_0" / "iterations.jsonl").read_text().splitlines()]
+            for m in ("dr", "ours")}
+    for records in runs.values():
+        assert [r["iteration"] for r in records] == [0, 1]
+        assert set(records[1]["heldout"]) == {"rearranged", "unseen"}
+    assert runs["dr"][1]["grad_updates"] == runs["ours"][1]["grad_updates"] > 0  # the same fine-tuning budget
+    assert runs["dr"][0]["heldout"] == runs["ours"][0]["heldout"]  # the same pi_0 on the same episodes
+    assert runs["ours"][1]["edits"] > 0
+    assert (out / "run" / "ours" / "seed_0" / runs["ours"][1]["gallery"][0]["after_png"]).is_file()
+
+    verdict = next(line for line in printed if line.startswith("Verdict: ours - dr held-out success = "))
+    assert "paired over the 50 held-out episodes" in verdict  # 25 per house, 1 house, 2 sets
+    index = out / "run" / "report" / "index.html"
+    assert index.is_file() and f"report: {index}" in [line.strip() for line in printed]
+    page = index.read_text()
+    assert page.index('<p class="verdict">') < page.index('id="overview"')

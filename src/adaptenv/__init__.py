@@ -5,7 +5,8 @@ The public API is small and imported lazily so that `import adaptenv` stays fast
 >>> from adaptenv import load_house, save_house
 
 ``import adaptenv`` also registers the Gymnasium id ``adaptenv/ObjectNav-v0`` (when gymnasium is
-imported, before or after adaptenv; see :mod:`adaptenv._gym`).
+imported, before or after adaptenv; see :mod:`adaptenv._gym`), and makes sure numba has a writable
+cache folder for its compiled kernels (:mod:`adaptenv._numba_cache`).
 """
 
 from __future__ import annotations
@@ -13,7 +14,7 @@ from __future__ import annotations
 import importlib
 from typing import Any
 
-from adaptenv import _gym
+from adaptenv import _gym, _numba_cache
 
 __version__ = "0.1.0"
 
@@ -37,6 +38,7 @@ _EXPORTS = {
 __all__ = sorted(_EXPORTS) + ["__version__"]
 
 _gym.install()
+_numba_cache.configure()  # before any numba kernel is defined
 
 
 def __getattr__(name: str) -> Any:

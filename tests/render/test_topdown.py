@@ -267,3 +267,58 @@ def test_doors_are_drawn_with_their_leaves(asset_id, leaves):
     at_second = near_pixels(r.image, r.transform.to_px(3.75, 2.6), 2)
     assert (td.DOOR in at_first) == (leaves >= 1)
     assert (td.DOOR in at_second) == (leaves == 2)
+
+
+def tall_fridge_walk() -> tuple:
+    """A tall, narrow room (2 m x 12 m) with a fridge at (1, 10), and a failed episode whose target is that fridge."""
+    from tests.sim import helpers as H
+
+    house = H.one_room(size=(2.0, 12.0), objects=[H.Obj(H.TALL_TARGET, 1.0, 10.0)])
+    steps = [Step(pose=Pose(x=1.0, z=1.0 + i, yaw=0.0), action="m") for i in range(5)]
+    traj = Trajectory(house="tall", target_type="Fridge", target_ids=[house.objects[0].id],
+                      target_positions=[(1.0, 10.0)], start=Pose(x=1.0, z=1.0, yaw=0.0), steps=steps,
+                      final_pose=Pose(x=1.0, z=6.0, yaw=0.0), policy="pretrained",
+                      metrics=EpisodeMetrics(success=False, spl=0.0, sel=0.0, episode_length=5, path_length=4.0,
+                                             final_geodesic=4.0, collisions=12, min_clearance=0.3, rooms_visited=1,
+                                             first_sight_step=None, optimal_path_length=9.0))
+    return house, traj
+
+
+def test_tall_narrow_house_keeps_the_whole_header_and_legend():
+    """The panel is widened (map centred) so the caption fits at its font size and no legend text is cut."""
+    from PIL import ImageDraw
+
+    from adaptenv.render.text import get_font
+
+    house, traj = tall_fridge_walk()
+    size = 1024
+    r = render_map(house, trajectory=traj, grid=True, size=size, title="house_07: a tall, narrow house")
+    width = r.image.size[0]
+    assert width >= td.MIN_WIDTH_FRACTION * size
+    measure = ImageDraw.Draw(Image.new("RGB", (1, 1)))
+    fs = r.layout.font_size
+    caption = "".join(text for text, _ in td._caption_parts(traj))
+    assert "SPL 0.00" in caption
+    assert measure.textbbox((r.layout.text_left, 0), caption, font=get_font(fs))[2] <= width - r.layout.text_left
+    small = max(9, fs - 2)
+    for row in r.layout.legend_rows:  # the positions _draw_legend writes each item's text at
+        x = min(r.transform.area[0], fs * 0.8)
+        for item in row:
+            text_x = x if item == td._GRID_NOTE else x + small * 1.6
+            bold = item == td._GRID_NOTE
+            assert measure.textbbox((text_x, 0), item, font=get_font(small, bold), anchor="lm")[2] <= width, item
+            x += td._legend_item_width(item, small)
+    assert {item for row in r.layout.legend_rows for item in row} >= {"window", "collision", "target"}
+
+
+def test_the_targets_label_stays_off_its_cross():
+    house, traj = tall_fridge_walk()
+    fridge = house.objects[0].id
+    plain = render_map(house, size=1024)
+    assert next(lab for lab in plain.labels if lab.text == fridge).inside  # without the cross: on the fridge
+    r = render_map(house, trajectory=traj, size=1024)
+    box = next(lab.box for lab in r.labels if lab.text == fridge)
+    cx, cy = r.transform.point(1.0, 10.0)
+    arm = td._PixelScene.of(SceneGeometry.from_house(house), r.transform).cross_arm
+    cross = np.array([[cx - arm, cy - arm, cx + arm, cy + arm]])
+    assert labels._overlap(np.array([box]), cross)[0, 0] == 0

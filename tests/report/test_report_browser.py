@@ -21,6 +21,8 @@ from PIL import Image
 from adaptenv.report import build_report
 
 CHROMIUM = Path("/usr/bin/chromium")
+WINDOW = (1400, 900)
+"""The probe's window: a report must fit its width (no sideways scrolling)."""
 pytestmark = pytest.mark.skipif(not CHROMIUM.exists(), reason="needs /usr/bin/chromium (apt-get install -y chromium)")
 
 PROBE = """<script>
@@ -45,7 +47,11 @@ window.addEventListener('load', function () {
   })).then(function () {
     var broken = imgs.filter(function (i) { return !(i.complete && i.naturalWidth > 0); })
                      .map(function (i) { return i.getAttribute('src'); });
-    var out = {images: imgs.length, broken: broken, errors: window.__errors, scripts: document.scripts.length};
+    var wide = Array.prototype.slice.call(document.querySelectorAll('body *'))
+                    .filter(function (e) { return e.getBoundingClientRect().right > window.innerWidth; })
+                    .slice(0, 5).map(function (e) { return e.tagName + '.' + e.className; });
+    var out = {images: imgs.length, broken: broken, errors: window.__errors, scripts: document.scripts.length,
+               scroll_width: document.documentElement.scrollWidth, window_width: window.innerWidth, wide: wide};
     var el = document.createElement('pre');
     el.id = '__report_check'; el.hidden = true; el.textContent = JSON.stringify(out);
     document.body.appendChild(el);
@@ -58,7 +64,7 @@ def chromium_args(user_data: Path) -> list[str]:
     """Headless, offline-friendly flags (no sync, updates or background networking)."""
     return [str(CHROMIUM), "--headless", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
             "--disable-background-networking", "--disable-component-update", "--disable-sync",
-            "--disable-extensions", "--hide-scrollbars", f"--user-data-dir={user_data}", "--window-size=1280,900"]
+            "--disable-extensions", "--hide-scrollbars", f"--user-data-dir={user_data}", f"--window-size={WINDOW[0]},{WINDOW[1]}"]
 
 
 def probe(index: Path, tmp_path: Path) -> tuple[dict, list[str]]:
@@ -80,15 +86,26 @@ def probe(index: Path, tmp_path: Path) -> tuple[dict, list[str]]:
     return json.loads(html.unescape(m.group(1))), console
 
 
+def assert_fits_window(found: dict) -> None:
+    """The page does not scroll sideways in the probe's window."""
+    assert found["window_width"] == WINDOW[0]
+    assert found["scroll_width"] <= WINDOW[0], f"the page scrolls sideways; too wide: {found['wide']}"
+
+
 def test_run_report_loads_cleanly_in_chromium(tmp_path, make_run, evil):
     run = make_run(tmp_path / "run", iterations=2, scenes=2, text=evil)
+    heldout = run / "iter_0002" / "heldout" / "unseen"  # a failure grid twice as wide as the window
+    heldout.mkdir(parents=True)
+    (heldout / "houses.csv").write_text("house,episodes,success,spl,collisions,steps\nh0,4,0.5,0.3,2,120\n")
+    Image.new("RGB", (2 * WINDOW[0], 300), "white").save(heldout / "failures.png")
     index = build_report(run)
     found, console = probe(index, tmp_path)
-    assert found["images"] == 1 + 2 * 2 * 2  # curves + before/after of 2 scenes in 2 iterations
+    assert found["images"] == 1 + 2 * 2 * 2 + 1  # curves + before/after of 2 scenes in 2 iterations + failures
     assert found["broken"] == []
     assert found["errors"] == []
     assert found["scripts"] == 1, "only the probe may be a script: text from files must stay escaped"
     assert console == []
+    assert_fits_window(found)
 
 
 def test_experiment_and_nested_run_reports_load_cleanly(tmp_path, make_experiment):
@@ -97,6 +114,7 @@ def test_experiment_and_nested_run_reports_load_cleanly(tmp_path, make_experimen
     found, console = probe(index, tmp_path)
     assert found["images"] == 2  # one curve figure per held-out set
     assert found["broken"] == [] and found["errors"] == [] and console == []
+    assert_fits_window(found)
     nested, console = probe(index.parent / "runs" / "ours" / "seed_1" / "index.html", tmp_path)
     assert nested["images"] == 1 + 2 * 1 * 2
     assert nested["broken"] == [] and nested["errors"] == [] and console == []

@@ -10,6 +10,13 @@ from pathlib import Path
 
 import typer
 
+DEMO_METHODS = ("dr", "ours")
+"""The demo compares the closed loop (ours) with domain randomization on the same houses, seed and budget."""
+HELDOUT_EPISODES_PER_HOUSE = 25
+"""Held-out episodes per house of each set: evaluation is cheap, and more paired episodes narrow the verdict's
+interval."""
+
+
 MARKER = ".adaptenv-demo"
 """The file the demo writes into its output folder: a later demo may replace only a folder that holds it."""
 OWNED = ("houses", "run")
@@ -44,11 +51,13 @@ def demo(
     seed: int = typer.Option(0, "--seed", help="Root seed: the same seed gives the same outputs."),
     policy: str = typer.Option("pretrained", "--policy", help="Starting policy: pretrained or a checkpoint path."),
 ) -> None:
-    """Generate houses, run the pretrained agent, analyze and adapt its scenes, fine-tune, write the report."""
+    """Generate houses, run the closed loop and domain randomization on them, write the report and its verdict."""
     prepare_out(out)  # before any work: a folder the demo did not write is refused, not emptied
     from rich.console import Console
 
-    from adaptenv.curriculum.loop import LoopConfig, run_loop
+    from adaptenv.curriculum.experiment import ExperimentConfig, run_experiment, verdict_lines
+    from adaptenv.curriculum.experiment import run_dir as experiment_run_dir
+    from adaptenv.curriculum.records import read_iterations
     from adaptenv.progress import ProgressBar
     from adaptenv.report import build_report
     from adaptenv.scene.house import save_house
@@ -67,23 +76,27 @@ def demo(
             save_house(house, heldout_new / f"house_{i:02d}.json")
             bar.advance()
 
-    console.print(f"[bold]2/4[/] closed loop ({iterations} iterations): roll out the agent, analyze each trajectory (F), "
-                  "edit the scenes (G), fine-tune, evaluate on held-out houses")
-    cfg = LoopConfig(method="ours", policy=policy, houses=str(train),
-                     heldout={"rearranged": str(heldout_re), "unseen": str(heldout_new)}, iterations=iterations,
-                     seed=seed, scenes_per_iteration=houses, edit_steps=5, finetune_frames=8192, finetune_envs=64,
-                     heldout_episodes=4 * houses, gallery=houses)
+    console.print(f"[bold]2/4[/] closed loop ({iterations} iterations) against domain randomization (dr) under the "
+                  "same budget: roll out the agent, analyze each trajectory (F), edit the scenes (G), fine-tune, "
+                  "evaluate on held-out houses")
+    loop = {"policy": policy, "houses": str(train), "heldout": {"rearranged": str(heldout_re), "unseen": str(heldout_new)},
+            "iterations": iterations, "scenes_per_iteration": houses, "edit_steps": 5, "finetune_frames": 8192,
+            "finetune_envs": 64, "heldout_episodes": HELDOUT_EPISODES_PER_HOUSE * houses, "gallery": houses}
+    cfg = ExperimentConfig(methods=list(DEMO_METHODS), seeds=[seed], loop=loop)
     run_dir = out / "run"
-    records = run_loop(cfg, run_dir, progress=lambda text: console.print(f"    [dim]{text}[/]"),
-                       command="adaptenv demo")
+    summary = run_experiment(cfg, run_dir, command="adaptenv demo",
+                             progress=lambda text: console.print(f"    [dim]{text}[/]"))
 
     console.print("[bold]3/4[/] held-out success per iteration (± standard error over episodes):")
-    for r in records:
-        figs = ", ".join(f"{k} {v.success:.2f} ± {v.success_se:.2f}" for k, v in sorted(r.heldout.items()))
-        took = f", {r.wall_time_s:.0f} s" if r.wall_time_s else ""
-        console.print(f"    t={r.iteration}: {figs}  ({r.edits} edits, {r.env_steps:,} env steps{took})")
-    console.print(f"    Each figure comes from {cfg.heldout_episodes} episodes per set, so a change smaller than "
-                  "about two standard errors is noise, not learning or forgetting; t=0 is the starting policy.")
+    for method in cfg.methods:
+        for r in read_iterations(experiment_run_dir(run_dir, method, seed)):
+            figs = ", ".join(f"{k} {v.success:.2f} ± {v.success_se:.2f}" for k, v in sorted(r.heldout.items()))
+            took = f", {r.wall_time_s:.0f} s" if r.wall_time_s else ""
+            console.print(f"    {method:>4} t={r.iteration}: {figs}  ({r.edits} edits, {r.env_steps:,} env steps{took})")
+    console.print(f"    Each figure comes from {loop['heldout_episodes']} episodes per set; t=0 is the starting policy "
+                  "(the same for both methods).")
+    for line in verdict_lines(summary) or ["Verdict: none (no held-out episodes evaluated by both methods)."]:
+        console.print(line, style="bold", markup=False)
 
     console.print("[bold]4/4[/] writing the report")
     index = build_report(run_dir)

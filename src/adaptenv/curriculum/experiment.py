@@ -10,6 +10,11 @@
   (``skipped_houses``, gathered from the runs' ``run.json``);
 - ``OUT/plots/heldout_<set>_vs_iterations.png`` and ``..._vs_env_steps.png``.
 
+``summary.json``'s ``episode_effects`` pairs the runs episode by episode instead of seed by seed (the last
+iteration's held-out episodes, the same for every method of a seed), so even a one-seed experiment such as
+``adaptenv demo`` gets a paired interval; :func:`verdict_lines` states it in words, and summary.md and the
+experiment report open with those lines.
+
 :func:`final_evaluation` (``adaptenv experiment --final-episodes N``) evaluates pi_0 and each run's
 last policy again on more held-out episodes, to shrink the evaluation noise in the comparison, and
 writes the same tables as ``per_seed_final.csv`` and ``summary_final.{json,md}``.
@@ -17,6 +22,7 @@ writes the same tables as ``per_seed_final.csv`` and ``summary_final.{json,md}``
 
 from __future__ import annotations
 
+import csv
 import json
 import math
 import shutil
@@ -42,6 +48,7 @@ from adaptenv.curriculum.executor import InProcessExecutor
 from adaptenv.curriculum.jobs import PolicyWeights
 from adaptenv.curriculum.loop import METHODS, LoopConfig, evaluate_sets, run_loop
 from adaptenv.curriculum.records import (
+    HELDOUT_DIR,
     ITERATIONS,
     STATE,
     IterationRecord,
@@ -51,6 +58,7 @@ from adaptenv.curriculum.records import (
     iteration_dir,
     read_iterations,
 )
+from adaptenv.curriculum.verdict import verdict_lines
 from adaptenv.errors import ConfigError
 
 METRICS = ("success", "spl", "collisions")
@@ -232,16 +240,18 @@ def summarize(out: str | Path, cfg: ExperimentConfig | None = None) -> dict[str,
     """Write per-seed CSVs, summary.json, summary.md and plots for an experiment folder."""
     out = Path(out)
     cfg = cfg or ExperimentConfig(**json.loads((out / "experiment.json").read_text(encoding="utf-8")))
-    summary = write_summary(out, cfg, final_figures(out, cfg))
+    summary = write_summary(out, cfg, final_figures(out, cfg), episode_effects=episode_effects(out, cfg))
     _plots(out, cfg)
     return summary
 
 
 def write_summary(out: Path, cfg: ExperimentConfig, table: dict[str, dict[int, dict[str, float]]],
-                  suffix: str = "", episodes: int | None = None) -> dict[str, Any]:
+                  suffix: str = "", episodes: int | None = None,
+                  episode_effects: dict[str, Any] | None = None) -> dict[str, Any]:
     """From method -> seed -> figures: ``<method>/per_seed{suffix}.csv`` and ``summary{suffix}.json/md``.
 
-    ``episodes``: episodes per held-out set behind each figure (the final evaluation's), recorded when given.
+    ``episodes``: episodes per held-out set behind each figure (the final evaluation's), recorded when given;
+    ``episode_effects``: :func:`episode_effects`' result, recorded when given.
     """
     metrics = sorted({k for seeds in table.values() for row in seeds.values() for k in row})
     for m, seeds in table.items():
@@ -275,10 +285,50 @@ def write_summary(out: Path, cfg: ExperimentConfig, table: dict[str, dict[int, d
     for name, p in holm(family).items():
         m, key = name.split("|")
         summary["holm"].setdefault(m, {})[key] = p
+    if episode_effects is not None:
+        summary["episode_effects"] = episode_effects
     summary["skipped_houses"] = {k: v.model_dump() for k, v in skipped_in_runs(out, cfg).items()}
     atomic_write_text(out / f"summary{suffix}.json", json.dumps(summary, indent=1, default=float))
     atomic_write_text(out / f"summary{suffix}.md", summary_markdown(summary))
     return summary
+
+
+def _episode_successes(folder: Path) -> dict[tuple[str, int], float]:
+    """(set, episode index) -> success of a run's last held-out evaluation (empty before iteration 1)."""
+    recs = read_iterations(folder)
+    if not recs or recs[-1].iteration < 1:
+        return {}
+    found = {}
+    for name in recs[-1].heldout:
+        path = iteration_dir(folder, recs[-1].iteration) / HELDOUT_DIR / name / "episodes.csv"
+        if path.is_file():
+            with path.open(newline="", encoding="utf-8") as f:
+                found.update({(name, int(row["index"])): float(row["success"] == "True") for row in csv.DictReader(f)})
+    return found
+
+
+def episode_effects(out: Path, cfg: ExperimentConfig) -> dict[str, dict[str, dict[str, float] | None]]:
+    """Per method: held-out success of the reference minus the method's, paired over the episodes both runs' last
+    iterations were evaluated on (``all``: every seed and set pooled; ``success:<set>``: one set), each with
+    the mean difference, its t-based 95% interval, the paired t-test's ``p_episodes`` and ``episodes``."""
+    ref = {s: _episode_successes(run_dir(out, cfg.reference, s)) for s in cfg.seeds}
+    effects: dict[str, dict[str, dict[str, float] | None]] = {}
+    for m in cfg.methods:
+        if m == cfg.reference:
+            continue
+        pairs: dict[str, tuple[list[float], list[float]]] = {}
+        for s in cfg.seeds:
+            other = _episode_successes(run_dir(out, m, s))
+            for key in sorted(set(ref[s]) & set(other)):
+                for group in ("all", f"success:{key[0]}"):
+                    a, b = pairs.setdefault(group, ([], []))
+                    a.append(ref[s][key])
+                    b.append(other[key])
+        effects[m] = {}
+        for group, (a, b) in sorted(pairs.items()):
+            e = paired_effect(a, b)
+            effects[m][group] = None if e is None else {**e, "p_episodes": paired_test(a, b), "episodes": len(a)}
+    return effects
 
 
 def skipped_in_runs(out: Path, cfg: ExperimentConfig) -> dict[str, SkippedHouses]:
@@ -377,7 +427,8 @@ def summary_markdown(summary: dict[str, Any]) -> str:
     keys = sorted({k for v in summary["methods"].values() for k in v if k.split(":")[0] in TESTED})
     ref = summary["reference"]
     head = "| method | " + " | ".join(keys) + " | env steps | updates |"
-    lines = [head, "|" + "---|" * (len(keys) + 3)]
+    verdicts = verdict_lines(summary)
+    lines = [*verdicts, *([""] if verdicts else []), head, "|" + "---|" * (len(keys) + 3)]
     for m, figs in summary["methods"].items():
         cells = []
         for k in keys:

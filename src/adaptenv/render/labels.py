@@ -14,6 +14,7 @@ Nothing here draws: :mod:`adaptenv.render.topdown` draws what this module places
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass
 from enum import IntEnum
 from functools import lru_cache
@@ -93,6 +94,14 @@ def _overlap(boxes: np.ndarray, others: np.ndarray) -> np.ndarray:
     w = np.minimum(boxes[:, None, 2], others[None, :, 2]) - np.maximum(boxes[:, None, 0], others[None, :, 0])
     h = np.minimum(boxes[:, None, 3], others[None, :, 3]) - np.maximum(boxes[:, None, 1], others[None, :, 1])
     return np.clip(w, 0, None) * np.clip(h, 0, None)
+
+
+def _touches(boxes: np.ndarray, others: np.ndarray) -> np.ndarray:
+    """Per box (K, 4): whether it intersects (or touches) any of ``others`` (N, 4)."""
+    if len(others) == 0:
+        return np.zeros(len(boxes), dtype=bool)
+    return ((boxes[:, None, 0] <= others[None, :, 2]) & (boxes[:, None, 2] >= others[None, :, 0])
+            & (boxes[:, None, 1] <= others[None, :, 3]) & (boxes[:, None, 3] >= others[None, :, 1])).any(axis=1)
 
 
 def _crossings(a: np.ndarray, b: np.ndarray, segs: np.ndarray, weights: np.ndarray | None = None) -> np.ndarray:
@@ -372,12 +381,14 @@ def fits_inside(fp: Footprint, t: MapTransform, w: float, h: float, inset: float
 
 def place_object_labels(floor: list[Footprint], t: MapTransform, layout: MapLayout, obst: Obstacles,
                         boxes: dict[str, Box], edges: dict[str, RGB], default_edge: RGB,
-                        inset: float) -> list[PlacedLabel]:
+                        inset: float, keep_off: Sequence[Box] = ()) -> list[PlacedLabel]:
     """Put every floor object's full id inside its rectangle when it fits, else beside it with a leader.
 
     ``boxes`` are the objects' pixel bounding boxes (the first rows of ``obst``), ``edges`` the
-    frame colours of highlighted objects, ``inset`` the pixels kept clear at an object's front and back.
+    frame colours of highlighted objects, ``inset`` the pixels kept clear at an object's front and back;
+    no label may cover a box of ``keep_off`` (the target crosses, drawn over the labels).
     """
+    off = np.asarray(keep_off, dtype=float).reshape(-1, 4)
     out: list[PlacedLabel] = []
     outside: list[Footprint] = []
     index = {oid: i for i, oid in enumerate(boxes)}  # furniture rows come first in ``obst``
@@ -387,8 +398,8 @@ def place_object_labels(floor: list[Footprint], t: MapTransform, layout: MapLayo
         for s in range(fs, min_fs - 1, -1):
             w, h = text_size(fp.object_id, s)
             w += 4
-            if fits_inside(fp, t, w, h, inset):
-                box = (anchor[0] - w / 2, anchor[1] - h / 2, anchor[0] + w / 2, anchor[1] + h / 2)
+            box = (anchor[0] - w / 2, anchor[1] - h / 2, anchor[0] + w / 2, anchor[1] + h / 2)
+            if fits_inside(fp, t, w, h, inset) and not _touches(np.array([box]), off).any():
                 out.append(PlacedLabel(fp.object_id, box, s, True, anchor, edges.get(fp.object_id, default_edge)))
                 obst.add_label(box, None)
                 break
@@ -405,6 +416,7 @@ def place_object_labels(floor: list[Footprint], t: MapTransform, layout: MapLayo
         # Near spots first; look further out only when none of them is clean.
         cand, ring = _candidates(boxes[fp.object_id], w, h)
         cost = obst.cost(cand, anchor, ring, own=index[fp.object_id])
+        cost[_touches(cand, off)] = np.inf
         k = int(np.argmin(cost))
         box = tuple(float(v) for v in cand[k])
         out.append(PlacedLabel(fp.object_id, box, fs, False, anchor, edges.get(fp.object_id, default_edge)))
@@ -472,12 +484,18 @@ def label_obstacles(layout: MapLayout, boxes: dict[str, Box], anchors: list, wal
         for pose in (trajectory.start, trajectory.poses[-1]):
             cx, cy = t.point(pose.x, pose.z)
             obst.add((cx - agent_r * 2, cy - agent_r * 2, cx + agent_r * 2, cy + agent_r * 2), Kind.MARKER)
-        for x, z in trajectory.target_positions:
-            cx, cy = t.point(x, z)
-            obst.add((cx - cross_arm - 2, cy - cross_arm - 2, cx + cross_arm + 2, cy + cross_arm + 2), Kind.MARKER)
+        obst.add(target_boxes(t, trajectory, cross_arm), Kind.MARKER)
     if grid:  # keep labels off the tick labels
         obst.add([(0, bottom + 1, layout.width, layout.height), (0, 0, left - 1, layout.height)], Kind.TICK_LABELS)
     return obst
+
+
+def target_boxes(t: MapTransform, trajectory: Trajectory | None, cross_arm: float) -> list[Box]:
+    """Pixel boxes of the episode's target crosses (with a 2 px margin)."""
+    if trajectory is None:
+        return []
+    centres = [t.point(x, z) for x, z in trajectory.target_positions]
+    return [(cx - cross_arm - 2, cy - cross_arm - 2, cx + cross_arm + 2, cy + cross_arm + 2) for cx, cy in centres]
 
 
 def leader_start(box: Box, anchor: tuple[float, float]) -> tuple[float, float]:

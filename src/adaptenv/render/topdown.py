@@ -32,6 +32,7 @@ from adaptenv.render.labels import (
     leader_start,
     place_object_labels,
     place_room_names,
+    target_boxes,
 )
 from adaptenv.render.text import RGB, draw_text, text_size
 from adaptenv.scene.geometry import Footprint, SceneGeometry, yaw_axes
@@ -88,6 +89,9 @@ CAPTION_TEXT: RGB = (20, 20, 20)
 _MOVE_ACTIONS = frozenset({"m", "b", "move_ahead", "move_back"})
 _GRID_STEP = 10
 _MIN_SIZE = 256
+MIN_WIDTH_FRACTION = 0.5
+"""A render is at least this fraction of ``size`` wide (a tall, narrow house is centred in the wider panel),
+and wider still when its caption or legend needs it, up to ``size``."""
 
 
 # ---------------------------------------------------------------- layout
@@ -150,6 +154,8 @@ class MapLayout:
     """Lowest pixel row of the caption lines; labels stay below it."""
     legend_top: float
     legend_rows: list[list[str]]
+    text_left: float = 0.0
+    """Left edge of the caption lines: the map's left margin (the map itself is centred in a widened panel)."""
 
 
 _GRID_NOTE = "grid: x grows right, y grows up"
@@ -184,19 +190,27 @@ def _wrap_legend(items: list[str], fs: int, width: float) -> list[list[str]]:
     return rows
 
 
+def base_font_size(size: int) -> int:
+    """Font size (px) of tick labels, captions and room names in a render of ``size`` px."""
+    return max(10, round(size / 80))
+
+
 def map_layout(geometry: SceneGeometry, *, size: int = 1024, grid: bool = False, captions: int = 0,
-               legend: bool = True, trajectory: bool = False, highlight: bool = False) -> MapLayout:
+               legend: bool = True, trajectory: bool = False, highlight: bool = False,
+               header_width: float = 0.0) -> MapLayout:
     """Fit the house into an image whose longer side is ``size`` px, keeping its aspect ratio.
 
     Margins hold the tick labels (left, bottom) when ``grid``, ``captions`` text lines on top
-    and the legend at the bottom.
+    and the legend at the bottom. The image is at least :data:`MIN_WIDTH_FRACTION` of ``size`` wide and
+    wide enough (up to ``size``) for the caption lines (``header_width`` px at the base font size) and for
+    every legend item; the map is centred when the panel is wider than the house.
     """
     if size < _MIN_SIZE:
         raise AdaptenvError(f"render size {size} px is too small to read; use --size {_MIN_SIZE} or more")
     g = geometry.grid or NormalizedGrid.from_bounds(*geometry.bounds)
     min_x, min_z, max_x, max_z = geometry.bounds
     wx, wz = max_x - g.min_x, max_z - g.min_z
-    fs = max(10, round(size / 80))
+    fs = base_font_size(size)
     label_fs = max(9, round(size / 88))
     small = max(9, fs - 2)
     _, line_h = text_size("Hg", fs)
@@ -207,20 +221,24 @@ def map_layout(geometry: SceneGeometry, *, size: int = 1024, grid: bool = False,
     ticks = (fs * 0.6 + line_h + pad * 0.5) if grid else pad
     _, small_h = text_size("Hg", small)
     items = _legend_items(trajectory, grid, highlight) if legend else []
+    needed = max([MIN_WIDTH_FRACTION * size, header_width + 2 * left]
+                 + [_legend_item_width(item, small) + 2 * pad for item in items])
     rows: list[list[str]] = []
     for _ in range(4):  # the legend may wrap once the width is known; settle in a few rounds
         bottom = ticks + (len(rows) * (small_h + 6) + pad * 0.5 if rows else pad * 0.5)
         scale = min((size - left - right) / wx, (size - top - bottom) / wz)
-        width = left + right + wx * scale
+        width = max(left + right + wx * scale, min(needed, size))
         new_rows = _wrap_legend(items, small, width - 2 * pad) if items else []
-        if len(new_rows) == len(rows):
+        settled = len(new_rows) == len(rows)
+        rows = new_rows  # always the rows of this width: the previous width's may overflow it
+        if settled:
             break
-        rows = new_rows
     height = top + bottom + wz * scale
-    transform = MapTransform(g, scale, (float(left), float(top + wz * scale)), (wx, wz))
+    shift = (width - (left + right + wx * scale)) / 2  # centre the map in a panel widened for its text
+    transform = MapTransform(g, scale, (float(left + shift), float(top + wz * scale)), (wx, wz))
     caption_top = pad * 0.6
     return MapLayout(int(math.ceil(width)), int(math.ceil(height)), transform, fs, label_fs, caption_top,
-                     caption_top + captions * (line_h + 4), top + wz * scale + ticks + pad * 0.3, rows)
+                     caption_top + captions * (line_h + 4), top + wz * scale + ticks + pad * 0.3, rows, float(left))
 
 
 # ---------------------------------------------------------------- small geometry helpers
@@ -478,6 +496,16 @@ def _caption_parts(traj: Trajectory) -> list[tuple[str, RGB]]:
     return parts
 
 
+def header_width(title: str | None, trajectory: Trajectory | None, fs: int) -> float:
+    """Pixel width of the caption lines at base font size ``fs`` (the title is one size larger and bold)."""
+    widths = [0.0]
+    if title is not None:
+        widths.append(text_size(title, fs + 1, True)[0])
+    if trajectory is not None:
+        widths.append(sum(text_size(text, fs)[0] for text, _ in _caption_parts(trajectory)))
+    return max(widths)
+
+
 def _draw_runs(image: Image.Image, x: float, y: float, parts: list[tuple[str, RGB]], fs: int,
                bold: bool, max_w: float) -> None:
     """Draw coloured text runs on one line, shrinking the font until the line fits ``max_w``."""
@@ -602,7 +630,8 @@ def render_map(house: House | None = None, *, trajectory: Trajectory | None = No
     geometry = _geometry_of(house, geometry)
     colours = _highlight_colours(geometry, highlight)
     layout = map_layout(geometry, size=size, grid=grid, captions=int(title is not None) + int(trajectory is not None),
-                        legend=legend, trajectory=trajectory is not None, highlight=bool(colours))
+                        legend=legend, trajectory=trajectory is not None, highlight=bool(colours),
+                        header_width=header_width(title, trajectory, base_font_size(size)))
     canvas = _Canvas.blank(layout)
     scene = _PixelScene.of(geometry, layout.transform)
     obstacles = label_obstacles(layout, scene.boxes, scene.anchors, scene.wall_segs, scene.wall_w, trajectory,
@@ -615,7 +644,7 @@ def render_map(house: House | None = None, *, trajectory: Trajectory | None = No
     if trajectory is not None:
         _draw_trajectory(canvas.draw, trajectory, canvas.t, max(2, round(canvas.t.scale * 0.05)))
     placed = place_object_labels(scene.floor, canvas.t, layout, obstacles, scene.boxes, colours, LABEL_EDGE,
-                                 scene.tick_len + 1) if labels else []
+                                 scene.tick_len + 1, target_boxes(canvas.t, trajectory, scene.cross_arm)) if labels else []
     _draw_labels(canvas, placed)
     if trajectory is not None:
         _draw_markers(canvas, trajectory, scene)
@@ -704,14 +733,14 @@ def _draw_markers(canvas: _Canvas, trajectory: Trajectory, scene: _PixelScene) -
 
 def _draw_captions(canvas: _Canvas, title: str | None, trajectory: Trajectory | None) -> None:
     """The bold title line and the episode's one-line summary above the map."""
-    layout, area = canvas.layout, canvas.t.area
-    y = layout.caption_top
-    max_w = layout.width - 2 * area[0] if area[0] > 0 else layout.width
+    layout = canvas.layout
+    y, x = layout.caption_top, layout.text_left
+    max_w = layout.width - 2 * x
     if title is not None:
-        _draw_runs(canvas.image, area[0], y, [(title, CAPTION_TEXT)], layout.font_size + 1, True, max_w)
+        _draw_runs(canvas.image, x, y, [(title, CAPTION_TEXT)], layout.font_size + 1, True, max_w)
         y += text_size("Hg", layout.font_size)[1] + 4
     if trajectory is not None:
-        _draw_runs(canvas.image, area[0], y, _caption_parts(trajectory), layout.font_size, False, max_w)
+        _draw_runs(canvas.image, x, y, _caption_parts(trajectory), layout.font_size, False, max_w)
 
 
 def _draw_leader(draw: ImageDraw.ImageDraw, lab: PlacedLabel) -> None:

@@ -31,6 +31,7 @@ from adaptenv.curriculum.records import (
     IterationRecord,
     SetMetrics,
 )
+from adaptenv.curriculum.verdict import verdict_lines
 from adaptenv.errors import AdaptenvError
 from adaptenv.render.compare import BeforeAfter, render_before_after
 from adaptenv.render.topdown import render_house
@@ -736,6 +737,16 @@ def runs_table(exp: ExperimentData, links: dict[Path, str]) -> str:
     return table(head, rows)
 
 
+def verdict_html(exp: ExperimentData) -> str:
+    """The page's opening lines: summary.json's verdict of the reference against each method (empty without one)."""
+    summary = exp.summary if isinstance(exp.summary, dict) else {}
+    try:
+        lines = verdict_lines(summary) if summary.get("reference") else []
+    except (KeyError, TypeError):  # a summary.json written by something else
+        lines = []
+    return "".join(f'<p class="verdict"><strong>{esc(line)}</strong></p>' for line in lines)
+
+
 def write_experiment_report(exp: ExperimentData, out: Path) -> Path:
     """Write the experiment report (summary, curves per set, per-run reports) into ``out``."""
     out.mkdir(parents=True, exist_ok=True)
@@ -754,7 +765,7 @@ def write_experiment_report(exp: ExperimentData, out: Path) -> Path:
         links_ = [assets.link(p, str(Path("data") / p.parent.relative_to(exp.path)), p.relative_to(exp.path).as_posix())
                   for p in exp.files]
         overview += '<p class="note">Data: ' + " · ".join(links_) + "</p>"
-    body = [warnings_box(exp.warnings), block("overview", "Overview", overview)]
+    body = [verdict_html(exp), warnings_box(exp.warnings), block("overview", "Overview", overview)]
     nav = [("Overview", "#overview")]
     if not any(run.iterations for runs in exp.runs.values() for run in runs):
         body.append('<div class="callout empty"><strong>No run has finished an iteration yet.</strong> '

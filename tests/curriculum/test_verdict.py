@@ -1,0 +1,74 @@
+"""The experiment's verdict: the reference minus each method on held-out success, paired over episodes."""
+
+from __future__ import annotations
+
+import csv
+from pathlib import Path
+
+import numpy as np
+import pytest
+from scipy import stats
+
+from adaptenv.curriculum.experiment import (
+    ExperimentConfig,
+    episode_effects,
+    final_figures,
+    run_dir,
+    write_summary,
+)
+from adaptenv.curriculum.records import HELDOUT_DIR, iteration_dir
+from adaptenv.curriculum.verdict import verdict_lines
+from adaptenv.report import build_report
+from tests.report.run_folders import SETS, write_fake_run
+
+EPISODES = 40
+
+
+def write_episodes(folder: Path, successes: dict[str, list[bool]]) -> None:
+    """Iteration 1's held-out episodes.csv per set, in ``adaptenv evaluate``'s columns that matter here."""
+    for name, wins in successes.items():
+        path = iteration_dir(folder, 1) / HELDOUT_DIR / name / "episodes.csv"
+        path.parent.mkdir(parents=True, exist_ok=True)
+        with path.open("w", newline="") as f:
+            w = csv.DictWriter(f, fieldnames=["index", "house", "success", "spl"])
+            w.writeheader()
+            w.writerows({"index": i, "house": f"h{i % 4}", "success": s, "spl": 0.5 * s} for i, s in enumerate(wins))
+
+
+def one_seed_experiment(out: Path, ours: dict[str, list[bool]], dr: dict[str, list[bool]]) -> ExperimentConfig:
+    """A one-seed experiment of ours and dr (one iteration each) with the given held-out outcomes."""
+    cfg = ExperimentConfig(methods=["dr", "ours"], seeds=[0])
+    for method, wins in (("ours", ours), ("dr", dr)):
+        folder = write_fake_run(run_dir(out, method, 0), None, method=method, iterations=1, scenes=0)
+        write_episodes(folder, wins)
+    return cfg
+
+
+def test_effect_pairs_episodes_and_states_noise(tmp_path):
+    ours = {s: [True] * EPISODES for s in SETS}
+    dr = {s: [i != 3 for i in range(EPISODES)] for s in SETS}  # dr fails one episode of each set
+    cfg = one_seed_experiment(tmp_path, ours, dr)
+    e = episode_effects(tmp_path, cfg)["dr"]
+    a = [float(x) for s in SETS for x in ours[s]]
+    b = [float(x) for s in SETS for x in dr[s]]
+    ci = stats.ttest_rel(a, b).confidence_interval(0.95)
+    assert e["all"]["episodes"] == 2 * EPISODES
+    assert e["all"]["diff"] == pytest.approx(np.mean(np.subtract(a, b)))
+    assert (e["all"]["low"], e["all"]["high"]) == pytest.approx((ci.low, ci.high))
+    assert e[f"success:{SETS[0]}"]["episodes"] == EPISODES
+    [line] = verdict_lines({"reference": "ours", "episode_effects": {"dr": e}})
+    assert line.startswith("Verdict: ours - dr held-out success = +2.5 points, 95% interval [")
+    assert "within noise" in line and "80 held-out episodes" in line
+
+
+def test_a_clear_difference_is_beyond_noise_and_opens_summary_and_report(tmp_path):
+    ours = {s: [True] * EPISODES for s in SETS}
+    dr = {s: [i % 2 == 0 for i in range(EPISODES)] for s in SETS}
+    cfg = one_seed_experiment(tmp_path, ours, dr)
+    summary = write_summary(tmp_path, cfg, final_figures(tmp_path, cfg), episode_effects=episode_effects(tmp_path, cfg))
+    [line] = verdict_lines(summary)
+    assert "+50.0 points" in line and "ours is better than dr beyond noise" in line
+    assert (tmp_path / "summary.md").read_text().startswith(line + "\n")
+    page = build_report(tmp_path).read_text()
+    assert page.index('<p class="verdict">') < page.index('id="overview"')
+    assert "ours is better than dr beyond noise" in page
