@@ -282,7 +282,7 @@ def _print_adapt_summary(console, s: dict, h, out: Path) -> None:
         console.print(f"  {k:15s} {_fmt(ob[k])} -> {_fmt(oa[k])} {unit:8s} {what}: "
                       f"{harder_or_easier(k, ob[k], oa[k])}")
     console.print(f"agent: success {ab['success']} -> {aa['success']}, SPL {ab['spl']:.3f} -> {aa['spl']:.3f}, "
-                  f"steps {ab['steps']} -> {aa['steps']}: {_verdict_text(s['verdict'])}")
+                  f"steps {ab['steps']} -> {aa['steps']}: {_verdict_text(s['verdict'], ab, aa)}")
     if s.get("diagnosis"):
         before, after = (SceneDiagnosis.model_validate(s[k]) for k in ("diagnosis", "diagnosis_after"))
         console.print(f"diagnosis before: {before.summary()}", highlight=False)
@@ -303,11 +303,12 @@ def _print_adapt_summary(console, s: dict, h, out: Path) -> None:
     console.print(f"wrote {out}/ (house.json, before.png, after.png, analysis.json, edits.json, summary.json)")
 
 
-def _verdict_text(v: str) -> str:
-    """The closing words of the agent line, following :func:`~adaptenv.adapt.step.verdict`."""
-    return {"harder": "the scene got harder for the agent (success fell, or SPL fell at equal success)",
-            "easier": "the scene got easier for the agent (success rose, or SPL rose at equal success)",
-            "unchanged": "no change for the agent (same success, same SPL)"}[v]
+def _verdict_text(v: str, before: dict, after: dict) -> str:
+    """The closing words of the agent line: :func:`~adaptenv.adapt.step.verdict` and what decided it."""
+    if v == "unchanged":
+        return "unchanged for the agent (same success, same SPL)"
+    why = "success" if bool(before["success"]) != bool(after["success"]) else "SPL at equal success"
+    return f"the scene got {v} for the agent ({why} {'fell' if v == 'harder' else 'rose'})"
 
 
 def _fmt(x) -> str:
