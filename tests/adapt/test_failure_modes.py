@@ -87,10 +87,13 @@ def test_looping_edits_raise_symmetry_or_route_length(scene):
 
 def test_target_moves_stay_in_the_targets_room_and_keep_the_house_valid(scene):
     house, world, ep, traj, _ = scene
-    gen = FailureModeGenerator(max_candidates=12)
-    v = EditValidator(house, episode_targets=[ep.target_type], start=ep.start[:2])
+    gen = FailureModeGenerator(max_candidates=12, relocate_targets=True)
+    v = EditValidator(house, episode_targets=[ep.target_type], start=ep.start[:2], move_targets=True)
     targets = {t.object_id for t in world.instances_of(ep.target_type)}
     route = RouteSpec.from_episode(ep.target_type, ep.start, traj)
+    plain = FailureModeGenerator(max_candidates=12)._mode_candidates("search", v, world, route, targets,
+                                                                     np.random.default_rng(3))
+    assert not [c for c in plain if c.object_id in targets], "targets move only with relocate_targets"
     cands = [c for c in gen._mode_candidates("search", v, world, route, targets, np.random.default_rng(3))
              if c.kind == "target_late"]
     assert cands and all(c.object_id in targets for c in cands)
@@ -104,7 +107,7 @@ def test_target_moves_stay_in_the_targets_room_and_keep_the_house_valid(scene):
 
 def test_relocated_targets_go_to_a_far_plausible_room_only_when_asked():
     house, world, ep, traj, _ = procedural_scene(2, 4, [1, 1])  # one HousePlant, in the living room
-    v = EditValidator(house, episode_targets=[ep.target_type], start=ep.start[:2])
+    v = EditValidator(house, episode_targets=[ep.target_type], start=ep.start[:2], move_targets=True)
     targets = {t.object_id for t in world.instances_of(ep.target_type)}
     route = RouteSpec.from_episode(ep.target_type, ep.start, traj)
 

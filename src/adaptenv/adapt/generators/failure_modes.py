@@ -354,7 +354,8 @@ class FailureModeGenerator(BuiltinGenerator):
         return oid, (aim - c) * rng.uniform(0.5, 1.0), "target_late"
 
     def _target_room(self, ctx, fps, world, route, targets, rng):
-        """A target instance relocated to a free-looking spot of a far room whose type it plausibly stands in."""
+        """A target instance relocated to a spot along a wall of a far room whose type it plausibly stands in (by a
+        wall: where ProcTHOR stands the small types it never places in the middle)."""
         movable = self._movable(ctx, lambda o: o in targets and o in fps)
         if not movable:
             return None
@@ -368,8 +369,11 @@ class FailureModeGenerator(BuiltinGenerator):
         rooms.sort(key=lambda r: -float(np.hypot(*(np.array(geom.rooms[r].centroid.coords[0]) - start))))
         room = rooms[int(rng.integers(min(2, len(rooms))))]
         x0, z0, x1, z1 = geom.rooms[room].bounds
-        margin = min(ctx.reach(ctx.index[oid]), (x1 - x0) / 2, (z1 - z0) / 2)
-        aim = np.array([rng.uniform(x0 + margin, x1 - margin), rng.uniform(z0 + margin, z1 - margin)])
+        margin = min(ctx.reach(ctx.index[oid]) + 0.02, (x1 - x0) / 2, (z1 - z0) / 2)
+        side, along = int(rng.integers(4)), rng.uniform(0.0, 1.0)
+        x = x0 + margin + along * (x1 - x0 - 2 * margin)
+        z = z0 + margin + along * (z1 - z0 - 2 * margin)
+        aim = np.array([(x, z0 + margin), (x, z1 - margin), (x0 + margin, z), (x1 - margin, z)][side])
         return oid, aim - ctx.centers[ctx.index[oid]], "target_room"
 
     def _distractor(self, ctx, fps, world, route, targets, rng):
