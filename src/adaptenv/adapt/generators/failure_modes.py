@@ -351,7 +351,8 @@ class FailureModeGenerator(BuiltinGenerator):
         start = np.array(route.start)
         spots.sort(key=lambda p: -float(np.hypot(*(p - start))))
         aim = spots[int(rng.integers(min(3, len(spots))))]
-        return oid, (aim - c) * rng.uniform(0.5, 1.0), "target_late"
+        # all the way: the march stops at the corner's walls or beside the tall object, never on open floor
+        return oid, (aim - c) * rng.uniform(0.95, 1.1), "target_late"
 
     def _target_room(self, ctx, fps, world, route, targets, rng):
         """A target instance relocated to a spot along a wall of a far room whose type it plausibly stands in (by a
