@@ -211,7 +211,6 @@ def test_builtin_rollout_checks_score_each_scene_as_one_run_at_a_time():
     """G rolls pi out on the scene and its candidates in one batch; the scores are each scene's own runs."""
     from adaptenv.agents.registry import load_pretrained
     from adaptenv.agents.rollout import checking_episodes, mean_spl, run_policy
-    from tests.adapt.scenes import procedural_scene
 
     house, world, ep, traj, analysis = procedural_scene(0, 4, [0, 7])  # one where plausible moves verify
     policy = load_pretrained()  # stochastic motions, seeded per episode
