@@ -116,15 +116,21 @@ F_ANSWER = {"outcome": {"success": True, "failure_mode": None, "summary": "reach
 
 
 def _responses_answer(srv):
-    """Answer any Responses API request of F or G (first allowed object moved; verification says yes)."""
+    """Answer any Responses API request of F or G (first allowed object moved, left then back right, so that
+    every move stays plausible; verification says yes)."""
+    moves = []
+
     def reply(body):
         tools = body.get("tools") or []
         if not tools:
             return 200, srv.responses_text_reply(json.dumps(F_ANSWER), input_tokens=1200, output_tokens=150)
         if tools[0]["name"] == "propose_move_instruction":
             oid = tools[0]["parameters"]["properties"]["object_id"]["enum"][0]
+            moves.append(oid)
+            back = len(moves) % 2 == 0
             return 200, srv.responses_tool_reply("propose_move_instruction", {
-                "object_id": oid, "x_direction": "left", "x_units": 2, "y_direction": "up", "y_units": 1,
+                "object_id": oid, "x_direction": "right" if back else "left", "x_units": 2,
+                "y_direction": "down" if back else "up", "y_units": 1,
                 "rotation": 90}, input_tokens=1000, output_tokens=40)
         return 200, srv.responses_tool_reply("verify_move", {"matches_intent": True, "reason": "ok",
                                                              "revised_move": None}, input_tokens=1100, output_tokens=30)

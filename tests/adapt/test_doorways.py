@@ -53,9 +53,9 @@ def test_edit_validator_rejects_parking_across_a_doorway():
     # The dresser already stands along the door wall, 0.82 m from it (x 2.81..3.19), clear of the zone.
     near = apply_edit(h, Edit(object_id="Dresser|0", achieved_dx=1.5, achieved_dz=1.7, yaw_after=90.0))
     # 8 m house: 100 units = 8 m, so 2 units = 0.16 m and 4 units = 0.32 m toward the door.
-    v = EditValidator(near, original=h)
+    v = EditValidator(near, original=h, plausibility=False)  # the physical rule alone
     assert v.try_edit("Dresser|0", 2.0, 0.0).accepted  # face at 3.35 m: outside the 0.5 m zone
-    v = EditValidator(near, original=h)
+    v = EditValidator(near, original=h, plausibility=False)
     edit = v.try_edit("Dresser|0", 4.0, 0.0)  # face at 3.51 m: across the zone, the way still open
     assert not edit.accepted
     assert edit.problems == ["Dresser|0 would cover 1.60 of the 1.60 m in front of doorway door|0|1|0"]
@@ -66,7 +66,7 @@ def test_edit_validator_counts_an_object_moved_into_the_approach_earlier():
     h = H.make_house([(0.0, 0.0, 4.0, 4.0), (4.0, 0.0, 8.0, 4.0)], doors=[H.Door(0, 1, 2.0, 1.6)],
                      objects=[H.Obj(DRESSER, 1.5, 0.3), H.Obj(H.LOW_TARGET, 7.0, 1.0), H.Obj(CHAIR, 1.0, 3.4),
                               H.Obj(CHAIR, 2.5, 3.4)], agent=(0.5, 2.0, 0.0))
-    v = EditValidator(h)
+    v = EditValidator(h, plausibility=False)  # the physical rule alone (plausibility keeps a 1 m clearance)
     assert v.propose("Chair|3", 13.75, -11.25).valid  # to (3.6, 2.5): the door's upper third, alone below the limit
     first = v.try_edit("Chair|2", 32.5, -25.0)  # to (3.6, 1.4): the door's lower third, alone below the limit
     assert first.accepted and first.stop_reason == "reached"

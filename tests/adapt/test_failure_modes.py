@@ -85,26 +85,26 @@ def test_looping_edits_raise_symmetry_or_route_length(scene):
     _valid_and_solvable(scene, res, after)
 
 
-def test_target_moves_stay_in_the_targets_room_and_keep_the_house_valid(scene):
-    house, world, ep, traj, _ = scene
-    gen = FailureModeGenerator(max_candidates=12)
-    v = EditValidator(house, episode_targets=[ep.target_type], start=ep.start[:2])
+def test_target_moves_only_when_asked_and_never_away_from_what_it_faces(scene):
+    house, world, ep, traj, _ = scene  # the target is a Television facing the living room's sofa
+    gen = FailureModeGenerator(max_candidates=12, relocate_targets=True)
+    v = EditValidator(house, episode_targets=[ep.target_type], start=ep.start[:2], move_targets=True)
     targets = {t.object_id for t in world.instances_of(ep.target_type)}
     route = RouteSpec.from_episode(ep.target_type, ep.start, traj)
+    plain = FailureModeGenerator(max_candidates=12)._mode_candidates("search", v, world, route, targets,
+                                                                     np.random.default_rng(3))
+    assert not [c for c in plain if c.object_id in targets], "targets move only with relocate_targets"
     cands = [c for c in gen._mode_candidates("search", v, world, route, targets, np.random.default_rng(3))
              if c.kind == "target_late"]
     assert cands and all(c.object_id in targets for c in cands)
-    geometry = SceneGeometry.from_house(v.house)
-    kept = [c for c in (gen._evaluate(v, geometry, c, route, house, ep) for c in cands) if c is not None]
-    assert kept, "some target move passes placement, validation and the expert check"
-    room = world.geometry.room_of_point(*world.geometry.footprint(kept[0].object_id).center)
-    moved = kept[0].world.geometry.footprint(kept[0].object_id)
-    assert kept[0].world.geometry.room_of_point(*moved.center) == room
+    for c in cands:  # carried to a far corner, the television would no longer face the sofa
+        problems = v.propose(c.object_id, c.dx_units, c.dy_units, c.rotation).problems
+        assert any(p.message.startswith("implausible (facing_broken)") for p in problems)
 
 
 def test_relocated_targets_go_to_a_far_plausible_room_only_when_asked():
     house, world, ep, traj, _ = procedural_scene(2, 4, [1, 1])  # one HousePlant, in the living room
-    v = EditValidator(house, episode_targets=[ep.target_type], start=ep.start[:2])
+    v = EditValidator(house, episode_targets=[ep.target_type], start=ep.start[:2], move_targets=True)
     targets = {t.object_id for t in world.instances_of(ep.target_type)}
     route = RouteSpec.from_episode(ep.target_type, ep.start, traj)
 

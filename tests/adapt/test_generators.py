@@ -207,12 +207,12 @@ def test_revision_loop_is_bounded_and_stops_on_success():
     assert applied == [0] and stop.revisions == 0
 
 
-def test_builtin_rollout_checks_score_each_scene_as_one_run_at_a_time(scene):
+def test_builtin_rollout_checks_score_each_scene_as_one_run_at_a_time():
     """G rolls pi out on the scene and its candidates in one batch; the scores are each scene's own runs."""
     from adaptenv.agents.registry import load_pretrained
     from adaptenv.agents.rollout import checking_episodes, mean_spl, run_policy
 
-    house, world, ep, _, traj, analysis = scene
+    house, world, ep, traj, analysis = procedural_scene(0, 4, [0, 7])  # one where plausible moves verify
     policy = load_pretrained()  # stochastic motions, seeded per episode
     ctx = GenerationContext(episode=ep, trajectory=traj, policy=policy, render=False, rollout_episodes=3)
     res = BuiltinGenerator(max_candidates=8).generate(house, analysis, steps=2, context=ctx,

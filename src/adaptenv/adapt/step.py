@@ -10,7 +10,8 @@ It rolls pi_t out (unless the caller already has that trajectory), analyses the 
 G edit the house one object at a time while checking candidates against pi_t (the paper's
 ``argmin_{e'} R(pi_t, e')``) and verifying each edit, validates the final house as a whole, and
 rolls pi_t out again in the edited house on the same episode. :func:`summarize` adds the figures a
-person reads (objectives, realism, expert check) and :func:`write_outputs` writes them.
+person reads (objectives, realism, the plausibility audit's counts, expert check, whether the scene got
+harder for pi_t: :func:`verdict`) and :func:`write_outputs` writes them.
 """
 
 from __future__ import annotations
@@ -29,6 +30,7 @@ from adaptenv.adapt.generators import GenerationContext, GenerationResult, Gener
 from adaptenv.adapt.llm.accounting import scene_usage
 from adaptenv.adapt.llm.usage import Prices
 from adaptenv.adapt.objectives import RouteSpec, measure, realism_score
+from adaptenv.adapt.plausibility import audit
 from adaptenv.adapt.validation import validate_scene
 from adaptenv.agents.policy import ExpertPolicy, Policy, as_policy
 from adaptenv.agents.rollout import rollout
@@ -145,9 +147,11 @@ def summarize(result: AdaptResult, *, analyzer: Analyzer, seed: int | None = Non
         "steps_requested": len(gen.steps), "edits_applied": result.edits_applied,
         "edits_verified": result.edits_verified,
         "agent_before": _agent(result.before), "agent_after": _agent(result.after),
+        "verdict": verdict(_agent(result.before), _agent(result.after)),
         "objective_before": measure(world, route).as_dict(), "objective_after": measure(new_world, route).as_dict(),
         "realism_before": realism_score(result.original, result.original),
         "realism_after": realism_score(result.house, result.original),
+        "plausibility": audit(result.original, result.house).counts(),
         "expert_solvable": bool(is_solvable(new_world, ep)), "expert_success_after": bool(expert.metrics.success),
         "valid": result.valid, "problems": result.problems, "stopped": gen.stopped,
         "usage": scene_usage(result.analysis, gen).to_dict(gen.prices or _backend_prices(analyzer), calls=False),
@@ -155,6 +159,15 @@ def summarize(result: AdaptResult, *, analyzer: Analyzer, seed: int | None = Non
         **({"diagnosis": result.diagnosis.model_dump(mode="json"),
             "diagnosis_after": result.diagnosis_after.model_dump(mode="json")} if result.diagnosis else {}),
     }
+
+
+def verdict(before: dict[str, Any], after: dict[str, Any], *, tol: float = 1e-3) -> str:
+    """``harder``, ``easier`` or ``unchanged`` for the agent, from two episodes' ``success`` and ``spl``: success
+    decides when it changed, else SPL when it moved by more than ``tol``."""
+    if bool(after["success"]) != bool(before["success"]):
+        return "harder" if before["success"] else "easier"
+    d = float(after["spl"]) - float(before["spl"])
+    return "unchanged" if abs(d) <= tol else "harder" if d < 0 else "easier"
 
 
 def _backend_info(part: Analyzer) -> dict[str, Any] | None:

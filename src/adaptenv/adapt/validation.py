@@ -23,7 +23,11 @@ against each other) may overlap.
 
 :class:`EditValidator` is the fast path the generators use: placement plus an incremental raster
 (only the moved object's inflated footprint is re-drawn) and one connected-component labelling
-per candidate; target types its cached success regions cannot prove reachable are decided exactly on
+per candidate, and the plausibility rules of :mod:`adaptenv.adapt.plausibility` on the moved object
+(``implausible``: an edge-only object off its wall, furniture in a door's clearance, a group split, a
+small object alone on open floor, a seat turned from its television; the rule's name starts the
+message). Objects of the episode's target types do not move (``target_moved``) unless
+``move_targets``. Target types its cached success regions cannot prove reachable are decided exactly on
 incrementally kept label and occluder grids (:class:`LabelRaster`, no world compiled; the slow
 :func:`reference_target_problems` is the plain version tests compare with). Its public interface is
 three methods: ``propose`` (a dry run returning a
@@ -52,6 +56,7 @@ from adaptenv.adapt.placement import (
     allowed_overlap,
     place_units,
 )
+from adaptenv.adapt.plausibility import PlausibilityReference, check_move
 from adaptenv.errors import AdaptenvError
 from adaptenv.scene.assets import AssetCatalog, load_catalog
 from adaptenv.scene.geometry import Footprint, SceneGeometry, footprint_corners
@@ -79,7 +84,8 @@ AREA_EPS = 1e-4
 CONTAIN_TOLERANCE = 0.01
 
 ProblemKind = Literal["invalid", "outside_room", "crosses_wall", "overlap", "overlap_grew", "start_blocked", "no_start",
-                      "room_unreachable", "doorway_blocked", "target_unreachable", "doorway_approach"]
+                      "room_unreachable", "doorway_blocked", "target_unreachable", "doorway_approach",
+                      "implausible", "target_moved"]
 
 
 @dataclass(frozen=True)
@@ -573,7 +579,10 @@ class EditValidator:
 
     def __init__(self, house: House, *, episode_targets: list[str] | None = None, start: Start | None = None,
                  original: House | None = None, step: float = DEFAULT_STEP, catalog: AssetCatalog | None = None,
-                 copy: bool = True):
+                 copy: bool = True, plausibility: bool = True, move_targets: bool = False):
+        """``plausibility``: check the moved object against :mod:`adaptenv.adapt.plausibility` (off only for the
+        random baselines); ``move_targets``: let objects of ``episode_targets``' types move (edits that relocate
+        the target opt in)."""
         self.catalog = catalog or load_catalog()
         self.house = house.model_copy(deep=True) if copy else house
         self.step = step
@@ -600,6 +609,8 @@ class EditValidator:
         base = SceneGeometry.from_house(original, self.catalog) if original is not None else self.geometry
         self.approach_before = {z.door_id: covered_width(z, [f.polygon for f in base.floor_objects])
                                 for z in approach_zones(base)}
+        self.plausible = PlausibilityReference.of(original or self.house, self.catalog, base) if plausibility else None
+        self.fixed_types = frozenset() if move_targets else frozenset(episode_targets or ())
         self.need_targets = need.targets if episode_targets is None else set(episode_targets) & need.targets
         self.tall = np.array([f.occludes for f in self.geometry.floor_objects], dtype=bool)
         self.of_type: dict[str, list[int]] = {}
@@ -706,6 +717,14 @@ class EditValidator:
                 for d, cover, width, ids in blocked_approaches(zones, polys, self.approach_before)
                 if self.ctx.ids[moved] in ids]
 
+    def _plausibility_check(self, fp: Footprint) -> list[ValidationProblem]:
+        """The plausibility rules the moved object (at its new footprint ``fp``) would break."""
+        if self.plausible is None:
+            return []
+        current = {f.object_id: f for f in self.geometry.footprints}
+        return [ValidationProblem("implausible", f"implausible ({v.rule}): {v.message}", (v.object_id, *v.others))
+                for v in check_move(self.plausible, fp, current)]
+
     def _polygon(self, k: int) -> shapely.Polygon:
         """Object k's true footprint where it stands (``ctx.outlines[k]``) as a polygon, built once per pose."""
         poly = self._polygons[k]
@@ -795,6 +814,10 @@ class EditValidator:
         if not res.changed:
             return Proposal(**request, problems=())
         i = self.ctx.index[object_id]
+        if self.ctx.types[i] in self.fixed_types:
+            return Proposal(**request, problems=(ValidationProblem(
+                "target_moved", f"target_moved: {object_id} is an instance of the episode's target "
+                f"{self.ctx.types[i]} and stays where it is; move another object", (object_id,)),))
         center = self.ctx.centers[i] + np.array(res.achieved)
         corners = self.ctx.corners(i, center, res.yaw_after)
         # the true footprint (its corners for a box)
@@ -819,7 +842,7 @@ class EditValidator:
                          for t in unproven if found[t] < 0]
         else:
             found = {}
-        problems += self._approach_check(i, outline)
+        problems += self._approach_check(i, outline) + self._plausibility_check(exact_fp)
         return Proposal(**request, problems=tuple(problems), center=center, corners=corners, inflated=inf,
                         drawn=drawn, footprint=exact_fp, outline=outline, labels=win,
                         exact_targets=frozenset(unproven),

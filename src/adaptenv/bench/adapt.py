@@ -9,7 +9,7 @@ re-run the policy from the same start on the same target. Reported:
   success after; before is 100% by construction);
 - expert success after (must stay 100%);
 - realism of the built-in result versus a random perturbation of the same house (the paper's
-  claim: built-in scores higher);
+  claim: built-in scores higher), and the plausibility audit's violations of each (summed over houses);
 - validated edits per second (placement + validation, no rollouts) from
   :mod:`adaptenv.bench.adapt_edits` (target: at least 1,000 on one core for a 5-room house), and
   the wall time per adapted house.
@@ -38,6 +38,7 @@ def run(*, houses: int = 50, steps: int = 5, policy: str = "pretrained", seed: i
     from adaptenv.adapt.generators.builtin import BuiltinGenerator
     from adaptenv.adapt.generators.random_perturbation import RandomPerturbation
     from adaptenv.adapt.objectives import realism_score
+    from adaptenv.adapt.plausibility import audit
     from adaptenv.adapt.step import adapt_scene
     from adaptenv.agents.policy import ExpertPolicy
     from adaptenv.agents.registry import resolve_policy
@@ -80,6 +81,7 @@ def run(*, houses: int = 50, steps: int = 5, policy: str = "pretrained", seed: i
             "valid": res.valid,
             "realism_original": realism_score(house, house), "realism_builtin": realism_score(res.house, house),
             "realism_random": realism_score(rnd.house, house),
+            "violations_builtin": audit(house, res.house).total, "violations_random": audit(house, rnd.house).total,
         })
     n = len(rows)
 
@@ -96,6 +98,8 @@ def run(*, houses: int = 50, steps: int = 5, policy: str = "pretrained", seed: i
         "agent SPL before": mean("spl_before"), "agent SPL after": mean("spl_after"),
         "expert success after": mean("expert_after"),
         "realism original": mean("realism_original"), "realism builtin": mean("realism_builtin"), "realism random": mean("realism_random"),
+        "plausibility violations builtin (sum)": int(sum(r["violations_builtin"] for r in rows)),
+        "plausibility violations random (sum)": int(sum(r["violations_random"] for r in rows)),
         "validated edits per s": edits["validated edits per s"],
         "valid after final validation": mean("valid"),
         "adapt s per house (adapt_scene: F, G with rollout checks, validation, after-rollout)": t_adapt / max(n, 1),

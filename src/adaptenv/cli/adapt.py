@@ -1,4 +1,5 @@
-"""``adaptenv analyze`` (F on a recorded episode), ``adaptenv adapt`` (one closed-loop step) and ``adaptenv bench adapt``.
+"""``adaptenv analyze`` (F on a recorded episode), ``adaptenv adapt`` (one closed-loop step), ``adaptenv audit``
+(the plausibility audit of an adapted house), ``adaptenv bench adapt`` and ``adaptenv bench plausibility``.
 
 Commands import their dependencies when they run, so ``adaptenv --help`` stays fast and never loads
 torch or numba.
@@ -327,7 +328,7 @@ def _print_adapt_summary(console, s: dict, h, out: Path) -> None:
         console.print(f"  {k:15s} {_fmt(ob[k])} -> {_fmt(oa[k])} {unit:8s} {what}: "
                       f"{harder_or_easier(k, ob[k], oa[k])}")
     console.print(f"agent: success {ab['success']} -> {aa['success']}, SPL {ab['spl']:.3f} -> {aa['spl']:.3f}, "
-                  f"steps {ab['steps']} -> {aa['steps']} (lower success or SPL: the scene got harder)")
+                  f"steps {ab['steps']} -> {aa['steps']}: {_verdict_text(s['verdict'], ab, aa)}")
     if t := s.get("trajectory"):
         console.print(f"  before: {t['policy']}'s recorded episode; after: {t['after_policy']} in the edited house "
                       "(a different agent: compare with care)", highlight=False)
@@ -335,6 +336,9 @@ def _print_adapt_summary(console, s: dict, h, out: Path) -> None:
         before, after = (SceneDiagnosis.model_validate(s[k]) for k in ("diagnosis", "diagnosis_after"))
         console.print(f"diagnosis before: {before.summary()}", highlight=False)
         console.print(f"diagnosis after:  {after.summary()}", highlight=False)
+    bad = {k: v for k, v in s["plausibility"].items() if v}
+    console.print("plausibility audit of the moved objects: " + (", ".join(f"{k} {v}" for k, v in bad.items())
+                                                                 if bad else "no violation"), highlight=False)
     console.print(f"realism: {_fmt(s['realism_before'])} -> {_fmt(s['realism_after'])}; expert solvable: "
                   f"{s['expert_solvable']}, expert success: {s['expert_success_after']}; valid: {s['valid']}")
     for p in s["problems"]:
@@ -346,6 +350,14 @@ def _print_adapt_summary(console, s: dict, h, out: Path) -> None:
             console.print(f"tokens {role:6s} {_usage_text(u)}", highlight=False)
         console.print(f"tokens total  {_usage_text(s['usage'])}", highlight=False)
     console.print(f"wrote {out}/ (house.json, before.png, after.png, analysis.json, edits.json, summary.json)")
+
+
+def _verdict_text(v: str, before: dict, after: dict) -> str:
+    """The closing words of the agent line: :func:`~adaptenv.adapt.step.verdict` and what decided it."""
+    if v == "unchanged":
+        return "unchanged for the agent (same success, same SPL)"
+    why = "success" if bool(before["success"]) != bool(after["success"]) else "SPL at equal success"
+    return f"the scene got {v} for the agent ({why} {'fell' if v == 'harder' else 'rose'})"
 
 
 def _fmt(x) -> str:
@@ -375,7 +387,56 @@ def bench_adapt(
     emit("adapt: built-in G on solved procedural houses", figures, as_json, notes=NOTES)
 
 
+def audit(
+    original: Path = typer.Argument(..., metavar="ORIGINAL.json", show_default=False,
+                                    help="The house before editing (ProcTHOR format)."),
+    adapted: Path = typer.Argument(..., metavar="ADAPTED.json", show_default=False,
+                                   help="The same house after editing (e.g. OUT/house.json of `adaptenv adapt`)."),
+    as_json: bool = JSON_OPTION,
+) -> None:
+    """Plausibility audit: every moved object checked against the original (docs/adapt.md); exit 1 on a violation."""
+    from adaptenv.adapt.plausibility import audit as run_audit
+    from adaptenv.cli._common import existing_file
+    from adaptenv.scene.house import load_house
+
+    before = load_house(existing_file(original, "original house"))
+    after = load_house(existing_file(adapted, "adapted house"))
+    report = run_audit(before, after)
+    if as_json:
+        typer.echo(json.dumps({"moved": report.moved, "counts": report.counts(),
+                               "violations": [{"rule": v.rule, "object": v.object_id, "others": list(v.others),
+                                               "message": v.message} for v in report.violations]}, indent=1))
+    else:
+        for v in report.violations:
+            typer.echo(str(v))
+        counts = ", ".join(f"{k} {n}" for k, n in report.counts().items())
+        typer.echo(f"{len(report.moved)} moved object(s), {report.total} violation(s): {counts}")
+    if report.total:
+        raise typer.Exit(1)
+
+
+def bench_plausibility(
+    houses: int = typer.Option(50, "--houses", min=1, help="Procedural houses to adapt."),
+    steps: int = typer.Option(5, "--steps", min=1, help="Edits per house and generator."),
+    seed: int = typer.Option(0, "--seed", help="Seed of houses, episodes and edits."),
+    rooms: int = typer.Option(5, "--rooms", min=1, help="Rooms per procedural house."),
+    real: Path | None = typer.Option(None, "--real", metavar="HOUSE.json",
+                                     help="Also adapt this house (e.g. a real ProcTHOR house) 5 times."),
+    as_json: bool = JSON_OPTION,
+) -> None:
+    """Plausibility audit of G's houses beside random perturbation: violations per rule."""
+    from adaptenv.bench import emit
+    from adaptenv.bench.plausibility import NOTES, run
+    from adaptenv.cli._common import existing_file
+
+    figures = run(houses=houses, steps=steps, seed=seed, rooms=rooms,
+                  real=existing_file(real, "--real house") if real is not None else None)
+    emit("plausibility: violations of G's edits and of random perturbation", figures, as_json, notes=NOTES)
+
+
 def register(app: typer.Typer, bench: typer.Typer) -> None:
     app.command("analyze")(analyze)
     app.command("adapt")(adapt)
+    app.command("audit")(audit)
     bench.command("adapt")(bench_adapt)
+    bench.command("plausibility")(bench_plausibility)

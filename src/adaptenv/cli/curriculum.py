@@ -113,8 +113,9 @@ def loop(
                                            "gradient steps: fp32, or bf16 (faster on CPUs with AVX512_BF16)."),
     focus_training: bool = typer.Option(False, "--focus-training", help="Fine-tuning episodes in adapted scenes ask "
                                         "for the target type G's edits aimed at."),
-    relocate_targets: bool = typer.Option(False, "--relocate-targets", help="The failure-mode G may relocate a "
-                                          "target to a far room where its type plausibly stands (search failures)."),
+    relocate_targets: bool = typer.Option(False, "--relocate-targets", help="The failure-mode G may move a target "
+                                          "inside its room or to a far room where its type plausibly stands (search "
+                                          "failures); otherwise no edit moves a target."),
     heldout_episodes: int = typer.Option(100, "--heldout-episodes", min=1, help="Episodes per held-out set."),
     heldout: list[str] = typer.Option(None, "--heldout", help="Held-out set NAME=HOUSES (repeatable); default: "
                                       "rearranged=preset:pretrain-rearranged and unseen=preset:pretrain-unseen."),

@@ -142,8 +142,9 @@ class LoopConfig:
     """Fine-tuning episodes in a scene adapted after a diagnosis (ours and its variants) ask for the target type
     G's edits aimed at (the worst diagnosed episode's), instead of any type: pi_t trains on the failure it was shown."""
     relocate_targets: bool = False
-    """The failure-mode G may answer search failures by relocating a target instance to a far room of a type
-    where it plausibly stands (the methods with the failure-mode G: ours, ours-randomscene, ours-dr)."""
+    """The failure-mode G may answer search failures by moving a target instance inside its room or relocating it
+    to a far room of a type where it plausibly stands (the methods with the failure-mode G: ours,
+    ours-randomscene, ours-dr); otherwise no edit moves a target."""
 
     __pydantic_config__ = STRICT
 

@@ -150,14 +150,15 @@ def render_before_after(original: House, edited: House, before: Trajectory, afte
         original: e_t, the house ``before`` ran in.
         edited: e_{t+1}, the house ``after`` ran in (same start and target as ``before``).
         before, after: the two recorded episodes, with metrics.
-        moved_ids: objects to fill with :data:`MOVED_COLOUR` on the after side; default: every object
-            whose pose differs between the houses (:func:`moved_objects`).
+        moved_ids: objects to fill with :data:`MOVED_COLOUR` on the after side (an id listed twice, e.g.
+            by two edits of one object, counts once in the title); default: every object whose pose
+            differs between the houses (:func:`moved_objects`).
         size: longer side of each render (px).
         grid: draw the normalized 0..100 grid.
         labels: write object ids and room names.
     """
     check_same_task(before, after)
-    moved = moved_objects(original, edited) if moved_ids is None else list(moved_ids)
+    moved = moved_objects(original, edited) if moved_ids is None else list(dict.fromkeys(moved_ids))
     changes = episode_changes(before, after)
     n = len(moved)
     left = render_map(original, trajectory=before, grid=grid, size=size, labels=labels, title="before: pi_t in e_t")

@@ -5,10 +5,15 @@ Per step (offline, deterministic for a given rng):
 1. Target one suggestion of the analysis (round-robin over suggestions sorted by priority).
 2. Draw candidate moves of movable objects near the route (the agent's and the current shortest
    one) or near the target: displacements toward / across the route, sideways along it, toward
-   the target, and turns by +-90 or 180 degrees, all on the normalized grid. The targets
-   themselves are never moved, so the episode stays comparable.
-3. Dry-run each through collision-aware placement and incremental validation
-   (:meth:`~adaptenv.adapt.validation.EditValidator.propose`); score valid ones by the targeted
+   the target, and turns by +-90 or 180 degrees, all on the normalized grid; objects that must keep
+   their back to a wall slide along it (:func:`along_wall`) or are set against the parallel wall
+   nearest to where the move aimed (:func:`to_wall`, a relocation inside their room) instead. The targets
+   themselves are never moved, so the episode stays comparable (the validator refuses it:
+   ``target_moved``).
+3. Dry-run them in order (up to ``POOL`` times ``max_candidates`` drawn, until ``max_candidates``
+   pass) through collision-aware placement and incremental validation
+   (:meth:`~adaptenv.adapt.validation.EditValidator.propose`, which also applies the plausibility
+   rules of :mod:`adaptenv.adapt.plausibility`); score valid ones by the targeted
    objective's gain, plus a smaller weight on the other suggestions' gains, plus
    ``realism_weight`` times the change in realism (:mod:`adaptenv.adapt.realism`). Candidates on
    which the shortest-path expert no longer solves the episode are dropped (``require_expert``):
@@ -54,7 +59,7 @@ from adaptenv.adapt.realism import RealismReference
 from adaptenv.adapt.validation import EditValidator, Proposal
 from adaptenv.adapt.verification import Check, check_objective, revise_until_verified
 from adaptenv.agents.rollout import checking_episodes, mean_spl, run_in_worlds, total_steps
-from adaptenv.scene.geometry import SceneGeometry
+from adaptenv.scene.geometry import SceneGeometry, heading
 from adaptenv.scene.house import House
 from adaptenv.sim.rollout import expert_policy, run_episode
 from adaptenv.sim.task import Episode
@@ -66,6 +71,9 @@ NEAR_ROUTE = 1.6
 NEAR_TARGET = 2.5
 #: When fewer objects are near, the nearest this many are used instead.
 MIN_OBJECTS = 4
+#: Candidates drawn per step, in multiples of ``max_candidates``: they are dry-run in order until
+#: ``max_candidates`` pass (many are refused by the plausibility rules).
+POOL = 3
 #: Minimal achieved translation (m) for a move without rotation to count as a change.
 MIN_MOVE = 0.05
 
@@ -91,6 +99,48 @@ class Candidate:
     policy_score: float | None = None
 
 
+def along_wall(v: EditValidator, oid: str, d: np.ndarray, rotation: float | None, rng: np.random.Generator
+               ) -> tuple[np.ndarray, float | None]:
+    """An object that must keep its back to a wall (see :mod:`adaptenv.adapt.plausibility`) slides along it: the
+    displacement ``d`` (m) projected on the wall, heading kept; a pure turn becomes a slide of 0.4-1.2 m."""
+    if v.plausible is None or oid not in v.plausible.anchored:
+        return d, rotation
+    h = heading(float(v.ctx.yaws[v.ctx.index[oid]]))
+    t = np.array([h[1], -h[0]])
+    along = float(np.dot(d, t)) if np.any(d) else float(rng.choice([-1.0, 1.0]) * rng.uniform(0.4, 1.2))
+    return t * along, None
+
+
+def to_wall(v: EditValidator, oid: str, aim: np.ndarray) -> tuple[np.ndarray, float] | None:
+    """For an object that must keep its back to a wall: the displacement (m) and yaw that set it against the wall
+    of its room nearest to ``aim`` that runs parallel to it (turned 180 degrees for the opposite wall); None for
+    other objects or when no such wall is near."""
+    ref, ctx = v.plausible, v.ctx
+    if ref is None or oid not in ref.anchored:
+        return None
+    i = ctx.index[oid]
+    c, yaw = ctx.centers[i], float(ctx.yaws[i])
+    h, half_w, half_d = heading(yaw), float(ctx.sizes[i, 0]) / 2.0, float(ctx.sizes[i, 1]) / 2.0
+    room = v.geometry.room_of_point(float(c[0]), float(c[1]))
+    best, best_d = None, np.inf
+    for p0, p1 in zip(ref.walls.p0, ref.walls.p1, strict=True):
+        length = float(np.hypot(*(p1 - p0)))
+        if length < 2.0 * half_w + 0.1:
+            continue
+        u = (p1 - p0) / length
+        n = np.array([-u[1], u[0]])
+        if np.dot(n, aim - p0) < 0:
+            n = -n
+        if abs(float(np.dot(n, h))) < 0.99:
+            continue
+        t = float(np.clip(np.dot(aim - p0, u), half_w + 0.05, length - half_w - 0.05))
+        center = p0 + t * u + n * (half_d + 0.03)
+        dist = float(np.hypot(*(center - aim)))
+        if dist < best_d and v.geometry.room_of_point(float(center[0]), float(center[1])) == room:
+            best, best_d = (center - c, math.degrees(math.atan2(n[0], n[1])) % 360.0), dist
+    return best
+
+
 def _rotation(step: int, suggestions: list[Suggestion]) -> list[Suggestion]:
     """Suggestions (one per kind, by priority) starting with the step's round-robin choice."""
     usable, kinds = [], set()
@@ -108,6 +158,8 @@ class BuiltinGenerator:
     """Offline G: objective-driven search over validated single-object moves (see module docstring)."""
 
     name = "builtin"
+    move_targets = False
+    """Whether the validator lets the episode's target instances move (only edit kinds that relocate the target)."""
 
     def __init__(self, *, max_candidates: int = 16, realism_weight: float = 0.5, other_weight: float = 0.25,
                  rollout_candidates: int = 3, max_revisions: int = 2, require_expert: bool = True):
@@ -132,9 +184,8 @@ class BuiltinGenerator:
                 result.steps.append(StepRecord(step=step, status="skipped",
                                                reason="the analysis has no suggestion with an objective"))
                 continue
-            cands = self._candidates(v, world, route, targets, rng)
-            geometry = SceneGeometry.from_house(v.house)
-            tried = [c for c in (self._evaluate(v, geometry, c, route, original, ep) for c in cands) if c is not None]
+            cands = self._candidates(v, world, route, targets, rng, limit=POOL * self.max_candidates)
+            tried = self._try(v, cands, route, original, ep)
             rollouts: dict[int, float] = {}
             record = StepRecord(step=step, status="skipped", suggestion_id=order[0].id,
                                 suggestion_kind=order[0].kind, candidates=len(cands),
@@ -175,7 +226,7 @@ class BuiltinGenerator:
         with the first objective trace entry."""
         ep = context.episode
         route = RouteSpec.from_episode(ep.target_type, ep.start, context.trajectory)
-        v = EditValidator(house, episode_targets=[ep.target_type], start=ep.start[:2])
+        v = EditValidator(house, episode_targets=[ep.target_type], start=ep.start[:2], move_targets=self.move_targets)
         world = compile_world(v.house, "candidate")
         values = measure(world, route)
         result = GenerationResult(house=v.house, steps=[], edit_log=v.log, generator=self.name,
@@ -195,9 +246,22 @@ class BuiltinGenerator:
         return compile_world(v.house, "candidate"), chosen.values, chosen.realism
 
     # ----------------------------------------------------------------------------- candidates
+    def _try(self, v: EditValidator, cands: list[Candidate], route: RouteSpec, original: RealismReference,
+             episode: Episode) -> list[Candidate]:
+        """Dry-run candidates in order until ``max_candidates`` pass (placement, validation, plausibility, expert)."""
+        geometry = SceneGeometry.from_house(v.house)
+        tried: list[Candidate] = []
+        for c in cands:
+            if len(tried) >= self.max_candidates:
+                break
+            if self._evaluate(v, geometry, c, route, original, episode) is not None:
+                tried.append(c)
+        return tried
+
     def _candidates(self, v: EditValidator, world: NavWorld, route: RouteSpec, targets: set[str],
-                    rng: np.random.Generator) -> list[Candidate]:
-        """Up to ``max_candidates`` distinct proposals for objects near the route or the target."""
+                    rng: np.random.Generator, limit: int | None = None) -> list[Candidate]:
+        """Up to ``limit`` (default ``max_candidates``) distinct proposals for objects near the route or the target."""
+        limit = limit or self.max_candidates
         ctx = v.ctx
         pts = route_points(world, route)
         if len(pts) == 0:
@@ -218,8 +282,8 @@ class BuiltinGenerator:
         upm = ctx.grid.units_per_meter
         out: list[Candidate] = []
         seen: set[tuple] = set()
-        for _ in range(self.max_candidates * 3):
-            if len(out) >= self.max_candidates:
+        for _ in range(limit * 3):
+            if len(out) >= limit:
                 break
             k = int(near[rng.choice(len(near), p=weights)])
             oid = ids[k]
@@ -247,12 +311,17 @@ class BuiltinGenerator:
             if kind != "turn" and rng.random() < 0.25:
                 yaw = float(ctx.yaws[ctx.index[oid]])
                 rotation = (yaw + float(rng.choice([90.0, 270.0]))) % 360.0
+            relocate = False
+            if kind in ("toward", "across", "toward_target") and (w := to_wall(v, oid, c + d)) is not None:
+                d, rotation, relocate, kind = w[0], w[1], True, "to_wall"
+            else:
+                d, rotation = along_wall(v, oid, d, rotation, rng)
             dx, dy = round(float(d[0] * upm), 1), round(float(d[1] * upm), 1)
             key = (oid, dx, dy, rotation)
             if key in seen:
                 continue
             seen.add(key)
-            out.append(Candidate(oid, dx, dy, rotation, kind))
+            out.append(Candidate(oid, dx, dy, rotation, kind, relocate=relocate))
         return out
 
     def _evaluate(self, v: EditValidator, geometry: SceneGeometry, cand: Candidate, route: RouteSpec,

@@ -9,8 +9,11 @@ diagnosis's dominant families:
   points that see a target) and how far along the shortest route the target is first seen.
   Moves: tall objects onto the sight lines between the route and the target; tall furniture of the
   target's room toward its doorways (hiding the view through them; validation keeps doorways
-  passable); the target instance itself moved inside its own room (placement never leaves the
-  room, so it stays where its type plausibly stands) toward far corners and behind tall objects.
+  passable); with ``relocate_targets`` (opt-in; the only edit kinds that move a target) the target
+  instance itself moved inside its own room toward far corners and behind tall objects
+  (``target_late``), or relocated to a far room of a type where it plausibly stands
+  (``target_room``). Every move goes through the plausibility rules of
+  :mod:`adaptenv.adapt.plausibility`.
 - ``premature_end`` (ended too far or without sight): :func:`distractor_pressure`, objects of a
   size similar to the target's near the route. Moves: such objects toward and along the route.
 - ``looping``: :func:`room_symmetry` of the rooms the route crosses plus the route length
@@ -39,7 +42,7 @@ from adaptenv.adapt.generators import (
     GenerationResult,
     StepRecord,
 )
-from adaptenv.adapt.generators.builtin import BuiltinGenerator, Candidate
+from adaptenv.adapt.generators.builtin import POOL, BuiltinGenerator, Candidate, along_wall
 from adaptenv.adapt.objectives import (
     CLEARANCE_CAP,
     MAX_VISIBILITY_POINTS,
@@ -53,7 +56,6 @@ from adaptenv.adapt.realism import RealismReference
 from adaptenv.adapt.validation import EditValidator
 from adaptenv.agents.rollout import checking_episodes, mean_spl, run_in_worlds, total_steps
 from adaptenv.scene.assets import load_catalog
-from adaptenv.scene.geometry import SceneGeometry
 from adaptenv.scene.house import House
 from adaptenv.sim.spec import MAX_RANGE
 from adaptenv.sim.task import visible_points
@@ -192,6 +194,7 @@ class FailureModeGenerator(BuiltinGenerator):
         super().__init__(**kw)
         self.tolerance = tolerance
         self.relocate_targets = relocate_targets
+        self.move_targets = relocate_targets
 
     def generate(self, house: House, analysis: Analysis, *, steps: int, context: GenerationContext,
                  rng: np.random.Generator) -> GenerationResult:
@@ -203,11 +206,10 @@ class FailureModeGenerator(BuiltinGenerator):
             before = mode_value(family, world, route, values)
             targets = {t.object_id for t in world.instances_of(ep.target_type)}
             cands = self._mode_candidates(family, v, world, route, targets, rng)
-            cands += [c for c in self._candidates(v, world, route, targets, rng)[: self.max_candidates // 2]
+            cands += [c for c in self._candidates(v, world, route, targets, rng, limit=POOL * self.max_candidates // 2)
                       if not any(c.object_id == o.object_id and (c.dx_units, c.dy_units, c.rotation) ==
                                  (o.dx_units, o.dy_units, o.rotation) for o in cands)]
-            geometry = SceneGeometry.from_house(v.house)
-            tried = [c for c in (self._evaluate(v, geometry, c, route, reference, ep) for c in cands) if c is not None]
+            tried = self._try(v, cands, route, reference, ep)
             record = StepRecord(step=step, status="skipped", suggestion_kind=family, failure_mode=family,
                                 candidates=len(cands), objective_before=values.as_dict())
             if not tried:
@@ -264,10 +266,10 @@ class FailureModeGenerator(BuiltinGenerator):
     # ----------------------------------------------------------------------------- candidates per family
     def _mode_candidates(self, family: str, v: EditValidator, world: NavWorld, route: RouteSpec, targets: set[str],
                          rng: np.random.Generator) -> list[Candidate]:
-        """Up to ``max_candidates`` moves that serve ``family`` (none for families served by the generic moves)."""
+        """Up to ``POOL * max_candidates`` moves that serve ``family`` (none for families served by the generic moves)."""
         makers: dict[str, list[Callable]] = {
-            "search": [self._sight_line, self._doorway_view, self._target_late]
-            + ([self._target_room] if self.relocate_targets else []),
+            "search": [self._sight_line, self._doorway_view]
+            + ([self._target_late, self._target_room] if self.relocate_targets else []),
             "premature_end": [self._distractor],
             "looping": [self._mirror_move],
         }
@@ -279,13 +281,15 @@ class FailureModeGenerator(BuiltinGenerator):
         out: list[Candidate] = []
         seen: set[tuple] = set()
         upm = ctx.grid.units_per_meter
-        for k in range(self.max_candidates * 3):
-            if len(out) >= self.max_candidates:
+        for k in range(POOL * self.max_candidates * 3):
+            if len(out) >= POOL * self.max_candidates:
                 break
             made = fns[k % len(fns)](ctx, fps, world, route, targets, rng)
             if made is None:
                 continue
             oid, d, kind = made
+            if kind != "target_room":
+                d, _ = along_wall(v, oid, np.asarray(d, dtype=float), None, rng)
             dx, dy = round(float(d[0] * upm), 1), round(float(d[1] * upm), 1)
             key = (oid, dx, dy)
             if key in seen or (dx == 0 and dy == 0):
@@ -347,10 +351,12 @@ class FailureModeGenerator(BuiltinGenerator):
         start = np.array(route.start)
         spots.sort(key=lambda p: -float(np.hypot(*(p - start))))
         aim = spots[int(rng.integers(min(3, len(spots))))]
-        return oid, (aim - c) * rng.uniform(0.5, 1.0), "target_late"
+        # all the way: the march stops at the corner's walls or beside the tall object, never on open floor
+        return oid, (aim - c) * rng.uniform(0.95, 1.1), "target_late"
 
     def _target_room(self, ctx, fps, world, route, targets, rng):
-        """A target instance relocated to a free-looking spot of a far room whose type it plausibly stands in."""
+        """A target instance relocated to a spot along a wall of a far room whose type it plausibly stands in (by a
+        wall: where ProcTHOR stands the small types it never places in the middle)."""
         movable = self._movable(ctx, lambda o: o in targets and o in fps)
         if not movable:
             return None
@@ -364,8 +370,11 @@ class FailureModeGenerator(BuiltinGenerator):
         rooms.sort(key=lambda r: -float(np.hypot(*(np.array(geom.rooms[r].centroid.coords[0]) - start))))
         room = rooms[int(rng.integers(min(2, len(rooms))))]
         x0, z0, x1, z1 = geom.rooms[room].bounds
-        margin = min(ctx.reach(ctx.index[oid]), (x1 - x0) / 2, (z1 - z0) / 2)
-        aim = np.array([rng.uniform(x0 + margin, x1 - margin), rng.uniform(z0 + margin, z1 - margin)])
+        margin = min(ctx.reach(ctx.index[oid]) + 0.02, (x1 - x0) / 2, (z1 - z0) / 2)
+        side, along = int(rng.integers(4)), rng.uniform(0.0, 1.0)
+        x = x0 + margin + along * (x1 - x0 - 2 * margin)
+        z = z0 + margin + along * (z1 - z0 - 2 * margin)
+        aim = np.array([(x, z0 + margin), (x, z1 - margin), (x0 + margin, z), (x1 - margin, z)][side])
         return oid, aim - ctx.centers[ctx.index[oid]], "target_room"
 
     def _distractor(self, ctx, fps, world, route, targets, rng):

@@ -11,8 +11,9 @@ Per step:
    invalid JSON is sent back with the error and asked again, at most ``max_attempts`` times,
    after which the step is skipped with the reason logged. ``rotation`` is read as the object's
    new absolute yaw in degrees (0 = front faces up on the map, 90 = right).
-3. The move goes through collision-aware placement and validation (a rejected move leaves the
-   scene unchanged and is logged), and the scene is re-rendered.
+3. The move goes through collision-aware placement and validation, the plausibility rules of
+   :mod:`adaptenv.adapt.plausibility` included (a rejected move leaves the scene unchanged and is
+   logged; the re-ask names the refusing rule and its reason), and the scene is re-rendered.
 4. Verification (the paper's experiment): the model sees the new render, its intent, what it
    requested and what placement achieved, and answers through ``verify_move``. On "revise" (or a
    rejected move) the step is redone from the scene before it with the revised move, at most
@@ -90,7 +91,12 @@ Rules:
 - Keep every object inside the walls of its own room.
 - Never block a doorway completely; passages and doorway clearances may become narrower.
 - Avoid overlapping other objects: a move that would collide stops at the last free position.
-- Keep the layout realistic: furniture where it could plausibly stand in a home.
+- Keep the layout realistic: furniture where it could plausibly stand in a home. Moves that break
+  one of these are refused, with the rule's name: wall furniture (beds, sofas, dressers, fridges,
+  ...) keeps its back to a wall (edge_off_wall); nothing moves into the 1 m in front of a doorway
+  (door_approach); chairs stay at their table, a floor lamp at its armchair, a sofa at its TV
+  (group_split); small objects stay by a wall or furniture (open_floor); seats keep facing the TV
+  and chairs their table (facing_broken).
 
 Movable objects (id: type at grid x, y, rotation):
 {objects}"""
@@ -206,7 +212,7 @@ class LLMGenerator:
                  rng: np.random.Generator) -> GenerationResult:
         ep = context.episode
         targets, start = [ep.target_type], ep.start[:2]
-        v = EditValidator(house, episode_targets=targets, start=start)
+        v = EditValidator(house, episode_targets=targets, start=start, move_targets=self.allow_target_moves)
         edit_log = EditLog()
         route = RouteSpec.from_episode(ep.target_type, ep.start, context.trajectory)
         values = measure(compile_world(v.house, "llm"), route)
@@ -261,7 +267,8 @@ class LLMGenerator:
                 return False
             edit_log.edits[k] = edit_log.edits[k].model_copy(update={"undone": True})
             state["v"] = EditValidator(snapshot, episode_targets=[context.episode.target_type],
-                                       start=context.episode.start[:2], original=original)
+                                       start=context.episode.start[:2], original=original,
+                                       move_targets=self.allow_target_moves)
             state["log_at"] = None
             return True
 

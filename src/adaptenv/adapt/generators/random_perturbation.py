@@ -3,11 +3,12 @@
 :class:`RandomPerturbation` ignores the analysis: every movable object (in a random order) gets a
 random displacement (uniform direction, length uniform in ``0..max_units`` grid units) and a
 random absolute yaw, each through the same collision-aware placement and validation as the other
-generators (a rejected move leaves the object where it was). ``steps`` is not used: one pass over
-all movable objects is one perturbation.
+generators (a rejected move leaves the object where it was), but without the plausibility rules
+of :mod:`adaptenv.adapt.plausibility` and with the targets movable: it is the baseline those rules
+are measured against. ``steps`` is not used: one pass over all movable objects is one perturbation.
 
 :func:`random_single_edits` makes ``k`` accepted random single-object edits (each validated),
-the analogue of ACCEL's k random level edits.
+the analogue of ACCEL's k random level edits (random too: no plausibility rules, targets movable).
 """
 
 from __future__ import annotations
@@ -54,7 +55,8 @@ class RandomPerturbation:
     def generate(self, house: House, analysis: Analysis | None, *, steps: int, context: GenerationContext,
                  rng: np.random.Generator) -> GenerationResult:
         ep = context.episode
-        v = EditValidator(house, episode_targets=[ep.target_type], start=ep.start[:2])
+        v = EditValidator(house, episode_targets=[ep.target_type], start=ep.start[:2], plausibility=False,
+                          move_targets=True)
         result = GenerationResult(house=v.house, steps=[], edit_log=v.log, generator=self.name)
         ids = _movable(v)
         for step, k in enumerate(rng.permutation(len(ids))):
@@ -77,7 +79,7 @@ def random_single_edits(house: House, k: int, rng: np.random.Generator, *, episo
     Returns the edited copy and the log of every proposal (rejected ones marked). Fewer than ``k``
     edits are made only when ``max_tries`` proposals in a row are rejected.
     """
-    v = EditValidator(house, episode_targets=episode_targets, start=start)
+    v = EditValidator(house, episode_targets=episode_targets, start=start, plausibility=False, move_targets=True)
     ids = _movable(v)
     if not ids:
         return v.house, v.log

@@ -1,0 +1,298 @@
+"""The plausibility audit: does every moved object still stand where a person would put it?
+
+ProcTHOR furnishes a room by its placement annotations (``inCorner`` / ``onEdge`` / ``inMiddle``
+per object type, in :meth:`~adaptenv.scene.assets.AssetCatalog.type_info`), its asset groups
+(objects placed together: chairs at a table, a floor lamp beside an armchair, a sofa facing a TV
+stand; ``scene/data/asset_groups.json``, derived from ProcTHOR) and door clearances. An edit that
+breaks one of these makes a house no person would live in. Rules, each checked per moved floor
+object against the house before editing (only what the move made worse counts):
+
+- ``edge_off_wall``: an object of an edge-only type (``onEdge`` and not ``inMiddle``, minus the
+  free-standing types of :data:`~adaptenv.adapt.realism.FREE_STANDING`) that stood with its back
+  to a wall, facing the room, no longer does (moved off its wall, or turned to face it);
+- ``door_approach``: the object reaches further into a passable doorway's approach zone than
+  before: the door's width by :data:`DOOR_CLEARANCE` m on each side;
+- ``group_split``: the object and a member of its asset group (formed in the original house:
+  pairs of the group's types in one room within :data:`GROUP_DISTANCE` m) end up farther apart
+  than that (or than they were, when farther);
+- ``open_floor``: a small object (footprint up to :data:`SMALL_AREA` m^2) of a type ProcTHOR
+  never places in the middle of a room, that stood by a wall or by furniture, now stands on open
+  floor: more than :data:`OPEN_FLOOR` m from every wall and every other floor object;
+- ``facing_broken``: a seat that faced the television (stand) of its room, the television that
+  faced it, or a chair that faced its table (heading within 45 degrees of the direction to the
+  partner's centre) now turns more than 60 degrees away.
+
+:func:`audit` compares an adapted house with its original; :class:`PlausibilityReference` and
+:func:`check_move` are the per-edit form every generator's
+:class:`~adaptenv.adapt.validation.EditValidator` uses.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from collections import Counter
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from functools import cache
+from importlib import resources
+
+import numpy as np
+import shapely
+
+from adaptenv.adapt.doorways import ApproachZone, approach_zones
+from adaptenv.adapt.realism import FREE_STANDING
+from adaptenv.errors import AdaptenvError
+from adaptenv.scene.assets import AssetCatalog, load_catalog
+from adaptenv.scene.geometry import Footprint, SceneGeometry, heading
+from adaptenv.scene.graph import (
+    AGAINST_WALL_ANGLE,
+    AGAINST_WALL_DISTANCE,
+    MIN_WALL_OVERLAP,
+    NEXT_TO_DISTANCE,
+)
+from adaptenv.scene.house import House
+
+RULES = ("edge_off_wall", "door_approach", "group_split", "open_floor", "facing_broken")
+#: Depth (m) of a doorway's clearance zone on each side. ProcTHOR keeps the door's swing (its width, about
+#: 0.65-1.0 m) plus 0.35 m free on the side a door opens to; edits do not know that side, so both get 1 m.
+DOOR_CLEARANCE = 1.0
+#: Area (m^2) by which an object may reach further into a door zone (touching, rounding).
+ZONE_EPS = 0.01
+#: Group members stand at most this far apart (m, between footprints): the scene graph's ``next_to``.
+GROUP_DISTANCE = NEXT_TO_DISTANCE
+#: Footprints up to this area (m^2) are small objects (plungers, bins, plants, lamps, stools, chairs).
+SMALL_AREA = 0.35
+#: A small object farther than this (m) from every wall and floor object stands on open floor.
+OPEN_FLOOR = 0.3
+#: A pair faces when the heading is within 45 degrees of the partner; the facing breaks past 60.
+FACING_BEFORE, FACING_AFTER = math.cos(math.radians(45.0)), math.cos(math.radians(60.0))
+#: Who faces whom (from ProcTHOR's television-sofa groups, and the chairs it turns to their tables).
+FACING: dict[str, frozenset[str]] = {
+    "Sofa": frozenset({"TVStand", "Television"}),
+    "ArmChair": frozenset({"TVStand", "Television"}),
+    "Television": frozenset({"Sofa", "ArmChair"}),
+    "TVStand": frozenset({"Sofa", "ArmChair"}),
+    "Chair": frozenset({"DiningTable", "Desk"}),
+}
+
+
+@dataclass(frozen=True)
+class Violation:
+    """One broken rule for one moved object."""
+
+    rule: str
+    object_id: str
+    message: str
+    others: tuple[str, ...] = ()
+    """The partner, door or wall-side object ids involved."""
+
+    def __str__(self) -> str:
+        return f"{self.rule}: {self.message}"
+
+
+@cache
+def group_pairs() -> tuple[tuple[str, str, str], ...]:
+    """(anchor type, member type, group name) of ProcTHOR's floor asset groups (members placed ``nextTo``)."""
+    doc = json.loads(resources.files("adaptenv.scene").joinpath("data/asset_groups.json").read_text("utf-8"))
+    out: dict[tuple[str, str], str] = {}
+    for p in doc["pairs"]:
+        if p["relation"] == "nextTo":
+            out.setdefault((p["anchor"], p["member"]), p["group"].rstrip("-0123456789"))
+    return tuple((a, m, g) for (a, m), g in out.items())
+
+
+def edge_only(catalog: AssetCatalog, object_type: str) -> bool:
+    """Whether ProcTHOR places this type only on an edge (never in the middle), free-standing types aside."""
+    info = catalog.type_info(object_type)
+    return info.on_edge and not info.in_middle and object_type not in FREE_STANDING
+
+
+def _small(catalog: AssetCatalog, fp: Footprint) -> bool:
+    info = catalog.type_info(fp.object_type)
+    return fp.size[0] * fp.size[1] <= SMALL_AREA and not info.in_middle and (info.on_edge or info.in_corner)
+
+
+@dataclass(frozen=True)
+class _Walls:
+    """The blocking wall segments (walls minus passable doors) as arrays and one geometry."""
+
+    p0: np.ndarray
+    p1: np.ndarray
+    lines: np.ndarray
+    union: shapely.Geometry
+
+    @classmethod
+    def of(cls, geometry: SceneGeometry) -> _Walls:
+        seg = geometry.blocking_segments()
+        lines = shapely.linestrings(seg) if len(seg) else np.array([], dtype=object)
+        return cls(seg[:, 0], seg[:, 1], lines, shapely.multilinestrings(list(lines)) if len(seg) else shapely.Point())
+
+    def against(self, fp: Footprint) -> bool:
+        """The scene graph's ``against_wall``: the back edge along a wall, the front pointing into the room."""
+        if not len(self.lines):
+            return False
+        back = shapely.LineString(fp.corners[:2])
+        near = np.flatnonzero(shapely.distance(back, self.lines) <= AGAINST_WALL_DISTANCE)
+        min_cos, front = math.cos(math.radians(AGAINST_WALL_ANGLE)), heading(fp.yaw)
+        for k in near:
+            p0, p1 = self.p0[k], self.p1[k]
+            length = max(float(np.linalg.norm(p1 - p0)), 1e-12)
+            u = (p1 - p0) / length
+            normal = np.array([-u[1], u[0]])
+            if np.dot(normal, np.array(fp.center) - p0) < 0:
+                normal = -normal
+            t = sorted(float(np.dot(c - p0, u)) for c in fp.corners[:2])
+            if float(np.dot(front, normal)) >= min_cos and min(t[1], length) - max(t[0], 0.0) >= MIN_WALL_OVERLAP:
+                return True
+        return False
+
+    def distance(self, fp: Footprint) -> float:
+        return float(shapely.distance(fp.polygon, self.union)) if len(self.lines) else math.inf
+
+
+def _on_open_floor(fp: Footprint, walls: _Walls, others: list[Footprint]) -> bool:
+    if walls.distance(fp) <= OPEN_FLOOR:
+        return False
+    polys = [o.polygon for o in others if o.object_id != fp.object_id]
+    return not polys or float(np.min(shapely.distance(fp.polygon, polys))) > OPEN_FLOOR
+
+
+def _faces(a: Footprint, b: Footprint) -> float:
+    """Cosine between a's heading and the direction from a's centre to b's."""
+    v = np.array(b.center) - np.array(a.center)
+    n = float(np.linalg.norm(v))
+    return float(np.dot(heading(a.yaw), v / n)) if n > 1e-9 else 1.0
+
+
+@dataclass(frozen=True)
+class PlausibilityReference:
+    """What the rules read from the house before editing (built once; every candidate is checked against it)."""
+
+    poses: dict[str, tuple[tuple[float, float], float]]
+    types: dict[str, str]
+    anchored: frozenset[str]
+    """Edge-only objects that stood against a wall."""
+    small: frozenset[str]
+    """Small objects of types never placed in the middle that did not stand on open floor."""
+    groups: tuple[tuple[str, str, str, float], ...]
+    """(anchor id, member id, group name, distance m) of the asset groups found."""
+    facing: tuple[tuple[str, str], ...]
+    """(a, b): a faced b."""
+    zones: tuple[ApproachZone, ...]
+    zone_area: dict[tuple[str, str], float]
+    """(door id, object id) -> area (m^2) of the object inside the door's zone, where positive."""
+    walls: _Walls = field(repr=False)
+
+    @classmethod
+    def of(cls, house: House, catalog: AssetCatalog | None = None,
+           geometry: SceneGeometry | None = None) -> PlausibilityReference:
+        catalog = catalog or load_catalog()
+        geometry = geometry or SceneGeometry.from_house(house, catalog)
+        floor = [f for f in geometry.floor_objects]
+        walls = _Walls.of(geometry)
+        room = {f.object_id: geometry.room_of_point(*f.center) for f in floor}
+        anchored = frozenset(f.object_id for f in floor if edge_only(catalog, f.object_type) and walls.against(f))
+        small = frozenset(f.object_id for f in floor if _small(catalog, f) and not _on_open_floor(f, walls, floor))
+        groups, facing = [], []
+        for a in floor:
+            for m in floor:
+                if a is m or room[a.object_id] is None or room[a.object_id] != room[m.object_id]:
+                    continue
+                name = next((g for at, mt, g in group_pairs() if (at, mt) == (a.object_type, m.object_type)), None)
+                if name is not None:
+                    d = float(shapely.distance(a.polygon, m.polygon))
+                    if d <= GROUP_DISTANCE:
+                        groups.append((a.object_id, m.object_id, name, d))
+                if m.object_type in FACING.get(a.object_type, ()) and _faces(a, m) >= FACING_BEFORE:
+                    facing.append((a.object_id, m.object_id))
+        zones = tuple(approach_zones(geometry, DOOR_CLEARANCE))
+        areas = {(z.door_id, f.object_id): z.zone.intersection(f.polygon).area for z in zones for f in floor
+                 if z.zone.intersects(f.polygon)}
+        return cls({f.object_id: (f.center, f.yaw) for f in floor}, {f.object_id: f.object_type for f in floor},
+                   anchored, small, tuple(groups), tuple(facing), zones,
+                   {k: v for k, v in areas.items() if v > 0.0}, walls)
+
+    def moved(self, fp: Footprint) -> bool:
+        """Whether a footprint stands elsewhere (or turned) compared with the original house."""
+        before = self.poses.get(fp.object_id)
+        if before is None:
+            return True
+        (x, z), yaw = before
+        dyaw = abs((fp.yaw - yaw + 180.0) % 360.0 - 180.0)
+        return math.hypot(fp.center[0] - x, fp.center[1] - z) > 1e-6 or dyaw > 1e-6
+
+
+def check_move(ref: PlausibilityReference, fp: Footprint, current: Mapping[str, Footprint]) -> list[Violation]:
+    """The rules ``fp`` (an object at its new pose) breaks, with every other object where ``current`` has it."""
+    oid = fp.object_id
+    out: list[Violation] = []
+    now = dict(current)
+    now[oid] = fp
+    if oid in ref.anchored and not ref.walls.against(fp):
+        out.append(Violation("edge_off_wall", oid, f"{oid} ({fp.object_type}) no longer stands with its back to a "
+                             "wall facing the room; its type stands only along walls"))
+    for z in ref.zones:
+        if not z.zone.intersects(fp.polygon):
+            continue
+        grew = z.zone.intersection(fp.polygon).area - ref.zone_area.get((z.door_id, oid), 0.0)
+        if grew > ZONE_EPS:
+            out.append(Violation("door_approach", oid, f"{oid} moves {grew:.2f} m^2 further into the "
+                                 f"{DOOR_CLEARANCE:g} m clearance in front of doorway {z.door_id}", (z.door_id,)))
+    for a, m, name, d0 in ref.groups:
+        if oid not in (a, m) or a not in now or m not in now:
+            continue
+        d = float(shapely.distance(now[a].polygon, now[m].polygon))
+        if d > max(GROUP_DISTANCE, d0 + 0.05):
+            other = m if oid == a else a
+            out.append(Violation("group_split", oid, f"{oid} ends {d:.2f} m from {other}, its {name} group "
+                                 "partner; move the group together or keep them side by side", (other,)))
+    for a, b in ref.facing:
+        if oid in (a, b) and a in now and b in now and _faces(now[a], now[b]) < FACING_AFTER:
+            out.append(Violation("facing_broken", oid, f"{a} no longer faces {b}",
+                                 (b if oid == a else a,)))
+    floor = [f for f in now.values() if f.role == "floor"]
+    for k in sorted({oid} | {s for s in ref.small if s in now and s != oid and ref.moved(now[s])}):
+        if k in ref.small and _on_open_floor(now[k], ref.walls, floor):
+            out.append(Violation("open_floor", k, f"{k} ({now[k].object_type}) stands alone on open floor; its "
+                                 "type stands by a wall or by furniture, never in the middle of a room"))
+    return out
+
+
+@dataclass
+class PlausibilityAudit:
+    """The violations of an adapted house against its original, per moved object."""
+
+    moved: list[str]
+    violations: list[Violation]
+
+    def counts(self) -> dict[str, int]:
+        """Violations per rule (every rule listed, 0 when none)."""
+        c = Counter(v.rule for v in self.violations)
+        return {r: c.get(r, 0) for r in RULES}
+
+    @property
+    def total(self) -> int:
+        return len(self.violations)
+
+
+def audit(original: House, adapted: House, *, catalog: AssetCatalog | None = None) -> PlausibilityAudit:
+    """Check every floor object of ``adapted`` that moved against ``original`` (the house before editing)."""
+    catalog = catalog or load_catalog()
+    ref = PlausibilityReference.of(original, catalog)
+    geometry = SceneGeometry.from_house(adapted, catalog)
+    now = {f.object_id: f for f in geometry.floor_objects}
+    missing = sorted(set(ref.poses) - set(now))
+    if missing:
+        raise AdaptenvError(f"the adapted house has no floor object {missing[0]!r} of the original; audit a house "
+                            "against the one it was adapted from")
+    moved = [oid for oid, f in now.items() if ref.moved(f)]
+    seen: set[tuple[str, str, tuple[str, ...]]] = set()
+    violations = []
+    for oid in moved:
+        for v in check_move(ref, now[oid], now):
+            key = (v.rule, v.object_id, v.others)
+            if key not in seen and v.object_id in moved:
+                seen.add(key)
+                violations.append(v)
+    return PlausibilityAudit(moved, violations)

@@ -1,0 +1,147 @@
+"""The plausibility audit: each rule on a small hand-built house, the validator refusing what it finds, the CLI."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from typer.testing import CliRunner
+
+from adaptenv.adapt.edits import Edit, apply_edit
+from adaptenv.adapt.plausibility import RULES, audit, group_pairs
+from adaptenv.adapt.step import verdict
+from adaptenv.adapt.validation import EditValidator
+from adaptenv.cli import app
+from adaptenv.scene.house import save_house
+from tests.sim import helpers as H
+
+# Room 0 (6 x 5 m) holds the furniture; a 1 m doorway at z = 2.5 in the wall x = 6 leads to room 1.
+OBJECTS = [
+    H.Obj("Bed_1", 1.0, 1.05, 0.0),                  # Bed|0: back against the wall z = 0
+    H.Obj("TV_Stand_201_1", 3.5, 0.34, 0.0),         # TVStand|1: against the wall z = 0
+    H.Obj("RoboTHOR_sofa_alrid", 3.5, 2.6, 180.0),   # Sofa|2: in the room, facing the stand
+    H.Obj("ArmChair_213_1", 1.0, 4.62, 180.0),       # ArmChair|3: against the wall z = 5
+    H.Obj("Floor_Lamp_1", 1.85, 4.74, 0.0),          # FloorLamp|4: beside the armchair (lamp-armchair)
+    H.Obj("Plunger_1", 5.85, 4.85, 0.0),             # Plunger|5: in the corner
+]
+
+
+@pytest.fixture(scope="module")
+def home():
+    return H.make_house([(0.0, 0.0, 6.0, 5.0), (6.0, 0.0, 9.0, 5.0)], doors=[H.Door(0, 1, 2.5)], objects=OBJECTS,
+                        agent=(7.5, 2.5, 0.0))
+
+
+def _moved(house, object_id: str, x: float, z: float, yaw: float | None = None):
+    obj = house.object_by_id(object_id)
+    return apply_edit(house, Edit(object_id=object_id, achieved_dx=x - obj.position.x,
+                                  achieved_dz=z - obj.position.z, yaw_before=obj.yaw,
+                                  yaw_after=obj.yaw if yaw is None else yaw))
+
+
+def _rules(original, adapted) -> set[str]:
+    return {v.rule for v in audit(original, adapted).violations}
+
+
+def test_the_untouched_home_and_a_slide_along_the_wall_break_nothing(home, real_house):
+    assert audit(home, home).total == 0 and audit(real_house, real_house).total == 0
+    assert audit(home, _moved(home, "Bed|0", 1.3, 1.05)).total == 0  # 0.3 m along its wall
+    assert ("ArmChair", "FloorLamp", "lamp-armchair") in group_pairs()
+
+
+def test_bed_off_its_wall_or_facing_it(home):
+    assert _rules(home, _moved(home, "Bed|0", 2.0, 2.8)) == {"edge_off_wall"}
+    assert _rules(home, _moved(home, "Bed|0", 1.0, 1.05, yaw=180.0)) == {"edge_off_wall"}
+
+
+def test_bed_across_the_doorway_approach(home):
+    # the issue's case: a bed 0.67 m in front of the only doorway, across most of its width
+    assert "door_approach" in _rules(home, _moved(home, "Bed|0", 6.0 - 0.67 - 1.04, 2.5, yaw=90.0))
+
+
+def test_lamp_left_behind_by_its_armchair(home):
+    report = audit(home, _moved(home, "FloorLamp|4", 4.5, 4.74))
+    assert [(v.rule, v.others) for v in report.violations] == [("group_split", ("ArmChair|3",))]
+    assert report.counts() == {**dict.fromkeys(RULES, 0), "group_split": 1}
+
+
+def test_plunger_on_open_floor_and_in_front_of_the_door(home):
+    assert _rules(home, _moved(home, "Plunger|5", 3.0, 4.0)) == {"open_floor"}
+    assert "door_approach" in _rules(home, _moved(home, "Plunger|5", 5.5, 2.5))
+
+
+def test_sofa_turned_away_from_the_television(home):
+    assert _rules(home, _moved(home, "Sofa|2", 3.5, 2.6, yaw=90.0)) == {"facing_broken"}
+
+
+def test_validator_refuses_with_the_rule_name_and_keeps_targets(home):
+    v = EditValidator(home, episode_targets=["Sofa"], start=(7.5, 2.5))
+    bed = v.propose("Bed|0", 0.0, 15.0)
+    assert bed.result.changed and not bed.valid
+    assert any(p.kind == "implausible" and p.message.startswith("implausible (edge_off_wall)") for p in bed.problems)
+    assert [p.kind for p in v.propose("Sofa|2", 3.0, 0.0).problems] == ["target_moved"]
+    assert v.propose("Bed|0", 3.0, 0.0).valid  # along its wall
+    free = EditValidator(home, episode_targets=["Sofa"], start=(7.5, 2.5), plausibility=False, move_targets=True)
+    assert free.propose("Bed|0", 0.0, 15.0).valid and free.propose("Sofa|2", 3.0, 0.0).valid
+
+
+def test_audit_command(home, tmp_path):
+    runner = CliRunner()
+    a, b = save_house(home, tmp_path / "a.json"), save_house(_moved(home, "Plunger|5", 3.0, 4.0), tmp_path / "b.json")
+    bad = runner.invoke(app, ["audit", str(a), str(b)])
+    assert bad.exit_code == 1 and "open_floor: Plunger|5" in bad.output
+    assert "1 moved object(s), 1 violation(s)" in bad.output
+    ok = runner.invoke(app, ["audit", str(a), str(a)])
+    assert ok.exit_code == 0 and "0 violation(s)" in ok.output
+
+
+@pytest.mark.parametrize(("before", "after", "expected"), [
+    ((True, 0.9), (True, 0.8), "harder"), ((True, 0.8), (True, 0.9), "easier"), ((True, 0.8), (True, 0.8), "unchanged"),
+    ((True, 0.5), (False, 0.0), "harder"), ((False, 0.0), (True, 0.4), "easier")])
+def test_verdict_follows_success_then_spl(before, after, expected):
+    assert verdict({"success": before[0], "spl": before[1]}, {"success": after[0], "spl": after[1]}) == expected
+
+
+def test_random_perturbation_of_the_real_house_breaks_rules(real_house):
+    from adaptenv.adapt.generators.random_perturbation import random_single_edits
+
+    house, _ = random_single_edits(real_house, 12, np.random.default_rng(0), max_units=40.0)
+    assert audit(real_house, house).total > 0
+
+
+@pytest.mark.parametrize("seed", [0, 1])
+@pytest.mark.parametrize("name", ["builtin", "failure-modes"])
+def test_offline_generators_pass_the_audit(name, seed):
+    from adaptenv.adapt.generators import GenerationContext, make_generator
+    from tests.adapt.scenes import procedural_scene
+
+    house, world, ep, traj, analysis = procedural_scene(seed, 4, [seed, 7])
+    res = make_generator(name).generate(house, analysis, steps=2, rng=np.random.default_rng(seed),
+                                        context=GenerationContext(episode=ep, trajectory=traj, render=False))
+    report = audit(house, res.house)
+    assert report.total == 0, [str(v) for v in report.violations]
+    targets = {t.object_id for t in world.instances_of(ep.target_type)}
+    assert not targets & set(report.moved), "targets move only with an opt-in edit kind"
+
+
+def test_llm_proposal_refused_by_a_rule_is_re_asked_with_its_name(llm_scene):
+    from adaptenv.adapt.generators import GenerationContext
+    from adaptenv.adapt.generators.llm import LLMGenerator
+    from tests.adapt.llm_mock import Mock, move, verify
+
+    house, world, ep, traj, analysis = llm_scene
+    mock = Mock(move(xu=0.0, yu=8.0), move(), verify(True))  # up into the doorway at (6, 3), then a plain move
+    res = LLMGenerator(mock.backend()).generate(house, analysis, steps=1, rng=np.random.default_rng(0),
+                                                context=GenerationContext(episode=ep, trajectory=traj, render_size=320))
+    refused = res.edit_log.edits[0]
+    assert not refused.accepted and refused.problems[0].startswith("implausible (door_approach)")
+    assert "implausible (door_approach)" in mock.bodies[1]["messages"][-1]["content"]
+    assert res.steps[0].status == "applied" and audit(house, res.house).total == 0
+
+
+def test_adapt_verdict_line_says_what_decided():
+    from adaptenv.cli.adapt import _verdict_text
+
+    assert _verdict_text("easier", {"success": False}, {"success": True}) == "the scene got easier for the agent " \
+        "(success rose)"
+    assert _verdict_text("harder", {"success": True}, {"success": True}).endswith("(SPL at equal success fell)")
+    assert _verdict_text("unchanged", {"success": True}, {"success": True}).startswith("unchanged")
