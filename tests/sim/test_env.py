@@ -111,7 +111,8 @@ def test_the_simulator_does_not_import_the_renderer(small_house):
 
     code = ("import sys, adaptenv.sim.env, adaptenv.sim.vector, adaptenv.sim.rollout; "
             "print(sorted(m for m in sys.modules if m.startswith('adaptenv.') and not m.startswith(('adaptenv.sim', "
-            "'adaptenv.scene', 'adaptenv.errors', 'adaptenv.vocabulary', 'adaptenv._gym'))))")
+            "'adaptenv.scene', 'adaptenv.errors', 'adaptenv.vocabulary', 'adaptenv._gym', 'adaptenv._numba_cache', "
+            "'adaptenv.configfile'))))")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
     assert out.strip() == "[]", f"the simulator imported upper layers: {out}"
 
