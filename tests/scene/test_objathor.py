@@ -98,10 +98,10 @@ def test_one_asset_annotation_file_is_read(tmp_path):
 
 @pytest.mark.parametrize(("content", "words"), [
     (b"not json", "cannot read it as JSON"),
-    (gzip.compress(b"{")[:10], "cannot read it as JSON"),
+    (gzip.compress(b"{", mtime=0)[:10], "cannot read it as JSON"),
     (json.dumps({"assets": {"x": {"type": "Sofa", "size": [1, 1, 1]}}}).encode(), "not an objathor annotation file"),
     (json.dumps([1, 2]).encode(), "not an objathor annotation file"),
-])
+], ids=["not-json", "truncated-gzip", "an-asset-table", "a-list"])
 def test_wrong_files_are_one_clear_error(tmp_path, content, words):
     p = tmp_path / "wrong.json"
     p.write_bytes(content)
