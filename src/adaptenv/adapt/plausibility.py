@@ -48,8 +48,8 @@ from adaptenv.scene.geometry import Footprint, SceneGeometry, heading
 from adaptenv.scene.graph import (
     AGAINST_WALL_ANGLE,
     AGAINST_WALL_DISTANCE,
-    MIN_WALL_OVERLAP,
     NEXT_TO_DISTANCE,
+    backs_onto,
 )
 from adaptenv.scene.house import House
 
@@ -134,18 +134,8 @@ class _Walls:
             return False
         back = shapely.LineString(fp.corners[:2])
         near = np.flatnonzero(shapely.distance(back, self.lines) <= AGAINST_WALL_DISTANCE)
-        min_cos, front = math.cos(math.radians(AGAINST_WALL_ANGLE)), heading(fp.yaw)
-        for k in near:
-            p0, p1 = self.p0[k], self.p1[k]
-            length = max(float(np.linalg.norm(p1 - p0)), 1e-12)
-            u = (p1 - p0) / length
-            normal = np.array([-u[1], u[0]])
-            if np.dot(normal, np.array(fp.center) - p0) < 0:
-                normal = -normal
-            t = sorted(float(np.dot(c - p0, u)) for c in fp.corners[:2])
-            if float(np.dot(front, normal)) >= min_cos and min(t[1], length) - max(t[0], 0.0) >= MIN_WALL_OVERLAP:
-                return True
-        return False
+        min_cos = math.cos(math.radians(AGAINST_WALL_ANGLE))
+        return any(backs_onto(fp, self.p0[k], self.p1[k], min_cos) for k in near)
 
     def distance(self, fp: Footprint) -> float:
         return float(shapely.distance(fp.polygon, self.union)) if len(self.lines) else math.inf

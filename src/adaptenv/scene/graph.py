@@ -219,6 +219,18 @@ def _wall_id(wall: WallSegment, room: str | None) -> str:
     return wall.wall_ids[0]
 
 
+def backs_onto(fp: Footprint, p0: np.ndarray, p1: np.ndarray, min_cos: float) -> bool:
+    """Whether the footprint's front faces away from the wall p0-p1 (within ``acos(min_cos)``) and its back edge
+    overlaps the wall by MIN_WALL_OVERLAP or more (distance is the caller's test)."""
+    length = max(float(np.linalg.norm(p1 - p0)), 1e-12)
+    u = (p1 - p0) / length
+    normal = np.array([-u[1], u[0]])
+    if np.dot(normal, np.array(fp.center) - p0) < 0:
+        normal = -normal
+    t = sorted(float(np.dot(c - p0, u)) for c in fp.corners[:2])
+    return float(np.dot(heading(fp.yaw), normal)) >= min_cos and min(t[1], length) - max(t[0], 0.0) >= MIN_WALL_OVERLAP
+
+
 def _against_wall(placed: list[Footprint], nodes: dict[str, ObjectNode], walls: list[WallSegment],
                   blocking: np.ndarray) -> list[Relation]:
     """Objects whose back edge runs within AGAINST_WALL_DISTANCE of a blocking wall they face away from."""
@@ -233,15 +245,7 @@ def _against_wall(placed: list[Footprint], nodes: dict[str, ObjectNode], walls: 
     out = []
     for i, k in zip(*np.nonzero(near & near_blocking[:, None]), strict=True):
         fp = placed[i]
-        p0, p1 = np.array(solid[k].p0), np.array(solid[k].p1)
-        length = max(float(np.linalg.norm(p1 - p0)), 1e-12)
-        u = (p1 - p0) / length
-        normal = np.array([-u[1], u[0]])
-        if np.dot(normal, np.array(fp.center) - p0) < 0:
-            normal = -normal
-        t = sorted(float(np.dot(c - p0, u)) for c in fp.corners[:2])
-        overlap = min(t[1], length) - max(t[0], 0.0)
-        if float(np.dot(heading(fp.yaw), normal)) >= min_cos and overlap >= MIN_WALL_OVERLAP:
+        if backs_onto(fp, np.array(solid[k].p0), np.array(solid[k].p1), min_cos):
             out.append(Relation("against_wall", fp.object_id, _wall_id(solid[k], nodes[fp.object_id].room)))
     return out
 
