@@ -2,24 +2,16 @@
 
 from __future__ import annotations
 
-import importlib.util
 import json
-import sys
-from pathlib import Path
 
 from adaptenv.scene.house import save_house
 from tests.conftest import REAL_HOUSE
 from tests.sim import helpers as H
-
-TOOL = Path(__file__).resolve().parents[1] / "tools" / "check_houses.py"
+from tests.tools import load_tool
 
 
 def _tool():
-    spec = importlib.util.spec_from_file_location("check_houses", TOOL)
-    mod = importlib.util.module_from_spec(spec)
-    sys.modules["check_houses"] = mod  # dataclasses look their module up while the class is built
-    spec.loader.exec_module(mod)
-    return mod
+    return load_tool("check_houses")
 
 
 def test_counts_every_stage_and_fails_the_check_on_a_broken_house(tmp_path, capsys):

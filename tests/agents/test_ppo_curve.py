@@ -3,17 +3,8 @@
 from __future__ import annotations
 
 import csv
-import importlib.util
-from pathlib import Path
 
-TOOL = Path(__file__).resolve().parents[2] / "tools" / "ppo_curve.py"
-
-
-def load_tool():
-    spec = importlib.util.spec_from_file_location("ppo_curve", TOOL)
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
+from tests.tools import load_tool
 
 
 def test_curve_keeps_the_evaluations_and_sets_the_final_row_apart(tmp_path):
@@ -27,5 +18,5 @@ def test_curve_keeps_the_evaluations_and_sets_the_final_row_apart(tmp_path):
         w = csv.DictWriter(f, fieldnames=keys)
         w.writeheader()
         w.writerows(rows)
-    curve, final = load_tool().curve_rows(path)
+    curve, final = load_tool("ppo_curve").curve_rows(path)
     assert [r["frames"] for r in curve] == ["0", "200"] and final["eval/success"] == "0.95"

@@ -2,20 +2,16 @@
 
 from __future__ import annotations
 
-import importlib.util
 import json
 from pathlib import Path
 
 import pytest
 
-TOOL = Path(__file__).resolve().parents[2] / "tools" / "evaluate_runs.py"
+from tests.tools import TOOLS, load_tool
 
 
 def _tool():
-    spec = importlib.util.spec_from_file_location("evaluate_runs", TOOL)
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    return mod
+    return load_tool("evaluate_runs")
 
 
 def _write(folder: Path, seed: int, success: dict[str, float]) -> None:
@@ -116,7 +112,7 @@ def test_assemble_gathers_methods_from_two_experiments_and_tests_them(tmp_path, 
 
 def test_table_prints_a_committed_experiment_in_points(capsys):
     """The item-4 experiment's figures as docs/results/ARCHIVE.md quotes them, from its committed summary_final.json."""
-    _tool().table(TOOL.parents[1] / "docs" / "results" / "efficacy-item4")
+    _tool().table(TOOLS.parent / "docs" / "results" / "efficacy-item4")
     out = capsys.readouterr().out
     assert out.startswith("seeds [0, 1, 2, 3, 4, 5, 6, 7, 8, 9], 1000 episodes per suite; pi_0: long-unseen 70.8, "
                           "far 45.1, clutter 64.3")

@@ -179,11 +179,9 @@ def test_runs_are_finally_evaluated_as_they_finish_and_a_packed_copy_resumes(tin
 def _check_timing(out: Path, cfg: ExperimentConfig, log: str, tmp_path: Path, capsys) -> None:
     """tools/evaluate_runs.py time: each run's final evaluation took measurable time, and the table adds the stages
     of every run and the evaluation's seconds, read from final_eval.json or, for older runs, from the log."""
-    import importlib.util
+    from tests.tools import load_tool
 
-    spec = importlib.util.spec_from_file_location("evaluate_runs", REPO / "tools" / "evaluate_runs.py")
-    tool = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(tool)
+    tool = load_tool("evaluate_runs")
     docs = {(m, s): json.loads((out / m / f"seed_{s}" / "final_eval.json").read_text()) for m in cfg.methods
             for s in cfg.seeds}
     assert all(d["seconds"] > 0 for d in docs.values())
