@@ -87,6 +87,11 @@ def test_every_method_runs_and_counts_its_budget(method, tiny_policy, tmp_path):
         state = json.loads((tmp_path / method / STATE).read_text())["state"]
         buffered = set(state["buffer"]["level_ids"])
         assert set(scenes["trained_on"]) <= buffered, "robust PLR/ACCEL train on replayed buffer levels only"
+    if method == "sfl":
+        fresh = [x for x in scenes["rolled_out"] if x.startswith("dr")]
+        assert len(fresh) == cfg.sfl_candidates * cfg.scenes_per_iteration, "sfl scores its candidates"
+        new = [x for x in scenes["trained_on"] if x in fresh]
+        assert len(new) == cfg.scenes_per_iteration, "and trains on the most learnable of them"
     if method == "ours-dr":
         fresh = [x for x in scenes["rolled_out"] if x.startswith("dr")]
         assert fresh and set(fresh) <= set(scenes["trained_on"]), "ours-dr trains on every fresh house, as dr does"

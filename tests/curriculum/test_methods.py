@@ -16,14 +16,23 @@ from adaptenv.curriculum.loop import LoopConfig, run_loop
 from adaptenv.sim.task import Episode
 
 
+def _result(success: bool, spl: float) -> EpisodeResult:
+    return EpisodeResult(index=0, house="h", env=0, target_type="Bed", seed=0, success=success, spl=spl, sel=0.0,
+                         steps=10, collisions=0, path_length=1.0, optimal=1.0, final_geodesic=0.0)
+
+
 def _rollout(success: bool, spl: float, expert: bool) -> Rollout:
-    res = EpisodeResult(index=0, house="h", env=0, target_type="Bed", seed=0, success=success, spl=spl, sel=0.0,
-                        steps=10, collisions=0, path_length=1.0, optimal=1.0, final_geodesic=0.0)
-    return Rollout(Episode("Bed", (0.0, 0.0, 0.0), 0), res, None, expert)
+    return Rollout([Episode("Bed", (0.0, 0.0, 0.0), 0)], [_result(success, spl)], [None], [expert])
+
+
+def _rollouts(successes: list[bool], experts: list[bool] | None = None, explorer: list[bool] | None = None) -> Rollout:
+    n = len(successes)
+    return Rollout([Episode("Bed", (0.0, 0.0, 0.0), k) for k in range(n)], [_result(s, 0.5 * s) for s in successes],
+                   [None] * n, experts or [True] * n, explorer or [])
 
 
 def test_every_method_is_registered_by_its_name():
-    assert set(M.METHODS) == {"none", "random", "dr", "oracle", "plr", "accel", "ours", "ours-noselect",
+    assert set(M.METHODS) == {"none", "random", "dr", "sfl", "oracle", "plr", "accel", "ours", "ours-noselect",
                               "ours-randomscene", "ours-nof", "ours-dr", "ours-llm"}
     assert all(cls.name == name for name, cls in M.METHODS.items())
     assert M.METHODS["ours"].generator == "failure-modes" and M.METHODS["ours-nof"].generator == "regret-only"
@@ -32,9 +41,62 @@ def test_every_method_is_registered_by_its_name():
 
 
 def test_regret_uses_the_experts_measured_success():
-    assert M.regret(_rollout(False, 0.0, True)) == 1.0
-    assert M.regret(_rollout(False, 0.0, False)) == 0.0, "a level the expert fails is not prioritised"
-    assert M.regret(_rollout(True, 0.7, True)) == 0.0
+    assert M.level_score(_rollout(False, 0.0, True)) == 1.0
+    assert M.level_score(_rollout(False, 0.0, False)) == 0.0, "a level the expert fails is not prioritised"
+    assert M.level_score(_rollout(True, 0.7, True)) == 0.0
+
+
+def test_scores_average_every_rollout_of_a_scene():
+    half = _rollouts([True, False, True, False])
+    assert half.success_rate == 0.5 and half.steps == 40
+    assert M.level_score(half, "learnability") == pytest.approx(0.25), "p(1-p) peaks at p = 0.5"
+    assert M.level_score(_rollouts([True] * 4), "learnability") == 0.0, "always solved: nothing to learn"
+    assert M.level_score(_rollouts([False] * 4), "learnability") == 0.0, "never solved: nothing to learn"
+    assert M.level_score(_rollouts([True, False, False, False]), "learnability") == pytest.approx(0.1875)
+    assert M.level_score(half, "regret") == pytest.approx(0.5)
+    assert M.level_score(_rollouts([False] * 4, experts=[True, True, False, False]), "regret") == pytest.approx(0.5)
+    assert M.level_score(_rollouts([False] * 4, explorer=[True, True, True, False]),
+                         "explorer_regret") == pytest.approx(0.75)
+    with pytest.raises(ValueError, match="explorer"):
+        M.level_score(half, "explorer_regret")
+
+
+def test_diagnosed_scenes_are_scored_by_the_same_rule():
+    assert M.diagnosed_score(0.5, 0.1, "learnability") == 0.25
+    assert M.diagnosed_score(0.5, 0.1, "regret") == 0.1
+    assert M.diagnosed_score(None, None, "regret") == 0.0
+
+
+class _Scored:
+    """An Iteration stand-in for SFL's make_scenes: only the config is read."""
+
+    def __init__(self, k: int) -> None:
+        self.cfg = LoopConfig(scenes_per_iteration=k)
+
+
+def test_sfl_keeps_the_most_learnable_scenes():
+    rolled = ["a", "b", "c", "d", "e", "f"]
+    rates = [[True] * 4, [True, False, True, False], [False] * 4, [True, True, True, False],
+             [True, False, False, False], [True, False, True, False]]
+    kept = M.SFL().make_scenes(_Scored(2), rolled, [_rollouts(r) for r in rates])
+    assert kept == ["b", "f"], "the two scenes at p = 0.5, in rollout order"
+    kept = M.SFL().make_scenes(_Scored(4), rolled, [_rollouts(r) for r in rates])
+    assert kept == ["b", "d", "e", "f"], "then p = 0.25 and 0.75 (0.1875 each); solved and unsolved ones last"
+
+
+def test_rollout_jobs_play_every_episode_and_the_first_is_the_old_one(tiny_policy):
+    from adaptenv.agents.checkpoint import load_checkpoint
+    from adaptenv.curriculum.jobs import PolicyWeights, RolloutJob
+    from adaptenv.scene.procedural import generate_preset
+
+    (name, house), *_ = generate_preset("tiny")
+    weights = PolicyWeights.of(load_checkpoint(tiny_policy).policy())
+    one = run_rollout(RolloutJob(weights, house, name, 123))
+    four = run_rollout(RolloutJob(weights, house, name, 123, episodes=4, explorer=True))
+    assert len(four.results) == len(four.expert_successes) == len(four.explorer_successes) == 4
+    assert four.episode == one.episode and four.result.success == one.result.success
+    assert len({(e.target_type, e.start) for e in four.episodes}) > 1, "different episodes, not one replayed"
+    assert four.steps == sum(r.steps for r in four.results) >= one.steps
 
 
 def test_streams_are_named_and_independent():

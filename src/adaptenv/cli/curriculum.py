@@ -91,7 +91,7 @@ def loop(
     houses: str = typer.Option("preset:pretrain-train", "--houses", help="Training scenes: a folder of house "
                                 "JSON files, a house file, a dataset FILE.jsonl[.gz][:START:STOP] or preset:NAME."),
     iterations: int = typer.Option(3, "--iterations", "-T", min=1, help="Loop iterations."),
-    method: str = typer.Option("ours", "--method", help="none, random, dr, plr, accel, ours, ours-noselect, "
+    method: str = typer.Option("ours", "--method", help="none, random, dr, sfl, plr, accel, ours, ours-noselect, "
                                 "ours-randomscene, ours-nof, ours-dr or ours-llm."),
     seed: int = typer.Option(0, "--seed", help="Root seed."),
     out: Path = typer.Option(Path("runs/loop"), "-o", "--out", help="Run folder."),

@@ -73,7 +73,7 @@ CONFIG_FIX = "write it as in configs/experiment-small.json (docs/curriculum.md l
 class ExperimentConfig:
     """Methods x seeds and the loop settings they share (JSON file for ``adaptenv experiment``)."""
 
-    methods: list[str] = field(default_factory=lambda: ["none", "random", "dr", "plr", "accel", "ours"])
+    methods: list[str] = field(default_factory=lambda: ["none", "random", "dr", "sfl", "plr", "accel", "ours"])
     """Methods to run; 'ours' is compared against every other one."""
     seeds: list[int] = field(default_factory=lambda: [0, 1, 2, 3, 4])
     """Seeds (at least 5 for the committed results)."""

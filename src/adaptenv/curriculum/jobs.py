@@ -26,13 +26,14 @@ from adaptenv.adapt.llm.usage import Usage
 from adaptenv.adapt.step import adapt_scene
 from adaptenv.agents.evaluate import EpisodeResult, Recorded, run_episodes, sample_episodes
 from adaptenv.agents.houses import HouseSet, load_house_set
+from adaptenv.agents.map_explorer import MapExplorerPolicy
 from adaptenv.agents.policy import ExpertPolicy
 from adaptenv.agents.rollout import run_recorded
 from adaptenv.curriculum.records import SkippedHouses
 from adaptenv.scene.house import House
 from adaptenv.sim.task import Episode, sample_episode
 from adaptenv.sim.trajectory import Trajectory
-from adaptenv.sim.world import compile_world
+from adaptenv.sim.world import NavWorld, compile_world
 
 if TYPE_CHECKING:
     from adaptenv.agents.network import NeuralPolicy
@@ -112,31 +113,77 @@ def run_eval(job: EvalJob) -> tuple[list[EpisodeResult], dict[int, Recorded]]:
 
 @dataclass(frozen=True)
 class RolloutJob:
-    """One episode of a policy in one scene, and the expert's on the same episode (for analysis and regret)."""
+    """Episodes of a policy in one scene, and the expert's on the same episodes (for analysis and scores)."""
 
     weights: PolicyWeights
     house: House
     name: str
     episode_seed: int
+    episodes: int = 1
+    """Episodes of pi_t (the first is the one F analyses; scores average all of them)."""
+    explorer: bool = False
+    """Also run the map explorer on the same episodes (for the ``explorer_regret`` score)."""
 
 
 @dataclass
 class Rollout:
-    """pi_t's episode in one scene: the task, its result, its trajectory (with metrics) and the expert's success."""
+    """pi_t's episodes in one scene: the tasks, results, trajectories (with metrics) and the references' successes.
 
-    episode: Episode
-    result: EpisodeResult
-    trajectory: Trajectory
-    expert_success: bool
+    The first episode is the one F analyses (``episode``, ``result``, ``trajectory``); level scores
+    (:func:`~adaptenv.curriculum.methods.level_score`) read every episode.
+    """
+
+    episodes: list[Episode]
+    results: list[EpisodeResult]
+    trajectories: list[Trajectory]
+    expert_successes: list[bool]
+    explorer_successes: list[bool] = field(default_factory=list)
+
+    @property
+    def episode(self) -> Episode:
+        return self.episodes[0]
+
+    @property
+    def result(self) -> EpisodeResult:
+        return self.results[0]
+
+    @property
+    def trajectory(self) -> Trajectory:
+        return self.trajectories[0]
+
+    @property
+    def expert_success(self) -> bool:
+        return self.expert_successes[0]
+
+    @property
+    def success_rate(self) -> float:
+        """p: the fraction of pi_t's episodes that succeeded."""
+        return float(np.mean([r.success for r in self.results]))
+
+    @property
+    def steps(self) -> int:
+        """Environment steps pi_t took over all its episodes."""
+        return sum(r.steps for r in self.results)
+
+
+def rollout_episodes(world: NavWorld, seed: int, n: int) -> list[Episode]:
+    """``n`` episodes of one scene: the first from ``seed`` itself, episode j from ``SeedSequence([seed, j])``."""
+    seeds = [seed] + [int(np.random.SeedSequence([seed, j]).generate_state(1)[0]) for j in range(1, n)]
+    return [sample_episode(world, s) for s in seeds]
 
 
 def run_rollout(job: RolloutJob) -> Rollout:
-    """Roll the policy out once in the scene, then the shortest-path expert on the same episode."""
+    """Roll the policy out ``job.episodes`` times in the scene, then the expert (and the explorer) on the same episodes."""
     world = compile_world(job.house, job.name)
-    episode = sample_episode(world, job.episode_seed)
-    [(result, traj)] = run_recorded(world, [episode], job.weights.policy())
-    expert, _ = run_episodes([world], [(0, episode)], ExpertPolicy(), batch=1)
-    return Rollout(episode, result, traj, expert[0].success)
+    episodes = rollout_episodes(world, job.episode_seed, job.episodes)
+    recorded = run_recorded(world, episodes, job.weights.policy())
+    tasks = [(0, ep) for ep in episodes]
+    expert, _ = run_episodes([world], tasks, ExpertPolicy(), batch=len(tasks))
+    explorer = []
+    if job.explorer:
+        explorer, _ = run_episodes([world], tasks, MapExplorerPolicy(), batch=len(tasks))
+    return Rollout(episodes, [r for r, _ in recorded], [t for _, t in recorded], [r.success for r in expert],
+                  [r.success for r in explorer])
 
 
 GeneratorKind = Literal["random", "builtin", "llm", "failure-modes", "regret-only"]
@@ -195,6 +242,10 @@ class Generated:
     """Regret of pi_t in the parent over the diagnosis episodes (diagnosing jobs)."""
     regret_after: float | None = None
     """Regret of pi_t in the child over the same episodes."""
+    success_before: float | None = None
+    """pi_t's success rate in the parent over the diagnosis episodes (diagnosing jobs)."""
+    success_after: float | None = None
+    """pi_t's success rate in the child over the same episodes."""
     rollout_steps: int = 0
     """pi_t's environment steps in this job: the diagnosis episodes (parent and child) and G's rollout checks."""
     before: Trajectory | None = None
@@ -238,15 +289,16 @@ def _run_diagnosed(job: GenerateJob, rng: np.random.Generator) -> Generated:
     log["diagnosis_after"] = res.diagnosis_after.model_dump(mode="json")
     steps = (sum(e.steps for e in res.diagnosis.episodes) + sum(e.steps for e in res.diagnosis_after.episodes)
              + check_steps(res.generation))
-    common = dict(regret_before=res.diagnosis.regret, rollout_steps=steps, before=res.before,
+    common = dict(regret_before=res.diagnosis.regret, success_before=res.diagnosis.success_rate,
+                  rollout_steps=steps, before=res.before,
                   usage=scene_usage(res.analysis, res.generation), stopped=res.generation.stopped)
     if not res.valid:
         log["final_validation"] = res.problems
         return Generated(job.house, log, 0, res.analysis, res.before, valid=False,
-                         regret_after=res.diagnosis.regret, **common)
+                         regret_after=res.diagnosis.regret, success_after=res.diagnosis.success_rate, **common)
     return Generated(res.house, log, res.edits_applied, res.analysis, res.after,
                      moved=[e.object_id for e in res.generation.applied], regret_after=res.diagnosis_after.regret,
-                     **common)
+                     success_after=res.diagnosis_after.success_rate, **common)
 
 
 def check_steps(generation: GenerationResult) -> int:

@@ -7,6 +7,7 @@ methods lives in their strategy classes (:mod:`adaptenv.curriculum.methods`):
 - ``none``: no new scenes; fine-tune on the original training scenes.
 - ``random``: ``edit_steps`` random single-object edits of each rolled-out training scene.
 - ``dr``: domain randomization, fresh procedural houses.
+- ``sfl``: Sampling For Learnability; scores fresh procedural houses by p(1-p) and trains on the most learnable.
 - ``plr``: Robust PLR; fresh procedural houses are only scored (regret against the expert's
   measured success), gradient steps are taken on levels replayed from a prioritized buffer.
 - ``accel``: ACCEL; replayed high-regret levels get ``edit_steps`` random edits each, the children
@@ -20,10 +21,10 @@ methods lives in their strategy classes (:mod:`adaptenv.curriculum.methods`):
   fresh houses instead of the buffer replay).
 - ``ours-llm``: the same with LLM F and G (needs an LLM config).
 
-Per iteration every method rolls out the same number of analysis/scoring episodes and spends the
-same number of fine-tuning frames (hence the same gradient updates); the editing methods make
-``edit_steps`` edits per adapted scene. Environment steps, updates and edits are counted and
-logged (G's own rollout checks of candidate edits are not counted as environment steps).
+Per iteration every method plays ``score_rollouts`` episodes in each scene it rolls out and spends
+the same number of fine-tuning frames (hence the same gradient updates); the editing methods make
+``edit_steps`` edits per adapted scene. Environment steps (rollouts, F's diagnosis episodes, G's
+rollout checks and fine-tuning frames), updates and edits are counted and logged.
 Every iteration is checkpointed atomically; ``resume=True`` continues from the last finished one
 and ends with the same results as an uninterrupted run (all randomness derives from (seed, t)).
 """
@@ -63,7 +64,7 @@ from adaptenv.curriculum.jobs import (
     skipped_houses,
 )
 from adaptenv.curriculum.llm_usage import budget_left, iteration_lines, record_iteration
-from adaptenv.curriculum.methods import METHODS, Iteration, Stream
+from adaptenv.curriculum.methods import LEVEL_SCORES, METHODS, Iteration, Stream
 from adaptenv.curriculum.records import (
     HELDOUT_DIR,
     STATE,
@@ -87,7 +88,7 @@ class LoopConfig:
     """Settings of one closed-loop run (one method, one seed); saved as run.json."""
 
     method: str = "ours"
-    """One of none, random, dr, plr, accel, ours, ours-noselect, ours-randomscene, ours-nof, ours-dr, ours-llm."""
+    """One of none, random, dr, sfl, plr, accel, ours, ours-noselect, ours-randomscene, ours-nof, ours-dr, ours-llm."""
     policy: str = "pretrained"
     """Starting policy pi_0: pretrained or a checkpoint path (it must be a neural policy to fine-tune)."""
     houses: str = "preset:pretrain-train"
@@ -101,6 +102,13 @@ class LoopConfig:
     """Root seed; every random choice derives from (seed, iteration)."""
     scenes_per_iteration: int = 8
     """Scenes rolled out (analysed or scored) and new scenes made per iteration."""
+    score_rollouts: int = 4
+    """Episodes of pi_t (and of the expert) per rolled-out scene: scene scores average them, F analyses the first."""
+    level_score: str = "regret"
+    """How plr, accel and ours score a scene: regret (expert success - pi_t's), learnability (p(1-p), p pi_t's
+    success rate) or explorer_regret (the map explorer's success - pi_t's; one more rollout per episode)."""
+    sfl_candidates: int = 4
+    """sfl: fresh houses scored per training scene; it trains on the most learnable 1 in sfl_candidates."""
     edit_steps: int = 5
     """Single-object edits per adapted scene (editing methods)."""
     finetune_frames: int = FinetuneConfig.frames
@@ -155,7 +163,8 @@ class LoopConfig:
             raise ConfigError(f"{source}: method {self.method!r} is unknown; use one of {', '.join(METHODS)}")
         if self.seed < 0:
             raise ConfigError(f"{source}: seed must be >= 0, got {self.seed}")
-        for name in ("iterations", "scenes_per_iteration", "finetune_frames", "heldout_episodes", "finetune_envs"):
+        for name in ("iterations", "scenes_per_iteration", "finetune_frames", "heldout_episodes", "finetune_envs",
+                     "score_rollouts", "sfl_candidates"):
             if getattr(self, name) < 1:
                 raise ConfigError(f"{source}: {name} must be at least 1, got {getattr(self, name)}")
         if self.edit_steps < 0 or self.diagnose_episodes < 1 or not 0.0 <= self.replay_fraction < 1.0:
@@ -167,6 +176,9 @@ class LoopConfig:
                               f"{self.finetune_beta} and {self.finetune_max_steps}")
         if self.finetune_min_start < 0:
             raise ConfigError(f"{source}: finetune_min_start must be >= 0 metres, got {self.finetune_min_start}")
+        if self.level_score not in LEVEL_SCORES:
+            raise ConfigError(f"{source}: level_score {self.level_score!r} is unknown; use one of "
+                              f"{', '.join(LEVEL_SCORES)}")
         if self.finetune_teacher not in TEACHERS:
             raise ConfigError(f"{source}: finetune_teacher {self.finetune_teacher!r} is unknown; use one of "
                               f"{', '.join(TEACHERS)}")
@@ -203,10 +215,11 @@ def _set_metrics(results: list[EpisodeResult]) -> SetMetrics:
     return SetMetrics(success=s, spl=spl, collisions=col, episodes=len(results), success_se=s_se, spl_se=spl_se)
 
 
-def rollout_scenes(store: SceneStore, names: list[str], weights: PolicyWeights, seed: int, executor: Executor
-                   ) -> list[Rollout]:
-    """One episode of the policy (and of the expert, for regret) in each named scene."""
-    jobs = [RolloutJob(weights, store.house(n), n, int(np.random.SeedSequence([seed, i]).generate_state(1)[0]))
+def rollout_scenes(store: SceneStore, names: list[str], weights: PolicyWeights, seed: int, executor: Executor,
+                   *, episodes: int = 1, explorer: bool = False) -> list[Rollout]:
+    """``episodes`` episodes of the policy (and of the expert, and the explorer if asked) in each named scene."""
+    jobs = [RolloutJob(weights, store.house(n), n, int(np.random.SeedSequence([seed, i]).generate_state(1)[0]),
+                       episodes, explorer)
             for i, n in enumerate(names)]
     return executor.map(run_rollout, jobs, desc="rollouts")
 
@@ -300,10 +313,11 @@ def _run_loop(cfg: LoopConfig, run_dir: str | Path, resume: bool, executor: Exec
         # 1. roll pi_t out in the scenes this method looks at (analysis or scoring)
         rolled = method.scenes_to_roll_out(it)
         say(f"t={t}: rolling out pi_{t - 1} in {len(rolled)} scenes")
-        rollouts = rollout_scenes(store, rolled, it.weights, it.seed(Stream.ROLLOUT_EPISODES), ex)
+        rollouts = rollout_scenes(store, rolled, it.weights, it.seed(Stream.ROLLOUT_EPISODES), ex,
+                                  episodes=cfg.score_rollouts, explorer=cfg.level_score == "explorer_regret")
         stages.lap("rollouts")
-        state.env_steps += sum(ro.result.steps for ro in rollouts)
-        train_metrics = _set_metrics([ro.result for ro in rollouts])
+        state.env_steps += sum(ro.steps for ro in rollouts)
+        train_metrics = _set_metrics([r for ro in rollouts for r in ro.results])
 
         # 2. the method's buffer and its new training scenes e_{t+1}
         method.update_buffer(it, rolled, rollouts)

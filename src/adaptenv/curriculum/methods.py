@@ -5,8 +5,8 @@ each iteration t (the split JaxUED's examples use between a resettable environme
 sampler):
 
 1. :meth:`Method.scenes_to_roll_out`: the scenes pi_t plays once each (analysed or scored);
-2. the loop rolls pi_t out in them (and the expert, for regret);
-3. :meth:`Method.update_buffer`: what goes into the level buffer, scored by regret (PLR, ACCEL);
+2. the loop rolls pi_t out in them ``score_rollouts`` times each (and the expert, for regret);
+3. :meth:`Method.update_buffer`: what goes into the level buffer, scored by :func:`level_score` (PLR, ACCEL, ours);
 4. :meth:`Method.make_scenes`: the new training scenes e_{t+1};
 5. :meth:`Method.train_on`: the scenes pi_t is fine-tuned on.
 
@@ -155,6 +155,22 @@ class DomainRandomization(Method):
         return rolled
 
 
+class SFL(Method):
+    """``sfl``: Sampling For Learnability (Rutherford et al., 2024). Each iteration scores ``sfl_candidates`` times
+    ``scenes_per_iteration`` fresh procedural houses by pi_t's learnability p(1-p) over ``score_rollouts``
+    episodes each, and trains on the most learnable ``scenes_per_iteration`` (plus the replay mix)."""
+
+    name = "sfl"
+
+    def scenes_to_roll_out(self, it: Iteration) -> list[str]:
+        return fresh_houses(it, it.cfg.sfl_candidates * it.cfg.scenes_per_iteration)
+
+    def make_scenes(self, it: Iteration, rolled: list[str], rollouts: list[Rollout]) -> list[str]:
+        scores = np.array([level_score(ro, "learnability") for ro in rollouts])
+        best = np.argsort(-scores, kind="stable")[:it.cfg.scenes_per_iteration]
+        return [rolled[i] for i in sorted(best.tolist())]
+
+
 class EditingMethod(Method):
     """Edit each rolled-out scene into a child with ``edit_steps`` single-object edits of one generator."""
 
@@ -220,7 +236,8 @@ class PLR(Method):
 
     def update_buffer(self, it: Iteration, rolled: list[str], rollouts: list[Rollout]) -> None:
         for name, ro in zip(rolled, rollouts, strict=True):
-            it.buffer = lb.insert(it.buffer, it.buffer_cfg, name, regret(ro), it.t, parent_id=it.parents.get(name))
+            it.buffer = lb.insert(it.buffer, it.buffer_cfg, name, level_score(ro, it.cfg.level_score), it.t,
+                                  parent_id=it.parents.get(name))
 
     def train_on(self, it: Iteration, rolled: list[str], new: list[str]) -> list[str]:
         if it.replayed:
@@ -289,7 +306,7 @@ class Ours(Method):
     def update_buffer(self, it: Iteration, rolled: list[str], rollouts: list[Rollout]) -> None:
         for name, ro in zip(rolled, rollouts, strict=True):
             if it.buffer.index(name) is None:
-                it.buffer = lb.insert(it.buffer, it.buffer_cfg, name, regret(ro), it.t)
+                it.buffer = lb.insert(it.buffer, it.buffer_cfg, name, level_score(ro, it.cfg.level_score), it.t)
 
     def make_scenes(self, it: Iteration, rolled: list[str], rollouts: list[Rollout]) -> list[str]:
         parents = it.replayed = self._pick(it, it.cfg.scenes_per_iteration, Stream.REPLAY)
@@ -304,12 +321,15 @@ class Ours(Method):
             it.made.append((job.name, made))
             it.state.edits += made.edits
             it.state.env_steps += made.rollout_steps
-            it.buffer = lb.insert(it.buffer, it.buffer_cfg, job.name, made.regret_before, it.t)
+            it.buffer = lb.insert(it.buffer, it.buffer_cfg, job.name,
+                                  diagnosed_score(made.success_before, made.regret_before, it.cfg.level_score), it.t)
             if not made.valid or made.edits == 0:
                 continue
             focus = (made.before.target_type,) if it.cfg.focus_training and made.before is not None else ()
             child = it.store.put(f"{job.name.split('~')[0]}~t{it.t:02d}{self.tag}{k:02d}", made.house, focus)
-            it.buffer = lb.insert(it.buffer, it.buffer_cfg, child, made.regret_after, it.t, parent_id=job.name)
+            it.buffer = lb.insert(it.buffer, it.buffer_cfg, child,
+                                  diagnosed_score(made.success_after, made.regret_after, it.cfg.level_score), it.t,
+                                  parent_id=job.name)
             children.append(child)
             if len(it.gallery) < it.cfg.gallery:
                 it.gallery.append(gallery_item(it.run_dir, it.t, child, job.house, made, made.before))
@@ -370,9 +390,38 @@ class OursLLM(Ours):
     uses_llm = True
 
 
-def regret(ro: Rollout) -> float:
-    """A level's score: the expert's measured success on pi_t's episode minus pi_t's (0 where the expert fails too)."""
-    return lb.regret_score(float(ro.result.success), ro.result.spl, float(ro.expert_success))
+LEVEL_SCORES = ("regret", "learnability", "explorer_regret")
+"""Scene scores of the level buffer (``LoopConfig.level_score``); ``sfl`` always uses learnability."""
+
+
+def learnability(p: float) -> float:
+    """SFL's learnability p(1-p) of a success rate p: highest where pi_t succeeds half the time."""
+    return p * (1.0 - p)
+
+
+def level_score(ro: Rollout, kind: str = "regret") -> float:
+    """A scene's score from pi_t's ``score_rollouts`` episodes in it (see :data:`LEVEL_SCORES`).
+
+    ``regret``: mean over episodes of the expert's success minus pi_t's (0 where the expert fails);
+    ``learnability``: p(1-p); ``explorer_regret``: the same regret with the map explorer, which searches
+    with what pi_t could know, as the reference.
+    """
+    agent = [float(r.success) for r in ro.results]
+    if kind == "learnability":
+        return learnability(ro.success_rate)
+    if kind == "explorer_regret":
+        if not ro.explorer_successes:
+            raise ValueError("explorer_regret needs rollouts with the explorer (rollout_scenes(..., explorer=True))")
+        return lb.success_regret(agent, [float(x) for x in ro.explorer_successes])
+    return lb.regret_score(agent, [r.spl for r in ro.results], [float(x) for x in ro.expert_successes])
+
+
+def diagnosed_score(success: float | None, regret: float | None, kind: str) -> float:
+    """The score of a scene ``ours`` diagnosed: learnability of its diagnosis success rate, else its regret
+    (the diagnosis runs the expert, not the explorer, so ``explorer_regret`` falls back to regret here)."""
+    if kind == "learnability" and success is not None:
+        return learnability(success)
+    return float(regret or 0.0)
 
 
 def seeds_buffer(it: Iteration) -> bool:
@@ -401,6 +450,6 @@ def fresh_houses(it: Iteration, k: int, *, oracle: bool = False) -> list[str]:
 
 
 #: Every method by name; add a method with one class and one line here.
-METHODS: dict[str, type[Method]] = {m.name: m for m in (NoNewScenes, RandomEdits, DomainRandomization, Oracle, PLR, ACCEL,
-                                                        Ours, OursNoSelect, OursRandomScene, OursNoF, OursDR,
-                                                        OursLLM)}
+METHODS: dict[str, type[Method]] = {m.name: m for m in (NoNewScenes, RandomEdits, DomainRandomization, SFL, Oracle,
+                                                        PLR, ACCEL, Ours, OursNoSelect, OursRandomScene, OursNoF,
+                                                        OursDR, OursLLM)}
