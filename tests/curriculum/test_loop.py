@@ -126,6 +126,43 @@ def test_an_unseeded_buffer_never_holds_the_training_scenes(method, tiny_policy,
         assert not set(scenes["rolled_out"]) & training and not set(scenes["trained_on"]) & training
 
 
+def test_loop_config_refuses_ppo_settings_that_do_not_apply():
+    with pytest.raises(ConfigError, match="finetune_algo"):
+        LoopConfig(finetune_algo="sac").check()
+    with pytest.raises(ConfigError, match="ppo only"):
+        LoopConfig(finetune_kl_coef=0.3).check()
+    with pytest.raises(ConfigError, match="fp32"):
+        LoopConfig(finetune_algo="ppo", finetune_precision="bf16").check()
+    with pytest.raises(ConfigError, match="level_score"):
+        LoopConfig(level_score="novelty").check()
+    cfg = finetune_config(LoopConfig(finetune_algo="ppo", finetune_kl_coef=0.3, finetune_explore_bonus=0.002,
+                                     finetune_max_steps=600), end_threshold=0.7)
+    assert (cfg.algo, cfg.kl_coef, cfg.explore_bonus, cfg.max_episode_steps) == ("ppo", 0.3, 0.002, 600)
+
+
+@pytest.mark.slow
+def test_the_loop_fine_tunes_by_anchored_ppo(tiny_policy, tmp_path, monkeypatch):
+    from adaptenv.agents import ppo
+
+    cards = []
+    real = ppo.train_ppo
+
+    def spy(pc, **kw):
+        result = real(pc, **kw)
+        cards.append(result.card)
+        return result
+
+    monkeypatch.setattr(ppo, "train_ppo", spy)
+    cfg = tiny_config(tiny_policy, "dr", iterations=1, finetune_algo="ppo", finetune_frames=8192,
+                      finetune_kl_coef=0.3, finetune_explore_bonus=0.002, finetune_max_steps=600)
+    records = run_loop(cfg, tmp_path / "ppo")
+    assert records[1].grad_updates > 0 and records[1].env_steps >= 8192
+    [card] = cards
+    assert card["algo"] == "ppo" and card["torch_threads"] == 1
+    assert {k: card["config"][k] for k in ("kl_coef", "explore_bonus", "max_episode_steps")} == \
+        {"kl_coef": 0.3, "explore_bonus": 0.002, "max_episode_steps": 600}
+
+
 def test_same_seed_same_results(tiny_policy, tmp_path):
     cfg = tiny_config(tiny_policy, "ours", iterations=1)
     a = run_loop(cfg, tmp_path / "a")

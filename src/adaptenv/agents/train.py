@@ -552,8 +552,10 @@ def finetune(net: NavNet, worlds: Sequence[NavWorld], cfg: FinetuneConfig, seed:
     ``algo='dagger'``: DAgger from the current weights with a fresh Adam optimizer, expert-action
     probability ``beta`` throughout, labels from ``cfg.teacher``, ``rollout_steps``-step blocks that are also the training
     sequences, a dataset holding the whole run. ``algo='ppo'``: :func:`adaptenv.agents.ppo.train_ppo`
-    on the simulator's reward (plus ``explore_bonus``, anchored by ``kl_coef``) with PPOConfig's
-    defaults for the rest (value warm-up at most half the iterations). Nothing is written to disk.
+    on the simulator's reward (plus ``explore_bonus``, anchored by ``kl_coef``) to ``max_episode_steps``,
+    with PPOConfig's defaults for the rest (128-step rollouts, 32-step sequences; value warm-up at most a
+    quarter of the iterations) on one torch thread, so results do not depend on the core count.
+    Nothing is written to disk.
     """
     if cfg.algo not in ("dagger", "ppo"):
         raise ConfigError(f"FinetuneConfig.algo must be 'dagger' or 'ppo', got {cfg.algo!r}")
@@ -567,13 +569,14 @@ def finetune(net: NavNet, worlds: Sequence[NavWorld], cfg: FinetuneConfig, seed:
         # cycle: ppo imports this module (RunLogger, TrainResult)
         from adaptenv.agents.ppo import train_ppo
 
-        iterations = -(-cfg.frames // (cfg.num_envs * cfg.rollout_steps))
-        pc = PPOConfig(houses="(in memory)", value_warmup_iters=min(PPOConfig.value_warmup_iters, iterations // 2), frames=cfg.frames, init="", output="", seed=seed, num_envs=cfg.num_envs,
-                       rollout_steps=cfg.rollout_steps, chunk_len=cfg.rollout_steps,
+        iterations = -(-cfg.frames // (cfg.num_envs * PPOConfig.rollout_steps))
+        pc = PPOConfig(houses="(in memory)", value_warmup_iters=min(PPOConfig.value_warmup_iters, iterations // 4),
+                       frames=cfg.frames, init="", output="", seed=seed, num_envs=cfg.num_envs,
                        learning_rate=cfg.learning_rate, end_threshold=cfg.end_threshold,
                        calibrate_episodes=cfg.calibrate_episodes, eval_every=0, final_eval_episodes=evals,
-                       min_start_distance=cfg.min_start_distance, kl_coef=cfg.kl_coef,
-                       explore_bonus=cfg.explore_bonus, progress=False, tensorboard=False)
+                       min_start_distance=cfg.min_start_distance, max_episode_steps=cfg.max_episode_steps,
+                       kl_coef=cfg.kl_coef, explore_bonus=cfg.explore_bonus, threads=1, progress=False,
+                       tensorboard=False)
         result = train_ppo(pc, worlds=worlds, init_net=net)
         return result.net, result.card
     steps = cfg.rollout_steps

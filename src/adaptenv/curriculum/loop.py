@@ -111,8 +111,11 @@ class LoopConfig:
     """sfl: fresh houses scored per training scene; it trains on the most learnable 1 in sfl_candidates."""
     edit_steps: int = 5
     """Single-object edits per adapted scene (editing methods)."""
+    finetune_algo: str = "dagger"
+    """How pi_t is fine-tuned: dagger (imitation of finetune_teacher) or ppo (anchored PPO on the simulator's
+    reward, docs/agent.md)."""
     finetune_frames: int = FinetuneConfig.frames
-    """Labelled frames of DAgger fine-tuning per iteration (identical for every method)."""
+    """Environment frames of fine-tuning per iteration (identical for every method)."""
     finetune_envs: int = FinetuneConfig.num_envs
     """Parallel agents while fine-tuning."""
     finetune_lr: float = FinetuneConfig.learning_rate
@@ -130,6 +133,10 @@ class LoopConfig:
     """Probability that the teacher's action is executed while fine-tuning (DAgger's beta, constant)."""
     finetune_max_steps: int = FinetuneConfig.max_episode_steps
     """Episode cap of fine-tuning's episodes (the map-reading agent trains to the evaluation's 600)."""
+    finetune_kl_coef: float = 0.0
+    """ppo: weight of the KL anchor to pi_t (0.3 in the PPO runs of docs/agent.md)."""
+    finetune_explore_bonus: float = 0.0
+    """ppo: reward per newly seen map cell (0.002 in the PPO runs of docs/agent.md)."""
     replay_fraction: float = 0.5
     """Share of the fine-tuning scenes drawn from earlier scenes so the policy does not forget."""
     heldout_episodes: int = 100
@@ -171,6 +178,14 @@ class LoopConfig:
             raise ConfigError(f"{source}: edit_steps must be >= 0, diagnose_episodes >= 1 and replay_fraction "
                               "in [0, 1)")
         check_precision(self.finetune_precision, f"{source}: finetune_precision")
+        if self.finetune_algo not in ("dagger", "ppo"):
+            raise ConfigError(f"{source}: finetune_algo must be dagger or ppo, got {self.finetune_algo!r}")
+        if self.finetune_algo == "ppo" and self.finetune_precision != "fp32":
+            raise ConfigError(f"{source}: finetune_precision {self.finetune_precision!r} applies to dagger only; "
+                              "use fp32 with finetune_algo ppo")
+        if self.finetune_algo == "dagger" and (self.finetune_kl_coef or self.finetune_explore_bonus):
+            raise ConfigError(f"{source}: finetune_kl_coef and finetune_explore_bonus apply to ppo only; set "
+                              "finetune_algo to ppo or leave them 0")
         if not 0.0 <= self.finetune_beta <= 1.0 or self.finetune_max_steps < 1:
             raise ConfigError(f"{source}: finetune_beta must lie in [0, 1] and finetune_max_steps be positive, got "
                               f"{self.finetune_beta} and {self.finetune_max_steps}")
@@ -247,8 +262,9 @@ def evaluate_sets(weights: PolicyWeights, specs: dict[str, str], episodes: int, 
 
 def finetune_config(cfg: LoopConfig, end_threshold: float) -> FinetuneConfig:
     """The loop's fine-tuning recipe (identical for every method): DAgger at ``finetune_beta`` with
-    ``finetune_teacher``'s labels, episodes starting ``finetune_min_start`` or more from the target."""
-    return FinetuneConfig(frames=cfg.finetune_frames, num_envs=cfg.finetune_envs, learning_rate=cfg.finetune_lr,
+    ``finetune_teacher``'s labels, or anchored PPO; episodes start ``finetune_min_start`` or more from the target."""
+    return FinetuneConfig(algo=cfg.finetune_algo, kl_coef=cfg.finetune_kl_coef,
+                          explore_bonus=cfg.finetune_explore_bonus, frames=cfg.finetune_frames, num_envs=cfg.finetune_envs, learning_rate=cfg.finetune_lr,
                           end_threshold=end_threshold, teacher=cfg.finetune_teacher,
                           min_start_distance=cfg.finetune_min_start, precision=cfg.finetune_precision,
                           beta=cfg.finetune_beta, max_episode_steps=cfg.finetune_max_steps)
