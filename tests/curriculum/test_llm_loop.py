@@ -49,7 +49,7 @@ def llm_loop(policy: Path, server, **llm) -> dict:
     return dict(method="ours-llm", policy=str(policy), houses="preset:tiny", heldout={"tiny": "preset:tiny"},
                 iterations=2, scenes_per_iteration=2, edit_steps=1, finetune_frames=256, finetune_envs=8,
                 heldout_episodes=1, gallery=1, diagnose_episodes=1,
-                llm={"provider": "openai-compatible", "base_url": server.url, "model": "vlm",
+                llm={"provider": "openai-compatible", "base_url": server.url if server else "", "model": "vlm",
                      "api_key_env": "MY_LLM_KEY", "price_in": 0.4, "price_out": 1.6, **llm})
 
 
@@ -134,3 +134,22 @@ def test_a_second_identical_loop_replays_from_the_cache_without_requests(tmp_pat
     replay = UsageLedger.read(tmp_path / "b").total
     assert replay["calls"] == 0 and replay["cache_hits"] == made
     assert [r.edits for r in again] == [r.edits for r in first]
+
+
+@pytest.mark.slow
+def test_an_unreachable_llm_stops_the_run_with_one_clear_error(tmp_path, tiny_policy, monkeypatch):
+    import socket
+
+    from adaptenv.adapt.llm import LLMUnavailableError
+
+    monkeypatch.setenv("MY_LLM_KEY", KEY)
+    with socket.socket() as s:  # a loopback port nothing listens on
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    cfg = LoopConfig(**{**llm_loop(tiny_policy, None), "llm": {
+        "provider": "openai-compatible", "base_url": f"http://127.0.0.1:{port}/v1", "model": "vlm",
+        "api_key_env": "MY_LLM_KEY", "max_retries": 0, "timeout_s": 5}})
+    with pytest.raises(LLMUnavailableError) as info:
+        run_loop(cfg, tmp_path)
+    assert "\n" not in str(info.value) and f"127.0.0.1:{port}" in str(info.value)
+    assert [r.iteration for r in read_iterations(tmp_path)] == [0], "no iteration is recorded as if the LLM had run"

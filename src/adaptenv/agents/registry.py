@@ -3,6 +3,8 @@
 Accepted specs (every command taking ``--policy`` uses :func:`resolve_policy`):
 
 - ``pretrained``: the checkpoint shipped in the package (``adaptenv/agents/data/pretrained.pt``).
+- ``pretrained-map``: the map-reading checkpoint taught by the map explorer; ``pretrained-ppo``: it
+  after anchored PPO (docs/agent.md has their cards).
 - ``expert``: the shortest-path expert (privileged).
 - ``explorer``: frontier exploration on the agent's own map, then the shortest path to a sighted
   target (knows its pose, not the target's location; :mod:`adaptenv.agents.explorer`).
@@ -27,12 +29,12 @@ from adaptenv.agents.map_explorer import MapExplorerPolicy
 from adaptenv.agents.policy import ExpertPolicy, Policy, RandomPolicy
 from adaptenv.errors import ConfigError
 
-SHIPPED = ("pretrained", "pretrained-map")
-"""Checkpoints shipped in the package: the scan-only pi_0 and the map-reading one (docs/agent.md)."""
+SHIPPED = ("pretrained", "pretrained-map", "pretrained-ppo")
+"""Checkpoints shipped in the package: the scan-only pi_0, the map-reading one, and it after anchored PPO (docs/agent.md)."""
 BUILTINS = (*SHIPPED, "expert", "explorer", "map-explorer", "random")
-_HELP = ("expected pretrained, pretrained-map, expert, explorer, map-explorer, random, a checkpoint path (.pt) or "
+_HELP = ("expected pretrained, pretrained-map, pretrained-ppo, expert, explorer, map-explorer, random, a checkpoint path (.pt) or "
          "module:attribute (e.g. examples/my_policy.py:policy)")
-POLICY_HELP = ("Policy: pretrained, pretrained-map, expert, explorer, map-explorer, random, a checkpoint path (.pt), "
+POLICY_HELP = ("Policy: pretrained, pretrained-map, pretrained-ppo, expert, explorer, map-explorer, random, a checkpoint path (.pt), "
                "or module:attribute.")
 
 
@@ -56,7 +58,7 @@ def load_pretrained(name: str = "pretrained", *, greedy: bool = False, seed: int
 
 
 def init_checkpoint(spec: str, *, flag: str = "--init") -> Path:
-    """The checkpoint a warm start (``--init``) names: ``pretrained`` or ``pretrained-map`` for a shipped one, else a path.
+    """The checkpoint a warm start (``--init``) names: a SHIPPED name for a shipped one, else a path.
 
     The other ``--policy`` names (expert, explorer, map-explorer, random, module:attribute) have no network to
     start from and raise ConfigError.
