@@ -57,7 +57,7 @@ def test_the_fine_tuning_recipe_carries_the_loop_settings():
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("method", [m for m in METHODS if m != "ours-llm"])
+@pytest.mark.parametrize("method", [m for m in METHODS if m not in ("ours-llm", "dr-matched")])
 def test_every_method_runs_and_counts_its_budget(method, tiny_policy, tmp_path):
     roomy = method in ("ours", "ours-randomscene", "ours-nof", "ours-dr")  # a buffer no level is evicted from, to check them all
     cfg = tiny_config(tiny_policy, method, **({"buffer_capacity": 16} if roomy else {}))
@@ -161,6 +161,36 @@ def test_the_loop_fine_tunes_by_anchored_ppo(tiny_policy, tmp_path, monkeypatch)
     assert card["algo"] == "ppo" and card["torch_threads"] == 1
     assert {k: card["config"][k] for k in ("kl_coef", "explore_bonus", "max_episode_steps")} == \
         {"kl_coef": 0.3, "explore_bonus": 0.002, "max_episode_steps": 600}
+
+
+@pytest.mark.slow
+def test_dr_matched_spends_the_environment_steps_of_the_run_it_matches(tiny_policy, tmp_path):
+    ours = run_loop(tiny_config(tiny_policy, "ours", iterations=2, buffer_capacity=16), tmp_path / "ours")
+    cfg = tiny_config(tiny_policy, "dr-matched", iterations=2, match_run=str(tmp_path / "ours"))
+    matched = run_loop(cfg, tmp_path / "matched")
+    plain = run_loop(tiny_config(tiny_policy, "dr", iterations=2), tmp_path / "dr")
+    block = cfg.finetune_envs * 32  # fine-tuning collects whole blocks of agents x rollout steps
+    assert ours[2].env_steps > plain[2].env_steps, "ours spends steps beyond fine-tuning (diagnosis, G's checks)"
+    for t in (1, 2):
+        assert abs(matched[t].env_steps - ours[t].env_steps) < block, "equal environment steps, iteration by iteration"
+    assert matched[2].grad_updates > plain[2].grad_updates, "the extra steps become extra fine-tuning"
+
+
+def test_dr_matched_needs_the_run_it_matches(tmp_path):
+    from adaptenv.curriculum.experiment import ExperimentConfig
+    from adaptenv.curriculum.methods import matched_steps
+
+    with pytest.raises(ConfigError, match="match_run"):
+        LoopConfig(method="dr-matched").check()
+    with pytest.raises(ConfigError, match="no such run folder"):
+        matched_steps(tmp_path / "missing", 1)
+    (tmp_path / "empty").mkdir()
+    with pytest.raises(ConfigError, match="iteration 1 did not finish"):
+        matched_steps(tmp_path / "empty", 1, wait_s=0.0)
+    with pytest.raises(ConfigError, match="list ours before dr-matched"):
+        ExperimentConfig(methods=["dr-matched", "ours"], seeds=[0]).check()
+    cfg = ExperimentConfig(methods=["ours", "dr-matched"], seeds=[3])
+    assert cfg.check().loop_config("dr-matched", 3, tmp_path).match_run == str(tmp_path / "ours" / "seed_3")
 
 
 def test_same_seed_same_results(tiny_policy, tmp_path):

@@ -32,7 +32,7 @@ def _rollouts(successes: list[bool], experts: list[bool] | None = None, explorer
 
 
 def test_every_method_is_registered_by_its_name():
-    assert set(M.METHODS) == {"none", "random", "dr", "sfl", "oracle", "plr", "accel", "ours", "ours-noselect",
+    assert set(M.METHODS) == {"none", "random", "dr", "dr-matched", "sfl", "oracle", "plr", "accel", "ours", "ours-noselect",
                               "ours-randomscene", "ours-nof", "ours-dr", "ours-llm"}
     assert all(cls.name == name for name, cls in M.METHODS.items())
     assert M.METHODS["ours"].generator == "failure-modes" and M.METHODS["ours-nof"].generator == "regret-only"

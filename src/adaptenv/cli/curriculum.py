@@ -91,14 +91,28 @@ def loop(
     houses: str = typer.Option("preset:pretrain-train", "--houses", help="Training scenes: a folder of house "
                                 "JSON files, a house file, a dataset FILE.jsonl[.gz][:START:STOP] or preset:NAME."),
     iterations: int = typer.Option(3, "--iterations", "-T", min=1, help="Loop iterations."),
-    method: str = typer.Option("ours", "--method", help="none, random, dr, sfl, plr, accel, ours, ours-noselect, "
-                                "ours-randomscene, ours-nof, ours-dr or ours-llm."),
+    method: str = typer.Option("ours", "--method", help="none, random, dr, dr-matched, sfl, plr, accel, ours, "
+                                "ours-noselect, ours-randomscene, ours-nof, ours-dr or ours-llm."),
     seed: int = typer.Option(0, "--seed", help="Root seed."),
     out: Path = typer.Option(Path("runs/loop"), "-o", "--out", help="Run folder."),
     resume: bool = typer.Option(False, "--resume", help="Continue the run in --out from its last iteration."),
     scenes: int = typer.Option(8, "--scenes", min=1, help="Scenes rolled out and made per iteration."),
     edit_steps: int = typer.Option(5, "--edit-steps", min=0, help="Single-object edits per adapted scene."),
-    finetune_frames: int = typer.Option(16_384, "--finetune-frames", min=1, help="DAgger frames per iteration."),
+    finetune_frames: int = typer.Option(16_384, "--finetune-frames", min=1, help="Fine-tuning frames per iteration."),
+    finetune_algo: str = typer.Option("dagger", "--finetune-algo", help="Fine-tuning: dagger (imitation of "
+                                      "--finetune-teacher) or ppo (anchored PPO on the simulator's reward)."),
+    finetune_kl_coef: float = typer.Option(0.0, "--finetune-kl-coef", min=0.0, help="ppo: weight of the KL anchor "
+                                           "to pi_t (0.3 in docs/agent.md's runs)."),
+    finetune_explore_bonus: float = typer.Option(0.0, "--finetune-explore-bonus", min=0.0, help="ppo: reward per "
+                                                 "newly seen map cell (0.002 in docs/agent.md's runs)."),
+    score_rollouts: int = typer.Option(4, "--score-rollouts", min=1, help="Episodes of pi_t per rolled-out scene; "
+                                       "scene scores average them."),
+    level_score: str = typer.Option("regret", "--level-score", help="Scene score of plr, accel and ours: regret, "
+                                    "learnability (p(1-p)) or explorer_regret."),
+    sfl_candidates: int = typer.Option(4, "--sfl-candidates", min=1, help="sfl: fresh houses scored per training "
+                                       "scene kept."),
+    match_run: str = typer.Option("", "--match-run", help="dr-matched: the run folder (same seed) whose "
+                                  "environment steps per iteration it matches."),
     finetune_lr: float = typer.Option(1e-4, "--finetune-lr", min=0.0, help="Adam learning rate of fine-tuning."),
     finetune_teacher: str = typer.Option("expert", "--finetune-teacher", help="Who labels fine-tuning's states: "
                                          "expert, explorer (searches), map-explorer (searches on the agent's own map) "
@@ -156,9 +170,13 @@ def loop(
                            allow_target_moves=allow_target_moves or None)
     cfg = LoopConfig(method=method, policy=policy, houses=houses, iterations=iterations, seed=seed,
                      scenes_per_iteration=scenes, edit_steps=edit_steps, finetune_frames=finetune_frames,
-                     finetune_lr=finetune_lr, finetune_teacher=finetune_teacher,
+                     finetune_lr=finetune_lr, finetune_teacher=finetune_teacher, finetune_algo=finetune_algo,
+                     finetune_kl_coef=finetune_kl_coef, finetune_explore_bonus=finetune_explore_bonus,
+                     score_rollouts=score_rollouts, level_score=level_score, sfl_candidates=sfl_candidates,
+                     match_run=match_run,
                      finetune_min_start=finetune_min_start, finetune_precision=finetune_precision,
-                     finetune_beta=finetune_beta, finetune_max_steps=finetune_max_steps, relocate_targets=relocate_targets, focus_training=focus_training,
+                     finetune_beta=finetune_beta, finetune_max_steps=finetune_max_steps,
+                     relocate_targets=relocate_targets, focus_training=focus_training,
                      heldout_episodes=heldout_episodes, llm=llm, **({"heldout": h} if (h := _heldout(heldout)) else {}))
     check_house_sets([cfg.houses, *cfg.heldout.values()], strict, console.print)
     command = shlex.join(["adaptenv", *sys.argv[1:]])

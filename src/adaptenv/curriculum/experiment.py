@@ -109,13 +109,21 @@ class ExperimentConfig:
             twice = next((v for i, v in enumerate(values) if v in values[:i]), None)
             if twice is not None:
                 raise ConfigError(f"{source}: {name} lists {twice!r} twice; list each once (runs share a folder)")
+        matched = self.loop.get("match_method", "ours")
+        if "dr-matched" in self.methods and matched not in self.methods[:self.methods.index("dr-matched")]:
+            raise ConfigError(f"{source}: methods: dr-matched matches {matched}'s environment steps; list "
+                              f"{matched} before dr-matched")
         for m in self.methods:
             for seed in self.seeds:
-                self.loop_config(m, seed).check(f"{source}: loop")
+                self.loop_config(m, seed, Path("OUT")).check(f"{source}: loop")
         return self
 
-    def loop_config(self, method: str, seed: int) -> LoopConfig:
-        return LoopConfig(**{**self.loop, "method": method, "seed": seed})
+    def loop_config(self, method: str, seed: int, out: Path | None = None) -> LoopConfig:
+        """One run's settings; ``dr-matched`` runs of experiment folder ``out`` match the same seed's run there."""
+        fields = {**self.loop, "method": method, "seed": seed}
+        if method == "dr-matched" and out is not None and not fields.get("match_run"):
+            fields["match_run"] = str(run_dir(out, fields.get("match_method", "ours"), seed))
+        return LoopConfig(**fields)
 
 
 def run_dir(out: Path, method: str, seed: int) -> Path:
@@ -159,7 +167,7 @@ def run_experiment(cfg: ExperimentConfig, out: str | Path, *, executor: Any = No
     out.mkdir(parents=True, exist_ok=True)
     atomic_write_text(out / "experiment.json", json.dumps(asdict(cfg), indent=1))
     # seed by seed: an experiment stopped early leaves whole seeds (every method), the unit of the paired tests
-    jobs = [(asdict(cfg.loop_config(m, s)), str(run_dir(out, m, s)), command, final_episodes) for s in cfg.seeds
+    jobs = [(asdict(cfg.loop_config(m, s, out)), str(run_dir(out, m, s)), command, final_episodes) for s in cfg.seeds
             for m in cfg.methods]
     if executor is None:
         for i, job in enumerate(jobs):

@@ -7,6 +7,7 @@ methods lives in their strategy classes (:mod:`adaptenv.curriculum.methods`):
 - ``none``: no new scenes; fine-tune on the original training scenes.
 - ``random``: ``edit_steps`` random single-object edits of each rolled-out training scene.
 - ``dr``: domain randomization, fresh procedural houses.
+- ``dr-matched``: ``dr`` with as many environment steps per iteration as another run (``match_run``).
 - ``sfl``: Sampling For Learnability; scores fresh procedural houses by p(1-p) and trains on the most learnable.
 - ``plr``: Robust PLR; fresh procedural houses are only scored (regret against the expert's
   measured success), gradient steps are taken on levels replayed from a prioritized buffer.
@@ -35,7 +36,7 @@ import json
 import shutil
 import time
 from collections.abc import Callable
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -88,7 +89,7 @@ class LoopConfig:
     """Settings of one closed-loop run (one method, one seed); saved as run.json."""
 
     method: str = "ours"
-    """One of none, random, dr, sfl, plr, accel, ours, ours-noselect, ours-randomscene, ours-nof, ours-dr, ours-llm."""
+    """One of none, random, dr, dr-matched, sfl, plr, accel, ours, ours-noselect, ours-randomscene, ours-nof, ours-dr, ours-llm."""
     policy: str = "pretrained"
     """Starting policy pi_0: pretrained or a checkpoint path (it must be a neural policy to fine-tune)."""
     houses: str = "preset:pretrain-train"
@@ -109,6 +110,10 @@ class LoopConfig:
     success rate) or explorer_regret (the map explorer's success - pi_t's; one more rollout per episode)."""
     sfl_candidates: int = 4
     """sfl: fresh houses scored per training scene; it trains on the most learnable 1 in sfl_candidates."""
+    match_method: str = "ours"
+    """dr-matched: the method whose environment steps it matches (an experiment runs it first, same seed)."""
+    match_run: str = ""
+    """dr-matched: that run's folder (an experiment fills it in: OUT/<match_method>/seed_<seed>)."""
     edit_steps: int = 5
     """Single-object edits per adapted scene (editing methods)."""
     finetune_algo: str = "dagger"
@@ -191,6 +196,11 @@ class LoopConfig:
                               f"{self.finetune_beta} and {self.finetune_max_steps}")
         if self.finetune_min_start < 0:
             raise ConfigError(f"{source}: finetune_min_start must be >= 0 metres, got {self.finetune_min_start}")
+        if self.method == "dr-matched" and (self.match_method not in METHODS or self.match_method == "dr-matched"):
+            raise ConfigError(f"{source}: match_method {self.match_method!r} must name another method, e.g. ours")
+        if self.method == "dr-matched" and not self.match_run:
+            raise ConfigError(f"{source}: dr-matched needs match_run, the folder of the run it matches (--match-run); "
+                              "an experiment fills it in")
         if self.level_score not in LEVEL_SCORES:
             raise ConfigError(f"{source}: level_score {self.level_score!r} is unknown; use one of "
                               f"{', '.join(LEVEL_SCORES)}")
@@ -322,7 +332,7 @@ def _run_loop(cfg: LoopConfig, run_dir: str | Path, resume: bool, executor: Exec
         shutil.rmtree(iteration_dir(run_dir, t), ignore_errors=True)  # a killed attempt at t starts over
         it = Iteration(t=t, cfg=cfg, state=state, store=store, executor=ex, run_dir=run_dir,
                        buffer=lb.LevelBufferState.from_dict(state.buffer) if state.buffer else lb.empty_state(),
-                       buffer_cfg=bcfg, weights=PolicyWeights.of(pi_t))
+                       buffer_cfg=bcfg, weights=PolicyWeights.of(pi_t), steps_before=state.env_steps)
         edits_before = state.edits
         stages = StageClock()
 
@@ -347,9 +357,10 @@ def _run_loop(cfg: LoopConfig, run_dir: str | Path, resume: bool, executor: Exec
             for line in iteration_lines(t, [n for n, _ in it.made], made, run_dir, cfg.llm):
                 say(line)
 
-        # 3. fine-tune pi on the chosen scenes with expert labels
-        say(f"t={t}: fine-tuning on {len(train_names)} scenes ({cfg.finetune_frames} frames)")
-        net, card = finetune(pi_t.net, [store.world(x) for x in train_names], finetune_config(cfg, pi_t.end_threshold),
+        # 3. fine-tune pi on the chosen scenes (DAgger with the teacher's labels, or anchored PPO)
+        ft = replace(finetune_config(cfg, pi_t.end_threshold), frames=method.finetune_frames(it))
+        say(f"t={t}: fine-tuning on {len(train_names)} scenes ({ft.frames} frames)")
+        net, card = finetune(pi_t.net, [store.world(x) for x in train_names], ft,
                              seed=it.seed(Stream.FINETUNE) % 2**31)
         state.env_steps += int(card["frames"])
         state.grad_updates += int(card["updates"])

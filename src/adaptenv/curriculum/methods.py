@@ -17,6 +17,7 @@ every random choice comes from a named :class:`Stream` of ``(seed, t)``.
 
 from __future__ import annotations
 
+import time
 from dataclasses import dataclass, field
 from enum import IntEnum
 from pathlib import Path
@@ -36,7 +37,8 @@ from adaptenv.curriculum.jobs import (
     needs_policy,
     run_generate,
 )
-from adaptenv.curriculum.records import GalleryItem, SceneStore
+from adaptenv.curriculum.records import GalleryItem, SceneStore, read_iterations
+from adaptenv.errors import ConfigError
 from adaptenv.scene.procedural import generate_house, preset_spec
 
 if TYPE_CHECKING:
@@ -87,6 +89,8 @@ class Iteration:
     """Buffer levels replayed this iteration (ACCEL trains on them)."""
     made: list[tuple[str, Generated]] = field(default_factory=list)
     """Every scene the method's generation jobs made this iteration (parent name, what the job returned)."""
+    steps_before: int = 0
+    """Environment steps of the run when this iteration began."""
 
     def rng(self, stream: Stream) -> np.random.Generator:
         """The generator of one named purpose of this iteration, independent of every other."""
@@ -118,6 +122,10 @@ class Method:
     def make_scenes(self, it: Iteration, rolled: list[str], rollouts: list[Rollout]) -> list[str]:
         """The new training scenes e_{t+1} (none by default)."""
         return []
+
+    def finetune_frames(self, it: Iteration) -> int:
+        """Fine-tuning frames of this iteration (the same ``finetune_frames`` for every method but ``dr-matched``)."""
+        return it.cfg.finetune_frames
 
     def train_on(self, it: Iteration, rolled: list[str], new: list[str]) -> list[str]:
         """The new scenes plus earlier ones (``replay_fraction`` of the mix) so the policy does not forget."""
@@ -153,6 +161,37 @@ class DomainRandomization(Method):
 
     def make_scenes(self, it: Iteration, rolled: list[str], rollouts: list[Rollout]) -> list[str]:
         return rolled
+
+
+class DRMatched(DomainRandomization):
+    """``dr-matched``: ``dr`` given as many environment steps as another run (``match_run``, e.g. ``ours`` of the
+    same seed) spent in each iteration: what that run spent beyond this one's rollouts (F's diagnosis, G's
+    rollout checks, scoring) becomes extra fine-tuning frames, so the two compare at equal environment steps."""
+
+    name = "dr-matched"
+
+    def finetune_frames(self, it: Iteration) -> int:
+        spent = matched_steps(Path(it.cfg.match_run), it.t)
+        return max(it.cfg.finetune_frames, spent - (it.state.env_steps - it.steps_before))
+
+
+#: How long ``dr-matched`` waits for the matched run's iteration (an experiment runs the two side by side).
+MATCH_WAIT_S = 6 * 3600.0
+
+
+def matched_steps(run: Path, t: int, *, wait_s: float = MATCH_WAIT_S, poll_s: float = 10.0) -> int:
+    """Environment steps the run in folder ``run`` spent in its iteration ``t``, waiting up to ``wait_s`` for it."""
+    if not run.is_dir():
+        raise ConfigError(f"match_run {run}: no such run folder; run the method it matches first (same seed)")
+    deadline = time.monotonic() + wait_s
+    while True:
+        steps = {r.iteration: r.env_steps for r in read_iterations(run)}
+        if t in steps and t - 1 in steps:
+            return steps[t] - steps[t - 1]
+        if time.monotonic() >= deadline:
+            raise ConfigError(f"match_run {run}: iteration {t} did not finish within {wait_s:.0f} s; "
+                              "finish that run, then resume this one")
+        time.sleep(poll_s)
 
 
 class SFL(Method):
@@ -450,6 +489,6 @@ def fresh_houses(it: Iteration, k: int, *, oracle: bool = False) -> list[str]:
 
 
 #: Every method by name; add a method with one class and one line here.
-METHODS: dict[str, type[Method]] = {m.name: m for m in (NoNewScenes, RandomEdits, DomainRandomization, SFL, Oracle,
-                                                        PLR, ACCEL, Ours, OursNoSelect, OursRandomScene, OursNoF,
-                                                        OursDR, OursLLM)}
+METHODS: dict[str, type[Method]] = {m.name: m for m in (NoNewScenes, RandomEdits, DomainRandomization, DRMatched,
+                                                        SFL, Oracle, PLR, ACCEL, Ours, OursNoSelect,
+                                                        OursRandomScene, OursNoF, OursDR, OursLLM)}
