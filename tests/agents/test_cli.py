@@ -64,7 +64,7 @@ def test_cli_evaluate_compares_sets_and_rejects_unknown_policies(tmp_path):
     assert cmp["drops"]["preset:tiny"]["success"]["drop"] == 0.0
     res = runner.invoke(app, ["evaluate", "--policy", "nonsense", "--houses", "preset:tiny", "-o", str(tmp_path)])
     assert res.exit_code != 0 and isinstance(res.exception, ConfigError)
-    assert "pretrained, pretrained-map, expert, explorer, map-explorer, random" in str(res.exception)
+    assert "pretrained, pretrained-map, pretrained-ppo, expert, explorer, map-explorer, random" in str(res.exception)
 
 
 def test_cli_train_help_lists_every_config_field():

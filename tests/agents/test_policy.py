@@ -192,3 +192,22 @@ def test_shipped_map_reading_checkpoint_loads_with_its_card():
     assert "--map" in card["command"] and "--teacher map-explorer" in card["command"] and "selection" in card
     assert isinstance(policy.initial_state(2), MapState)
     assert init_checkpoint("pretrained-map") == pretrained_path("pretrained-map")
+
+
+def test_shipped_ppo_checkpoint_loads_with_its_card_and_selection():
+    import json
+
+    from adaptenv.agents.network import MapState
+    from adaptenv.agents.registry import init_checkpoint, pretrained_path
+
+    policy = resolve_policy("pretrained-ppo")
+    card = json.loads(pretrained_path("pretrained-ppo").with_suffix(".json").read_text())
+    assert policy.name == "pretrained-ppo" and policy.net.config.map_channels > 0
+    assert policy.end_threshold == card["end_threshold"] == card["end_threshold_calibration"]["threshold"]
+    assert card["algo"] == "ppo" and card["command"].startswith("adaptenv ppo") and "--kl-coef" in card["command"]
+    assert [s["stage"] for s in card["stages"]] == [1, 2] and card["stages"][0]["init"] == "pretrained-map"
+    assert card["frames_total"] == sum(s["frames"] for s in card["stages"])
+    assert "docs/results/ppo-pi0/DECLARED.md" in card["selection"]
+    assert '": "/' not in json.dumps(card) and " /" not in card["command"], "no absolute paths in the card"
+    assert isinstance(policy.initial_state(2), MapState)
+    assert init_checkpoint("pretrained-ppo") == pretrained_path("pretrained-ppo")
