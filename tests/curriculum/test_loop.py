@@ -193,6 +193,19 @@ def test_dr_matched_needs_the_run_it_matches(tmp_path):
     assert cfg.check().loop_config("dr-matched", 3, tmp_path).match_run == str(tmp_path / "ours" / "seed_3")
 
 
+@pytest.mark.slow
+def test_ours_edits_already_edited_scenes_again(tiny_policy, tmp_path):
+    """Edits compound across iterations, as ACCEL's do: a child in the buffer is picked and edited into a grandchild."""
+    cfg = tiny_config(tiny_policy, "ours", iterations=2, seed_buffer=False, buffer_capacity=4)
+    run_loop(cfg, tmp_path)
+    second = json.loads((tmp_path / "iter_0002" / "scenes.json").read_text())
+    edited_again = [x for x in second["replayed"] if "~t01" in x]
+    assert edited_again, "seed 0 picks an iteration-1 child at t=2"
+    grandchildren = [c for c, p in second["parents"].items() if p in edited_again]
+    assert grandchildren and set(grandchildren) & set(second["trained_on"]), "its child is trained on"
+    assert all(p in second["replayed"] for p in second["parents"].values()), "every child names its parent"
+
+
 def test_same_seed_same_results(tiny_policy, tmp_path):
     cfg = tiny_config(tiny_policy, "ours", iterations=1)
     a = run_loop(cfg, tmp_path / "a")

@@ -382,7 +382,7 @@ def _run_loop(cfg: LoopConfig, run_dir: str | Path, resume: bool, executor: Exec
                                        stage_seconds=stages.seconds, llm_usage=llm_usage))
         (iteration_dir(run_dir, t) / "scenes.json").write_text(json.dumps(
             {"rolled_out": rolled, "replayed": it.replayed, "trained_on": train_names,
-             "edits_this_iteration": state.edits - edits_before}),
+             "edits_this_iteration": state.edits - edits_before, "parents": it.parents}),
             encoding="utf-8")
         _checkpoint(run_dir, cfg, state, records)
     return records

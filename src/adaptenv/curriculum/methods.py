@@ -84,7 +84,7 @@ class Iteration:
     run_dir: Path
     gallery: list[GalleryItem] = field(default_factory=list)
     parents: dict[str, str] = field(default_factory=dict)
-    """Rolled-out scene -> the buffer level it was made from (ACCEL's children)."""
+    """Scene edited this iteration -> the scene it was edited from (ACCEL's children, editing methods' and ours')."""
     replayed: list[str] = field(default_factory=list)
     """Buffer levels replayed this iteration (ACCEL trains on them)."""
     made: list[tuple[str, Generated]] = field(default_factory=list)
@@ -230,6 +230,7 @@ class EditingMethod(Method):
             it.state.edits += made.edits
             it.state.env_steps += made.rollout_steps
             new.append(it.store.put(f"{job.name.split('~')[0]}~t{it.t:02d}{self.tag}{k:02d}", made.house))
+            it.parents[new[-1]] = job.name
             if len(it.gallery) < it.cfg.gallery:
                 it.gallery.append(gallery_item(it.run_dir, it.t, new[-1], job.house, made, rollouts[k].trajectory))
         return new
@@ -369,6 +370,7 @@ class Ours(Method):
             it.buffer = lb.insert(it.buffer, it.buffer_cfg, child,
                                   diagnosed_score(made.success_after, made.regret_after, it.cfg.level_score), it.t,
                                   parent_id=job.name)
+            it.parents[child] = job.name
             children.append(child)
             if len(it.gallery) < it.cfg.gallery:
                 it.gallery.append(gallery_item(it.run_dir, it.t, child, job.house, made, made.before))
