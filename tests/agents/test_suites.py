@@ -31,6 +31,8 @@ PINNED = {
     ("long-rearranged", "2"): "bc38e65aa5cf4316",
     ("long-train", "2"): "81a5e8755f0bc13a",
     ("long-unseen", "2"): "55a8acc6450bd72c",
+    ("closed", "1"): "faac883b18b12e55",
+    ("val-closed", "1"): "3b1fc845fb73554d",
 }
 
 

@@ -122,6 +122,29 @@ def test_doors_connect_rooms_and_one_front_door_is_closed():
         assert lo > 0 and hi - lo > 0.9
 
 
+def test_shut_interior_doors_close_rooms_off_and_block_the_agent():
+    from adaptenv.scene.procedural.checks import closed_interior_doors, opened
+
+    catalog = load_catalog()
+    cfg = PRESETS["suite-closed"].config()
+    houses = [generate_house(s, cfg, catalog) for s in range(6)]
+    shut = [closed_interior_doors(h) for h in houses]
+    assert sum(map(len, shut)) > 0 and all(house_problems(h, cfg, catalog) == [] for h in houses)
+    h = next(h for h, ids in zip(houses, shut, strict=True) if ids)
+    assert all(d.openness == 0 and d.openable for d in h.doors if d.id in closed_interior_doors(h))
+    geometry, reopened = SceneGeometry.from_house(h), SceneGeometry.from_house(opened(h))
+    assert sum(d.passable for d in reopened.doors) > sum(d.passable for d in geometry.doors), "a shut door blocks"
+    assert closed_interior_doors(opened(h)) == []
+
+
+def test_no_interior_door_is_shut_by_default():
+    """(The option spends no random draw when it is 0: the pinned suite episodes of tests/agents/test_suites.py
+    would change otherwise.)"""
+    for seed in range(4):
+        assert all(d.openness != 0 for d in generate_house(seed, GenerationConfig(n_rooms=6)).doors
+                   if d.room0 != d.room1)
+
+
 def test_walls_appear_once_per_room_plus_exterior_copies():
     house = _house(8, 5)
     segments: dict[tuple, list[str]] = {}

@@ -88,12 +88,16 @@ SUITES: dict[str, SuiteSpec] = {
                          "cluttered 3-6 room houses, starts >= 4 m from the target"),
     "doors": SuiteSpec("preset:suite-doors", EpisodeFloor(min_geodesic=6.0), "2",
                        "5-8 room houses joined only by doors (a tree of rooms), starts >= 6 m"),
-    # Validation twins of long-unseen, far and clutter: settings are chosen here, never on the suites above.
+    "closed": SuiteSpec("preset:suite-closed", EpisodeFloor(min_geodesic=8.0), "1",
+                        "6-9 room houses with 40% of interior doors shut, starts >= 8 m from the target"),
+    # Validation twins of long-unseen, far, clutter and closed: settings are chosen here, never on the suites above.
     "val-long": SuiteSpec("preset:validation", LONG, "1", "validation twin of long-unseen: new houses, starts >= 6 m"),
     "val-far": SuiteSpec("preset:validation-large", EpisodeFloor(min_geodesic=10.0), "1",
                          "validation twin of far: 7-10 room houses, starts >= 10 m"),
     "val-clutter": SuiteSpec("preset:validation-clutter", EpisodeFloor(min_geodesic=4.0), "1",
                              "validation twin of clutter: cluttered 3-6 room houses, starts >= 4 m"),
+    "val-closed": SuiteSpec("preset:validation-closed", EpisodeFloor(min_geodesic=8.0), "1",
+                            "validation twin of closed: 6-9 room houses with shut doors, starts >= 8 m"),
 }
 
 

@@ -136,7 +136,8 @@ def house_problems(house: House, cfg: GenerationConfig, catalog: AssetCatalog,
                    allowed_overlaps: frozenset[frozenset[str]] = frozenset()) -> list[str]:
     """Every violated guarantee of a generated house (empty when it is fine).
 
-    Checks: the start pose is navigable; every room is reachable from it; at least
+    Checks: the start pose is navigable; every room is reachable from it (with closed interior doors opened: a
+    shut door may close rooms off by design, ``GenerationConfig.closed_door_prob``); at least
     ``cfg.min_target_types`` target types (and all of ``required_targets``) have a reachable
     instance; no two floor footprints overlap; every floor footprint lies in a room;
     :func:`adaptenv.scene.validate.validate_house` finds nothing. ``allowed_overlaps`` lists id
@@ -149,9 +150,11 @@ def house_problems(house: House, cfg: GenerationConfig, catalog: AssetCatalog,
     if start == 0:
         problems.append("the agent start pose is missing or not navigable")
     else:
-        g = nav.grid
+        rooms = nav if not closed_interior_doors(house) else Navigation.of(opened(house), catalog, cfg.agent_radius)
+        here = rooms.component_at(pose[0], pose[1])
+        g = rooms.grid
         for k, rid in enumerate(g.room_ids):
-            if not ((g.room == k) & (nav.labels == start)).any():
+            if not ((g.room == k) & (rooms.labels == here)).any():
                 problems.append(f"{rid} is not reachable from the start")
         found = reachable_target_types(nav, start, cfg.target_reach)
         if len(found) < cfg.min_target_types:
@@ -163,6 +166,18 @@ def house_problems(house: House, cfg: GenerationConfig, catalog: AssetCatalog,
     problems += footprint_problems(nav.geometry, allowed_overlaps)
     problems += [str(p) for p in validate_house(house, catalog=catalog)]
     return problems
+
+
+def closed_interior_doors(house: House) -> list[str]:
+    """Ids of the interior doors that are shut (openness 0)."""
+    return [d.id for d in house.doors if d.room0 != d.room1 and d.openness is not None and d.openness <= 0]
+
+
+def opened(house: House) -> House:
+    """A copy of ``house`` with every shut interior door opened."""
+    shut = set(closed_interior_doors(house))
+    return house.model_copy(update={"doors": [d.model_copy(update={"openness": 1}) if d.id in shut else d
+                                              for d in house.doors]})
 
 
 def overlapping_pairs(geometry: SceneGeometry) -> list[tuple[str, str, float]]:

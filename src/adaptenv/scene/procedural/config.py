@@ -58,6 +58,9 @@ class GenerationConfig:
     """Probability that such a public connection is a leafless doorframe (when it is not open)."""
     extra_door_prob: float = 0.3
     """Probability of an extra door between two adjacent public rooms beyond the spanning tree."""
+    closed_door_prob: float = 0.0
+    """Probability that an interior door with a leaf is closed (openness 0): the rooms behind closed doors are out
+    of the agent's reach and sight, as in a home with shut bedroom doors. 0 in every training preset."""
     window_prob: float = 0.6
     """Probability that an exterior wall segment long enough for a window gets one."""
     min_target_types: int = 3

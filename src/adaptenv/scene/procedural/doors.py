@@ -153,7 +153,8 @@ def _spanning_links(rng: np.random.Generator, house: House, usable: dict[tuple[s
 
 
 def stage_doors(house: House, *, rng: np.random.Generator, catalog: AssetCatalog, cfg: GenerationConfig) -> None:
-    """Doors, doorframes and open walls making every room reachable, plus one closed exterior door."""
+    """Doors, doorframes and open walls making every room reachable (with ``closed_door_prob``, some interior doors
+    are then shut), plus one closed exterior door."""
     types = {r.id: r.roomType for r in house.rooms}
     min_len = 1.0 + 2 * END_MARGIN + 0.1
     usable = {pair: [s for s in segs if s.length >= min_len] for pair, segs in shared_walls(house).items()}
@@ -177,7 +178,8 @@ def stage_doors(house: House, *, rng: np.random.Generator, catalog: AssetCatalog
         t = _hole_start(rng, seg.length, width, [])
         if t is None:
             raise StageFailed(f"no room for a door on {w0.id}")
-        extra = {"openable": True, "openness": 1} if kind == "Doorway" else {}
+        closed = kind == "Doorway" and cfg.closed_door_prob > 0 and rng.random() < cfg.closed_door_prob
+        extra = {"openable": True, "openness": 0 if closed else 1} if kind == "Doorway" else {}
         lo, hi = sorted((_num(a), _num(b)))
         doors.append(_opening(f"door|{lo}|{hi}", asset, w0.roomId, w1.roomId, w0.id, w1.id, t, width, 0.0, height,
                               **extra))

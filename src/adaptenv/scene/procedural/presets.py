@@ -54,11 +54,15 @@ PRESETS: dict[str, PresetSpec] = {
     "suite-doors": PresetSpec(30, 5301, room_range=(5, 8), overrides=(
         ("open_kitchen_prob", 0.0), ("doorframe_prob", 0.0), ("extra_door_prob", 0.0)),
         description="5-8 room houses where every connection is a door (no open walls, frames or loops)"),
+    "suite-closed": PresetSpec(30, 5601, room_range=(6, 9), overrides=(("closed_door_prob", 0.4),),
+        description="6-9 room houses where 40% of the interior doors are shut (rooms behind them out of reach)"),
     # Validation houses (agents/suites.py, val-*): for choosing settings; never trained on, never reported as held-out.
     "validation": PresetSpec(50, 4000, description="validation houses of the training distribution"),
     "validation-large": PresetSpec(30, 5401, room_range=(7, 10), description="7-10 room validation houses"),
     "validation-clutter": PresetSpec(30, 5501, room_range=(3, 6), overrides=CLUTTER,
         description="cluttered 3-6 room validation houses (suite-clutter's settings)"),
+    "validation-closed": PresetSpec(30, 5701, room_range=(6, 9), overrides=(("closed_door_prob", 0.4),),
+        description="6-9 room validation houses with shut interior doors (suite-closed's settings)"),
 }
 
 
