@@ -205,7 +205,7 @@ def test_shipped_ppo_checkpoint_loads_with_its_card_and_selection():
     assert policy.name == "pretrained-ppo" and policy.net.config.map_channels > 0
     assert policy.end_threshold == card["end_threshold"] == card["end_threshold_calibration"]["threshold"]
     assert card["algo"] == "ppo" and card["command"].startswith("adaptenv ppo") and "--kl-coef" in card["command"]
-    assert [s["stage"] for s in card["stages"]] == [1, 2] and card["stages"][0]["init"] == "pretrained-map"
+    assert [s["stage"] for s in card["stages"]] == [1, 2, 3] and card["stages"][0]["init"] == "pretrained-map"
     assert card["frames_total"] == sum(s["frames"] for s in card["stages"])
     assert "docs/results/ppo-pi0/DECLARED.md" in card["selection"]
     assert '": "/' not in json.dumps(card) and " /" not in card["command"], "no absolute paths in the card"
