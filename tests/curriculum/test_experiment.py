@@ -67,9 +67,35 @@ def test_holm_adjusts_step_down_and_keeps_order():
 
 
 @pytest.mark.slow
+def test_primary_compares_with_the_better_baseline_per_set_and_holm_over_sets_only():
+    from adaptenv.curriculum.experiment import primary_comparison, primary_markdown
+
+    seeds = range(5)
+    table = {
+        "ours": {s: {"success:far": 0.60 + 0.01 * s, "success:clutter": 0.80 + 0.02 * (s % 2)} for s in seeds},
+        "dr": {s: {"success:far": 0.50 + 0.01 * s + 0.002 * (s % 3), "success:clutter": 0.70} for s in seeds},
+        "sfl": {s: {"success:far": 0.55 + 0.01 * s - 0.003 * (s % 2), "success:clutter": 0.60} for s in seeds},
+        "none": {s: {"success:far": 0.90, "success:clutter": 0.90} for s in seeds},  # not a declared baseline
+    }
+    out = primary_comparison(table, "ours", ["dr", "sfl"])
+    far, clutter = out["sets"]["success:far"], out["sets"]["success:clutter"]
+    assert far["baseline"] == "sfl" and clutter["baseline"] == "dr", "the better baseline on each set"
+    assert far["effect"]["diff"] == pytest.approx(0.05 + 0.003 * 0.4, abs=1e-9)
+    assert far["seeds"] == clutter["seeds"] == 5
+    (lo, lo_adj), (hi, hi_adj) = sorted((r["p"], r["p_holm"]) for r in (far, clutter))
+    assert lo_adj == pytest.approx(min(1.0, 2 * lo)) and hi_adj == pytest.approx(max(lo_adj, hi)), "Holm over 2 sets"
+    md = "\n".join(primary_markdown(out))
+    assert "| far | sfl | +5.1 |" in md and "| clutter | dr | +10.8 |" in md
+    with pytest.raises(ConfigError, match="primary"):
+        ExperimentConfig(methods=["ours", "dr"], primary=["dr", "sfl"]).check()
+    with pytest.raises(ConfigError, match="primary"):
+        ExperimentConfig(methods=["ours", "dr"], primary=["ours"]).check()
+
+
 def test_small_experiment_writes_every_artifact(tiny_policy, tmp_path, capsys):
     cfg = ExperimentConfig.load(REPO / "configs" / "experiment-small.json")
     cfg.methods = ["none", "dr", "ours"]
+    cfg.primary = ["none", "dr"]
     cfg.loop["policy"] = str(tiny_policy)
     summary = run_experiment(cfg, tmp_path)
     log = capsys.readouterr().err  # stderr is not a terminal here: a timestamped line per stage and per run
@@ -94,6 +120,8 @@ def test_small_experiment_writes_every_artifact(tiny_policy, tmp_path, capsys):
     assert "success_gain:tiny" in summary["tests"]["none"]
     md = (tmp_path / "summary.md").read_text()
     assert "| ours |" in md and "paired t-test" in md
+    assert summary["primary"]["sets"]["success:tiny"]["baseline"] in ("none", "dr")
+    assert "Declared primary: ours minus the better of none and dr" in md
     assert set(summary["effects"]) == {"none", "dr"} and "p (Holm)" in md
     holm_p = summary["holm"]["none"]["success:tiny"]
     assert holm_p is None or holm_p >= summary["tests"]["none"]["success:tiny"]

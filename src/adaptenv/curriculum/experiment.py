@@ -81,6 +81,9 @@ class ExperimentConfig:
     """LoopConfig fields shared by every run (method and seed are set per run)."""
     reference: str = "ours"
     """The method tested against every other one."""
+    primary: list[str] = field(default_factory=list)
+    """The declared primary comparison: the reference against the better of these baselines on each held-out set
+    (by mean success over seeds), Holm over the sets only (e.g. ["dr", "sfl"]); empty: none declared."""
 
     __pydantic_config__ = STRICT
 
@@ -103,6 +106,10 @@ class ExperimentConfig:
         for where, m in [*((f"methods[{i}]", m) for i, m in enumerate(self.methods)), ("reference", self.reference)]:
             if m not in METHODS:
                 raise ConfigError(f"{source}: {where} {m!r} is unknown; use one of {', '.join(METHODS)}")
+        for i, b in enumerate(self.primary):
+            if b not in self.methods or b == self.reference:
+                raise ConfigError(f"{source}: primary[{i}] {b!r} must be one of the methods other than the "
+                                  f"reference {self.reference!r}")
         for name, values in (("methods", self.methods), ("seeds", self.seeds)):
             if not values:
                 raise ConfigError(f"{source}: {name} is empty; list at least one")
@@ -293,12 +300,32 @@ def write_summary(out: Path, cfg: ExperimentConfig, table: dict[str, dict[int, d
     for name, p in holm(family).items():
         m, key = name.split("|")
         summary["holm"].setdefault(m, {})[key] = p
+    if cfg.primary:
+        summary["primary"] = primary_comparison(table, cfg.reference, cfg.primary)
     if episode_effects is not None:
         summary["episode_effects"] = episode_effects
     summary["skipped_houses"] = {k: v.model_dump() for k, v in skipped_in_runs(out, cfg).items()}
     atomic_write_text(out / f"summary{suffix}.json", json.dumps(summary, indent=1, default=float))
     atomic_write_text(out / f"summary{suffix}.md", summary_markdown(summary))
     return summary
+
+
+def primary_comparison(table: dict[str, dict[int, dict[str, float]]], reference: str,
+                       baselines: list[str]) -> dict[str, Any]:
+    """The declared primary: on each held-out set, ``reference`` minus the baseline with the higher mean success there
+    (the first listed on a tie), paired over their common seeds, with Holm's correction over the sets only."""
+    ref = table.get(reference, {})
+    sets = sorted({k for row in ref.values() for k in row if k.startswith("success:")})
+    rows: dict[str, dict[str, Any]] = {}
+    for key in sets:
+        means = {b: _mean_se([row[key] for row in table.get(b, {}).values() if key in row])[0] for b in baselines}
+        best = max(baselines, key=lambda b: (np.nan_to_num(means[b], nan=-np.inf), -baselines.index(b)))
+        common = sorted(s for s in set(ref) & set(table.get(best, {})) if key in ref[s] and key in table[best][s])
+        a, b = [ref[s][key] for s in common], [table[best][s][key] for s in common]
+        rows[key] = {"baseline": best, "seeds": len(common), "effect": paired_effect(a, b), "p": paired_test(a, b)}
+    for key, p_adj in holm({k: r["p"] for k, r in rows.items()}).items():
+        rows[key]["p_holm"] = p_adj
+    return {"reference": reference, "baselines": list(baselines), "sets": rows}
 
 
 def _episode_successes(folder: Path) -> dict[tuple[str, int], float]:
@@ -436,7 +463,8 @@ def summary_markdown(summary: dict[str, Any]) -> str:
     ref = summary["reference"]
     head = "| method | " + " | ".join(keys) + " | env steps | updates |"
     verdicts = verdict_lines(summary)
-    lines = [*verdicts, *([""] if verdicts else []), head, "|" + "---|" * (len(keys) + 3)]
+    lines = [*verdicts, *([""] if verdicts else []), *primary_markdown(summary.get("primary")), head,
+             "|" + "---|" * (len(keys) + 3)]
     for m, figs in summary["methods"].items():
         cells = []
         for k in keys:
@@ -454,6 +482,22 @@ def summary_markdown(summary: dict[str, Any]) -> str:
     lines += ["", *effects_markdown(summary)]
     lines += ["", skipped_line(summary.get("skipped_houses") or {})]
     return "\n".join(lines) + "\n"
+
+
+def primary_markdown(primary: dict[str, Any] | None) -> list[str]:
+    """summary.md's first table: the declared primary comparison, one row per held-out set (none when undeclared)."""
+    if not primary:
+        return []
+    ref, rows = primary["reference"], primary["sets"]
+    lines = [f"Declared primary: {ref} minus the better of {' and '.join(primary['baselines'])} on each set, "
+             "points of held-out success, paired over seeds, Holm over the sets:", "",
+             "| set | baseline | difference | 95% interval | p | p (Holm) |", "|---|---|---|---|---|---|"]
+    for key, r in rows.items():
+        e = r["effect"]
+        diff = "n/a" if e is None else f"{100 * e['diff']:+.1f}"
+        ci = "n/a" if e is None else f"[{100 * e['low']:+.1f}, {100 * e['high']:+.1f}]"
+        lines.append(f"| {key.split(':', 1)[1]} | {r['baseline']} | {diff} | {ci} | {_p(r['p'])} | {_p(r['p_holm'])} |")
+    return [*lines, ""]
 
 
 def skipped_line(skipped: dict[str, dict[str, Any]]) -> str:
