@@ -112,7 +112,7 @@ def test_a_jobs_env_steps_count_every_step_pi_t_takes_for_g(house):
     episode = draw_episode(world, np.random.default_rng([0, 1]))
     [(res, traj)] = run_recorded(world, [episode], weights.policy())
     made = run_generate(GenerateJob("builtin", house, "h", 1, (0,), weights=weights,
-                                    rollout=Rollout(episode, res, traj, True)))
+                                    rollout=Rollout([episode], [res], [traj], [True])))
     checks = [s["check_steps"] for s in made.edit_log["steps"]]
     own = total_steps([run_policy(world, checking_episodes(episode, 3), weights.policy())])
     assert made.rollout_steps == sum(checks) and checks[0] > own, "the scene's own check episodes plus its candidates'"
@@ -138,7 +138,7 @@ def test_loop_generate_job_and_adapt_cli_make_the_same_house_and_log(house, tmp_
     weights = PolicyWeights.of(load_pretrained())
     [(res, traj)] = run_recorded(world, [episode], weights.policy())
     made = run_generate(GenerateJob("builtin", house, "h", 3, (0,), weights=weights,
-                                    rollout=Rollout(episode, res, traj, True)))
+                                    rollout=Rollout([episode], [res], [traj], [True])))
     assert made.house.to_dict() == load_house(out / "house.json").to_dict()
 
     def steps(log):
