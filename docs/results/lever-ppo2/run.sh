@@ -10,5 +10,5 @@ mkdir -p "$out"
 cd "$out"
 [ -f pi0-c.pt ] || git -C "$root" show 605ebc7:src/adaptenv/agents/data/pretrained-ppo.pt > pi0-c.pt
 export NUMBA_NUM_THREADS=1
-"$root/.venv/bin/adaptenv" experiment --config "$root/configs/experiment-lever-ppo2.json" -o "$out" \
+PYTHONPATH="$root/src" "$root/.venv/bin/adaptenv" experiment --config "$root/configs/experiment-lever-ppo2.json" -o "$out" \
   --final-episodes 1000 --executor process --workers 2
