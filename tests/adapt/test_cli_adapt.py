@@ -236,3 +236,23 @@ def test_adapt_with_a_diagnosis_aims_g_at_failure_modes(house_file, tmp_path):
     assert len(summary["diagnosis"]["episodes"]) == len(summary["diagnosis_after"]["episodes"]) == 2
     steps = json.loads((tmp_path / "edits.json").read_text())["steps"]
     assert steps[0]["failure_mode"] == "search", "a solved scene gets the default plan, searches first"
+
+
+def test_adapt_with_door_edits_opens_a_shut_door(tmp_path):
+    from adaptenv.scene.house import load_house, save_house
+    from adaptenv.scene.procedural import GenerationConfig, generate_house
+    from adaptenv.scene.procedural.checks import closed_interior_doors
+
+    shut = generate_house(0, GenerationConfig(n_rooms=6, closed_door_prob=0.4))
+    path = save_house(shut, tmp_path / "shut.json")
+    args = ["adapt", str(path), "--policy", "expert", "--steps", "2", "--seed", "1", "--diagnose", "2"]
+    wrong = runner.invoke(app, [*args, "--door-edits", "-o", str(tmp_path / "x")])
+    assert isinstance(wrong.exception, ConfigError) and "add --generator failure-modes" in str(wrong.exception)
+    result = runner.invoke(app, [*args, "--generator", "failure-modes", "--door-edits", "-o", str(tmp_path / "out")])
+    assert result.exit_code == 0, result.output
+    doors = [e for e in json.loads((tmp_path / "out" / "edits.json").read_text())["edit_log"]
+             if e["openness"] is not None and e["accepted"]]
+    assert doors, "G opened a door"
+    after = load_house(tmp_path / "out" / "house.json")
+    assert set(closed_interior_doors(after)) == set(closed_interior_doors(shut)) - {e["object_id"] for e in doors}
+    assert json.loads((tmp_path / "out" / "summary.json").read_text())["valid"]

@@ -296,3 +296,18 @@ def test_a_killed_run_resumes_to_the_same_results(tiny_policy, tmp_path):
     assert json.loads((killed / STATE).read_text())["state"]["iteration"] < 3
     resumed = run_loop(cfg, killed, resume=True)
     assert figures(resumed) == figures(reference)
+
+
+def test_door_edits_reach_the_failure_mode_generator(tiny_policy, tmp_path, monkeypatch):
+    from adaptenv.curriculum import jobs
+
+    seen, make_fg = [], jobs.make_fg
+
+    def recording(kind, llm, **kw):
+        analyzer, generator = make_fg(kind, llm, **kw)
+        seen.append((kind, getattr(generator, "door_edits", None)))
+        return analyzer, generator
+
+    monkeypatch.setattr(jobs, "make_fg", recording)
+    run_loop(tiny_config(tiny_policy, "ours-dr", iterations=1, door_edits=True), tmp_path / "r")
+    assert seen and all(s == ("failure-modes", True) for s in seen)

@@ -200,7 +200,7 @@ def test_highlight_fills_the_object(house):
 
 
 def test_bad_highlights_and_sizes_are_clear_errors(house):
-    with pytest.raises(AdaptenvError, match="no object with that id"):
+    with pytest.raises(AdaptenvError, match="no object or door with that id"):
         render_house(house, highlight={"Nope|1": "red"})
     with pytest.raises(AdaptenvError, match="not a colour"):
         render_house(house, highlight={"Sofa|3|3": "not-a-colour"})
@@ -322,3 +322,13 @@ def test_the_targets_label_stays_off_its_cross():
     arm = td._PixelScene.of(SceneGeometry.from_house(house), r.transform).cross_arm
     cross = np.array([[cx - arm, cy - arm, cx + arm, cy + arm]])
     assert labels._overlap(np.array([box]), cross)[0, 0] == 0
+
+
+def test_a_highlighted_door_is_drawn_on_a_band_of_its_colour(house):
+    door = next(d for d in house.doors if d.room0 != d.room1)
+
+    def green(img) -> int:
+        return int((np.asarray(img.convert("RGB")) == (0, 255, 0)).all(axis=2).sum())
+
+    assert green(render_house(house, highlight={door.id: "#00ff00"})) > 20
+    assert green(render_house(house)) == 0

@@ -6,6 +6,10 @@ in degrees (0 faces world +z / "up" on the map, 90 faces +x / "right"), not a de
 the yaw. Grid units follow :class:`~adaptenv.scene.grid.NormalizedGrid`: +dx is right (world +x),
 +dy is up (world +z).
 
+A door edit (``openness`` set) opens or shuts one interior door instead: ``object_id`` is then the door's
+id, ``openness_before`` and ``openness`` its openness before and after (0 shut, 1 open), and the move
+fields stay 0.
+
 An :class:`EditLog` round-trips through JSON, and :func:`apply_edit` / :func:`replay` rebuild an
 edited scene from its parent by replaying the *achieved* moves (never re-running placement).
 
@@ -23,7 +27,7 @@ from typing import Literal
 from pydantic import BaseModel, ConfigDict, Field
 
 from adaptenv.errors import AdaptenvError
-from adaptenv.scene.house import House, move_object
+from adaptenv.scene.house import House, move_object, set_door_openness
 
 StopReason = Literal["reached", "blocked_by_object", "blocked_by_wall", "left_room", "rotation_blocked",
                      "invalid"]
@@ -67,11 +71,24 @@ class Edit(BaseModel):
     """Free-text intent (e.g. the LLM's reason, the suggestion it implements)."""
     undone: bool = False
     """True when the generator took the edit back (replaced by a revision, or its step was aborted)."""
+    openness: float | None = None
+    """A door edit's requested openness (0 shut, 1 open); None for an object edit."""
+    openness_before: float | None = None
+    """A door edit's openness before it."""
+
+    @property
+    def is_door(self) -> bool:
+        """Whether this edit opens or shuts a door (``object_id`` is the door's id)."""
+        return self.openness is not None
 
     @property
     def changed(self) -> bool:
         """Whether replaying this edit changes the scene."""
-        return self.accepted and not self.undone and (self.achieved_dx != 0.0 or self.achieved_dz != 0.0 or _yaw_delta(self) != 0.0)
+        if not self.accepted or self.undone:
+            return False
+        if self.is_door:
+            return self.openness != self.openness_before
+        return self.achieved_dx != 0.0 or self.achieved_dz != 0.0 or _yaw_delta(self) != 0.0
 
 
 def _yaw_delta(edit: Edit) -> float:
@@ -123,12 +140,19 @@ class EditLog(BaseModel):
 
 
 def apply_edit(house: House, edit: Edit, *, in_place: bool = False) -> House:
-    """The house with an edit's achieved move replayed (children move rigidly); a copy unless ``in_place``.
+    """The house with an edit's achieved move (or door openness) replayed; a copy unless ``in_place``.
 
-    Rejected and undone edits change nothing. Raises AdaptenvError when the object is not a top-level object.
+    Rejected and undone edits change nothing. Raises AdaptenvError when the object (or door) is not in the house.
     """
     out = house if in_place else house.model_copy(deep=True)
     if not edit.accepted or edit.undone:
+        return out
+    if edit.is_door:
+        try:
+            set_door_openness(out, edit.object_id, edit.openness)
+        except KeyError:
+            raise AdaptenvError(f"edit of door {edit.object_id!r}: the house has no door with this id; replay the "
+                                "edit on the house it was made on") from None
         return out
     for obj in out.objects:
         if obj.id == edit.object_id:

@@ -60,7 +60,7 @@ from adaptenv.adapt.plausibility import PlausibilityReference, check_move
 from adaptenv.errors import AdaptenvError
 from adaptenv.scene.assets import AssetCatalog, load_catalog
 from adaptenv.scene.geometry import Footprint, SceneGeometry, footprint_corners
-from adaptenv.scene.house import House, move_object
+from adaptenv.scene.house import House, is_interior_leaf_door, move_object, set_door_openness
 from adaptenv.scene.occupancy import (
     DEFAULT_RESOLUTION,
     LABEL_DOOR,
@@ -384,7 +384,7 @@ def scene_reachability(house: House, *, start: Start | None = None, targets: lis
     reach, _ = _reachable(occ.navigable(AGENT_RADIUS), None if s is None else _cell(occ, s), occ.room,
                           occ.room_ids, door_threshold_cells(geometry, occ))
     if reach.start_free and s is not None:
-        reach.targets = _geodesic_targets(house, geometry, s, targets or _default_targets(geometry))
+        reach.targets = _geodesic_targets(house, geometry, s, _default_targets(geometry) if targets is None else targets)
     return reach
 
 
@@ -394,6 +394,17 @@ def _cell(occ: OccupancyGrid, p: tuple[float, float]) -> tuple[int, int] | None:
 
 
 # --------------------------------------------------------------------------- validate_scene
+
+def _doors_as_in(original: House, house: House) -> House:
+    """``original`` with each door's openness as in ``house`` (``original`` itself when no door changed)."""
+    now = {d.id: d.openness for d in house.doors}
+    if all(now.get(d.id, d.openness) == d.openness for d in original.doors):
+        return original
+    out = original.model_copy(deep=True)
+    for d in out.doors:
+        d.openness = now.get(d.id, d.openness)
+    return out
+
 
 def _allowed_pair(a: str, b: str) -> bool:
     """The ProcTHOR pattern of overlaps allowed without an original: seats under tables or against seats."""
@@ -501,9 +512,13 @@ def validate_scene(house: House, *, episode_targets: list[str] | None = None, st
                                           f"{s[1]:.2f}); move the furniture away from it"))
         return problems
     if original is not None:
-        need = scene_reachability(original, start=start or _start_of(original, None), targets=episode_targets,
-                                  geometry=orig_geometry)
-        need_targets = need.targets if episode_targets is None else set(episode_targets) & need.targets
+        # Doors opened or shut on purpose are part of the baseline; what the original reached must stay reached.
+        base = _doors_as_in(original, house)
+        before = scene_reachability(original, start=start or _start_of(original, None), targets=episode_targets,
+                                    geometry=orig_geometry)
+        need = before if base is original else scene_reachability(base, start=start or _start_of(original, None),
+                                                                  targets=[])
+        need_targets = before.targets if episode_targets is None else set(episode_targets) & before.targets
     else:
         navr = occ.navigable(AGENT_RADIUS)
         need = Reachability(True, {occ.room_ids[k] for k in np.unique(occ.room[navr]) if k >= 0}, set(doors))
@@ -583,6 +598,8 @@ class EditValidator:
         """``plausibility``: check the moved object against :mod:`adaptenv.adapt.plausibility` (off only for the
         random baselines); ``move_targets``: let objects of ``episode_targets``' types move (edits that relocate
         the target opt in)."""
+        self._settings = dict(episode_targets=episode_targets, step=step, catalog=catalog, plausibility=plausibility,
+                              move_targets=move_targets)
         self.catalog = catalog or load_catalog()
         self.house = house.model_copy(deep=True) if copy else house
         self.step = step
@@ -876,6 +893,42 @@ class EditValidator:
         """
         return self.commit(self.propose(object_id, dx_units, dy_units, rotation, relocate=relocate), source=source,
                            intent=intent)
+
+    def propose_door(self, door_id: str, openness: float) -> tuple[House | None, list[ValidationProblem]]:
+        """Dry run of a door edit: the house with the door at ``openness`` (0 shut, 1 open) and every problem
+        :func:`validate_scene` finds against the current scene (None and the reason for a door that cannot move)."""
+        door = next((d for d in self.house.doors if d.id == door_id), None)
+        if door is None or not is_interior_leaf_door(door):
+            why = "the house has no such door" if door is None else "only interior doors with a leaf open and shut"
+            return None, [ValidationProblem("invalid", f"door {door_id}: {why}; pick one of the house's interior "
+                                            "doors", (door_id,))]
+        new = self.house.model_copy(update={"doors": [d.model_copy() for d in self.house.doors]})
+        set_door_openness(new, door_id, openness)
+        return new, validate_scene(new, episode_targets=self._settings["episode_targets"], start=self.start,
+                                   original=self.house, catalog=self.catalog)
+
+    def set_door(self, door_id: str, openness: float, *, source: str = "manual", intent: str = "") -> Edit:
+        """Open (``openness`` 1) or shut (0) an interior door when the scene stays valid, log it either way; returns
+        the Edit. Rooms behind a shut door may become unreachable; the episode's targets may not."""
+        new, problems = self.propose_door(door_id, openness)
+        before = next((d.openness for d in self.house.doors if d.id == door_id), None)
+        ok = new is not None and not problems
+        edit = Edit(object_id=door_id, openness=float(openness), openness_before=before, accepted=ok,
+                    stop_reason="reached" if ok else "invalid", problems=[str(p) for p in problems], source=source,
+                    intent=intent)
+        if ok and edit.changed:
+            self._rebuild(new)
+        self.log.append(edit)
+        return edit
+
+    def _rebuild(self, house: House) -> None:
+        """Start over on ``house`` (a door changed what is reachable), keeping the log and the reference scene's
+        plausibility rules and doorway-approach baselines."""
+        log, plausible, approach_before = self.log, self.plausible, self.approach_before
+        self.__init__(house, copy=False, start=self.start, **self._settings)
+        self.log, self.plausible = log, plausible
+        self.approach_before = {**self.approach_before, **{k: w for k, w in approach_before.items()
+                                                           if k in self.approach_before}}
 
     def _apply(self, i: int, proposal: Proposal) -> None:
         """Move object i to the proposal's pose in every cache (footprints, regions, context, raster, house)."""

@@ -130,6 +130,8 @@ def loop(
     relocate_targets: bool = typer.Option(False, "--relocate-targets", help="The failure-mode G may move a target "
                                           "inside its room or to a far room where its type plausibly stands (search "
                                           "failures); otherwise no edit moves a target."),
+    door_edits: bool = typer.Option(False, "--door-edits", help="The failure-mode G may also open or shut interior "
+                                    "doors (search, looping and timeout failures)."),
     heldout_episodes: int = typer.Option(100, "--heldout-episodes", min=1, help="Episodes per held-out set."),
     heldout: list[str] = typer.Option(None, "--heldout", help="Held-out set NAME=HOUSES (repeatable); default: "
                                       "rearranged=preset:pretrain-rearranged and unseen=preset:pretrain-unseen."),
@@ -176,7 +178,7 @@ def loop(
                      match_run=match_run,
                      finetune_min_start=finetune_min_start, finetune_precision=finetune_precision,
                      finetune_beta=finetune_beta, finetune_max_steps=finetune_max_steps,
-                     relocate_targets=relocate_targets, focus_training=focus_training,
+                     relocate_targets=relocate_targets, door_edits=door_edits, focus_training=focus_training,
                      heldout_episodes=heldout_episodes, llm=llm, **({"heldout": h} if (h := _heldout(heldout)) else {}))
     check_house_sets([cfg.houses, *cfg.heldout.values()], strict, console.print)
     command = shlex.join(["adaptenv", *sys.argv[1:]])

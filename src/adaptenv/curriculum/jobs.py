@@ -216,6 +216,8 @@ class GenerateJob:
     ``regret-only``: G gets generic objectives, no F analysis)."""
     relocate_targets: bool = False
     """``failure-modes``: G may relocate a target instance to a far room (``LoopConfig.relocate_targets``)."""
+    door_edits: bool = False
+    """``failure-modes``: G may open or shut interior doors (``LoopConfig.door_edits``)."""
 
 
 @dataclass
@@ -281,7 +283,8 @@ def _run_diagnosed(job: GenerateJob, rng: np.random.Generator) -> Generated:
     if job.weights is None:
         raise ValueError(f"GenerateJob {job.name}: kind {job.kind!r} needs the policy weights")
     episodes = hard_episodes(compile_world(job.house, job.name), rng, job.diagnose_episodes)
-    analyzer, generator = make_fg(job.kind, job.llm, relocate_targets=job.relocate_targets)
+    analyzer, generator = make_fg(job.kind, job.llm, relocate_targets=job.relocate_targets,
+                                  door_edits=job.door_edits)
     res = adapt_scene(job.house, episodes[0], policy=job.weights.policy(), analyzer=analyzer, generator=generator,
                       steps=job.edit_steps, rng=rng, name=job.name, episodes=episodes)
     log = res.generation.to_json_dict()
@@ -306,13 +309,15 @@ def check_steps(generation: GenerationResult) -> int:
     return sum(s.check_steps for s in generation.steps)
 
 
-def make_fg(kind: GeneratorKind, llm: dict[str, Any], *, relocate_targets: bool = False) -> tuple[Analyzer, Generator]:
+def make_fg(kind: GeneratorKind, llm: dict[str, Any], *, relocate_targets: bool = False,
+            door_edits: bool = False) -> tuple[Analyzer, Generator]:
     """Analyzer F and generator G: built-in, or LLM-backed (one backend shared by F and G)."""
     if kind == "llm":
         backend = make_backend(LLMConfig(**llm))
         return LLMAnalyzer(backend), make_generator("llm", backend=backend)
     if kind == "failure-modes":
-        return BuiltinAnalyzer(), make_generator("failure-modes", relocate_targets=relocate_targets)
+        return BuiltinAnalyzer(), make_generator("failure-modes", relocate_targets=relocate_targets,
+                                                     door_edits=door_edits)
     if kind == "regret-only":
         return NoAnalyzer(), make_generator("builtin")
     return BuiltinAnalyzer(), make_generator("builtin")

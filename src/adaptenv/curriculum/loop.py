@@ -165,6 +165,8 @@ class LoopConfig:
     """The failure-mode G may answer search failures by moving a target instance inside its room or relocating it
     to a far room of a type where it plausibly stands (the methods with the failure-mode G: ours,
     ours-randomscene, ours-dr); otherwise no edit moves a target."""
+    door_edits: bool = False
+    """The failure-mode G may also open or shut interior doors (search, looping and timeout failures)."""
 
     __pydantic_config__ = STRICT
 

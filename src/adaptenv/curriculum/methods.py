@@ -353,7 +353,7 @@ class Ours(Method):
         jobs = [GenerateJob(self.generator, it.store.house(p), p, it.cfg.edit_steps,
                             (it.cfg.seed, it.t, Stream.GENERATE + k), weights=it.weights,
                             diagnose_episodes=it.cfg.diagnose_episodes, llm=it.cfg.llm,
-                            relocate_targets=it.cfg.relocate_targets)
+                            relocate_targets=it.cfg.relocate_targets, door_edits=it.cfg.door_edits)
                 for k, p in enumerate(parents)]
         children = []
         for k, (job, made) in enumerate(zip(jobs, it.executor.map(run_generate, jobs, desc="diagnosis and generation"),

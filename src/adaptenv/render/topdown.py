@@ -357,9 +357,10 @@ def door_leaves(asset_id: str) -> int:
     return 2 if "Double" in asset_id else 1
 
 
-def _draw_doors(draw: ImageDraw.ImageDraw, geometry: SceneGeometry, t: MapTransform, wall_w: int) -> None:
+def _draw_doors(draw: ImageDraw.ImageDraw, geometry: SceneGeometry, t: MapTransform, wall_w: int,
+                highlight: dict[str, RGB] | None = None) -> None:
     """Open doors as a gap with their leaves and swing arcs (none for a doorframe, one from each jamb for a
-    double door); closed doors as a red bar."""
+    double door); closed doors as a red bar; a highlighted door on a wide band of its colour."""
     for d in geometry.doors:
         p0, p1 = np.array(d.p0), np.array(d.p1)
         width = float(np.linalg.norm(p1 - p0))
@@ -367,6 +368,8 @@ def _draw_doors(draw: ImageDraw.ImageDraw, geometry: SceneGeometry, t: MapTransf
             continue
         u = (p1 - p0) / width
         n = np.array([-u[1], u[0]])
+        if highlight and d.id in highlight:
+            draw.line(_pts(t, [p0, p1]), fill=highlight[d.id], width=wall_w + 8)
         if not d.passable:
             a, b = _pts(t, [p0, p1])
             draw.line([a, b], fill=CLOSED_DOOR, width=wall_w + 2)
@@ -663,13 +666,14 @@ def _geometry_of(house: House | None, geometry: SceneGeometry | None) -> SceneGe
 
 
 def _highlight_colours(geometry: SceneGeometry, highlight: dict[str, str] | None) -> dict[str, RGB]:
-    """Object id -> fill colour, checked: every id must be in the house and every colour known to Pillow."""
+    """Object (or door) id -> colour, checked: every id must be in the house and every colour known to Pillow."""
     known = {f.object_id for f in geometry.footprints} | {c.object_id for k in geometry.children.values() for c in k}
+    known |= {d.id for d in geometry.doors}
     colours: dict[str, RGB] = {}
     for oid, value in (highlight or {}).items():
         if oid not in known:
-            raise AdaptenvError(f"cannot highlight {oid!r}: the house has no object with that id; "
-                                "use an id from the house's objects")
+            raise AdaptenvError(f"cannot highlight {oid!r}: the house has no object or door with that id; "
+                                "use an id from the house's objects or doors")
         colours[oid] = _colour(value, oid)
     return colours
 
@@ -699,7 +703,7 @@ def _draw_house(canvas: _Canvas, geometry: SceneGeometry, scene: _PixelScene, co
     _draw_small(draw, geometry, t, colours, max(1.5, 0.035 * t.scale))
     _draw_walls(draw, t, scene.pieces, scene.empty, scene.wall_w)
     _draw_windows(draw, geometry, t, scene.wall_w)
-    _draw_doors(draw, geometry, t, scene.wall_w)
+    _draw_doors(draw, geometry, t, scene.wall_w, colours)
     _draw_decor(draw, [f for f in geometry.footprints if f.role == "wall"], t, colours, scene.wall_w)
 
 

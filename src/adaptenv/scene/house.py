@@ -184,6 +184,20 @@ def move_object(obj: HouseObject, dx: float, dz: float, dyaw: float = 0.0) -> No
         obj.rotation = Vec3(**{**obj.rotation.model_dump(), "y": (obj.rotation.y + dyaw) % 360.0})
 
 
+def is_interior_leaf_door(door: Opening) -> bool:
+    """Whether a door can open and close between two rooms: openable (it has a leaf) and not the front door."""
+    return bool(door.openable) and door.room0 != door.room1 and "exterior" not in door.wall1
+
+
+def set_door_openness(house: House, door_id: str, openness: float) -> None:
+    """Set one door's openness (0 shut, 1 open) in place; KeyError when the house has no such door."""
+    for door in house.doors:
+        if door.id == door_id:
+            door.openness = float(openness)
+            return
+    raise KeyError(door_id)
+
+
 def json_path(loc: tuple[Any, ...] | list[Any]) -> str:
     """Format a location tuple such as ``('doors', 2, 'wall0')`` as ``doors[2].wall0``."""
     out = ""

@@ -97,6 +97,8 @@ class Candidate:
     realism: float | None = None
     score: float = -math.inf
     policy_score: float | None = None
+    openness: float | None = None
+    """A door edit (``object_id`` is the door's id): the door's new openness; None for a move."""
 
 
 def along_wall(v: EditValidator, oid: str, d: np.ndarray, rotation: float | None, rng: np.random.Generator

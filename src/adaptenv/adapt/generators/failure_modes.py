@@ -6,7 +6,8 @@ failure family (:mod:`adaptenv.adapt.diagnosis`), one family per step, round rob
 diagnosis's dominant families:
 
 - ``search`` (never saw the target): :func:`hiddenness`, the mean of (1 - the share of route
-  points that see a target) and how far along the shortest route the target is first seen.
+  points that see a target) and how far along the shortest route the target is first seen, plus
+  half the :func:`search_space` (reachable rooms without a target; only door edits change it).
   Moves: tall objects onto the sight lines between the route and the target; tall furniture of the
   target's room toward its doorways (hiding the view through them; validation keeps doorways
   passable); with ``relocate_targets`` (opt-in; the only edit kinds that move a target) the target
@@ -22,6 +23,12 @@ diagnosis's dominant families:
 - ``stuck``: narrower passages and clutter (the built-in objectives).
 - ``timeout``: a longer route and less target visibility.
 
+With ``door_edits`` (opt-in) the ``search``, ``looping`` and ``timeout`` families also try opening or shutting
+each interior door that has a leaf (``close_door`` / ``open_door``): a shut door forces a detour or cuts rooms
+off, an opened one adds rooms to search. A door edit goes through its own check
+(:meth:`~adaptenv.adapt.validation.EditValidator.propose_door`): the episode's target stays reachable, the
+start stays free and an opened doorway's approach stays clear.
+
 Every step records its family and intent in the edit (``Edit.intent``) and in the step
 (``StepRecord.failure_mode``). Verification: the family's objective must move in the harder
 direction (checked), and pi_t's rollout on the candidate (the checking episodes) is classified by
@@ -34,6 +41,7 @@ from __future__ import annotations
 from collections.abc import Callable
 
 import numpy as np
+from scipy import ndimage
 
 from adaptenv.adapt.analysis import Analysis, analyze_trajectory
 from adaptenv.adapt.diagnosis import MODE_FAMILY, ModeFamily, SceneDiagnosis
@@ -48,6 +56,8 @@ from adaptenv.adapt.objectives import (
     MAX_VISIBILITY_POINTS,
     ObjectiveValues,
     RouteSpec,
+    measure,
+    realism_score,
     route_points,
     shortest_route,
     visibility_fraction,
@@ -56,10 +66,12 @@ from adaptenv.adapt.realism import RealismReference
 from adaptenv.adapt.validation import EditValidator
 from adaptenv.agents.rollout import checking_episodes, mean_spl, run_in_worlds, total_steps
 from adaptenv.scene.assets import load_catalog
-from adaptenv.scene.house import House
-from adaptenv.sim.spec import MAX_RANGE
-from adaptenv.sim.task import visible_points
-from adaptenv.sim.world import NavWorld
+from adaptenv.scene.geometry import SceneGeometry
+from adaptenv.scene.house import House, is_interior_leaf_door
+from adaptenv.sim.rollout import run_episode
+from adaptenv.sim.spec import AGENT_RADIUS, MAX_RANGE
+from adaptenv.sim.task import Episode, visible_points
+from adaptenv.sim.world import NavWorld, compile_world
 
 #: Objects within this distance (m) of the route count as distractors (weight falls linearly to 0).
 DISTRACTOR_RANGE = 2.0
@@ -71,6 +83,10 @@ SYMMETRY_CAP = 2.0
 LOOP_LENGTH_SCALE = 10.0
 #: Families tried, in order, when the diagnosis found no failure (held-out failures are mostly searches).
 DEFAULT_PLAN: tuple[ModeFamily, ...] = ("search", "premature_end")
+#: Weight of :func:`search_space` in the search objective (beside :func:`hiddenness`, which lies in [0, 1]).
+SEARCH_SPACE_WEIGHT = 0.5
+#: Families whose candidates include door edits (with ``door_edits``).
+DOOR_FAMILIES = ("search", "looping", "timeout")
 
 INTENTS: dict[str, str] = {
     "sight_line": "occlude the target's sight line from the route",
@@ -80,6 +96,8 @@ INTENTS: dict[str, str] = {
     "distractor": "bring a similar-size distractor near the route",
     "mirror": "make the room near-symmetric so places look alike",
     "block_shortcut": "block a shortcut of the shortest route",
+    "close_door": "shut a door so the agent must find another way",
+    "open_door": "open a shut door so there are more rooms to search",
     "generic": "built-in move near the route",
 }
 
@@ -103,6 +121,22 @@ def hiddenness(world: NavWorld, route: RouteSpec) -> float:
     """Search objective in [0, 1]: mean of (1 - visibility from the route points) and the first-sight fraction."""
     vis = visibility_fraction(world, route.target_type, route_points(world, route))
     return 0.5 * (1.0 - vis) + 0.5 * first_sight_fraction(world, route.target_type, route.start)
+
+
+def search_space(world: NavWorld, route: RouteSpec) -> float:
+    """Share of the house's rooms the agent can reach from the start that hold no target instance (0..1): the
+    rooms it may have to search in vain. Object moves never change it (validation keeps every room reachable);
+    opening a shut door can raise it, shutting one can lower it."""
+    grid = world.grid
+    nav = grid.navigable(AGENT_RADIUS)
+    row, col = grid.to_cell(*route.start)
+    if not (grid.in_bounds(row, col) and nav[int(row), int(col)]):
+        return 0.0
+    labels, _ = ndimage.label(nav)
+    reached = set(np.unique(grid.room[labels == labels[int(row), int(col)]]).tolist()) - {-1}
+    holding = {grid.room_ids.index(r) for t in world.instances_of(route.target_type)
+               if (r := world.geometry.room_of_point(*t.center)) is not None}
+    return len(reached - holding) / max(len(grid.room_ids), 1)
 
 
 def _similar_size(fp_area: float, target_area: float) -> bool:
@@ -165,7 +199,7 @@ def room_symmetry(world: NavWorld, route: RouteSpec) -> float:
 def mode_value(family: str, world: NavWorld, route: RouteSpec, values: ObjectiveValues) -> float:
     """The failure family's objective on one scene (higher = harder in the way the family needs)."""
     if family == "search":
-        return hiddenness(world, route)
+        return hiddenness(world, route) + SEARCH_SPACE_WEIGHT * search_space(world, route)
     if family == "premature_end":
         return distractor_pressure(world, route)
     if family == "looping":
@@ -190,11 +224,12 @@ class FailureModeGenerator(BuiltinGenerator):
 
     name = "failure-modes"
 
-    def __init__(self, *, tolerance: float = 1e-6, relocate_targets: bool = False, **kw):
+    def __init__(self, *, tolerance: float = 1e-6, relocate_targets: bool = False, door_edits: bool = False, **kw):
         super().__init__(**kw)
         self.tolerance = tolerance
         self.relocate_targets = relocate_targets
         self.move_targets = relocate_targets
+        self.door_edits = door_edits
 
     def generate(self, house: House, analysis: Analysis, *, steps: int, context: GenerationContext,
                  rng: np.random.Generator) -> GenerationResult:
@@ -205,7 +240,8 @@ class FailureModeGenerator(BuiltinGenerator):
             family = plan[step % len(plan)]
             before = mode_value(family, world, route, values)
             targets = {t.object_id for t in world.instances_of(ep.target_type)}
-            cands = self._mode_candidates(family, v, world, route, targets, rng)
+            cands = self._door_candidates(v) if self.door_edits and family in DOOR_FAMILIES else []
+            cands += self._mode_candidates(family, v, world, route, targets, rng)
             cands += [c for c in self._candidates(v, world, route, targets, rng, limit=POOL * self.max_candidates // 2)
                       if not any(c.object_id == o.object_id and (c.dx_units, c.dy_units, c.rotation) ==
                                  (o.dx_units, o.dy_units, o.rotation) for o in cands)]
@@ -233,8 +269,12 @@ class FailureModeGenerator(BuiltinGenerator):
             record.verification, record.verified = "objective", True
             record.reason = f"{family} objective {before:.3f} -> {chosen.mode_value:.3f}"
             intent = INTENTS.get(chosen.kind, INTENTS["generic"])
-            edit = v.try_edit(chosen.object_id, chosen.dx_units, chosen.dy_units, chosen.rotation, source=self.name,
-                              intent=f"{family}: {intent} ({chosen.kind} move)", relocate=chosen.relocate)
+            if chosen.openness is not None:
+                edit = v.set_door(chosen.object_id, chosen.openness, source=self.name, intent=f"{family}: {intent}")
+            else:
+                edit = v.try_edit(chosen.object_id, chosen.dx_units, chosen.dy_units, chosen.rotation,
+                                  source=self.name, intent=f"{family}: {intent} ({chosen.kind} move)",
+                                  relocate=chosen.relocate)
             if not edit.accepted:  # cannot happen when the dry run agreed; kept as a guard
                 record.status, record.reason = "rejected", "; ".join(edit.problems)
                 result.steps.append(record)
@@ -262,6 +302,37 @@ class FailureModeGenerator(BuiltinGenerator):
         head.sort(key=lambda c: (not c.produced, round(c.policy_score, 6), -c.score))
         record.produced_failure = head[0].produced
         return head + ranked[self.rollout_candidates:]
+
+    # ----------------------------------------------------------------------------- door edits
+    @staticmethod
+    def _door_candidates(v: EditValidator) -> list[Candidate]:
+        """Every interior door with a leaf, shut if open and opened if shut."""
+        out = []
+        for d in v.house.doors:
+            if is_interior_leaf_door(d):
+                shut = d.openness is not None and d.openness <= 0
+                out.append(Candidate(d.id, 0.0, 0.0, None, "open_door" if shut else "close_door",
+                                     openness=1.0 if shut else 0.0))
+        return out
+
+    def _evaluate(self, v: EditValidator, geometry: SceneGeometry, cand: Candidate, route: RouteSpec,
+                  original: RealismReference, episode: Episode) -> Candidate | None:
+        """A move as the built-in G dry-runs it; a door edit through the validator's door check, then the same
+        objective, expert and realism measures on the edited house."""
+        if cand.openness is None:
+            return super()._evaluate(v, geometry, cand, route, original, episode)
+        house, problems = v.propose_door(cand.object_id, cand.openness)
+        if house is None or problems:
+            return None
+        cand.world = compile_world(house, "candidate")
+        cand.values = measure(cand.world, route)
+        if not np.isfinite(cand.values.lengthen_route):
+            return None
+        if self.require_expert and not run_episode(cand.world, episode, self._expert, record=False).metrics.success:
+            return None
+        if self.realism_weight > 0:
+            cand.realism = realism_score(house, original, geometry=cand.world.geometry)
+        return cand
 
     # ----------------------------------------------------------------------------- candidates per family
     def _mode_candidates(self, family: str, v: EditValidator, world: NavWorld, route: RouteSpec, targets: set[str],
@@ -424,5 +495,5 @@ class FailureModeGenerator(BuiltinGenerator):
         return oid, aim - ctx.centers[ctx.index[oid]], "mirror"
 
 
-__all__ = ["DEFAULT_PLAN", "FailureModeGenerator", "distractor_pressure", "first_sight_fraction", "hiddenness",
+__all__ = ["DEFAULT_PLAN", "FailureModeGenerator", "search_space", "distractor_pressure", "first_sight_fraction", "hiddenness",
            "mode_plan", "mode_value", "room_symmetry"]
