@@ -197,11 +197,22 @@ def test_finetune_with_a_named_config(tiny_set, algo):
     ppo_only = {"kl_coef": 0.5, "explore_bonus": 0.001}
     cfg = FinetuneConfig(algo=algo, frames=2048, num_envs=16, learning_rate=1e-3, final_eval_episodes=3,
                          **(ppo_only if algo == "ppo" else {}))
-    new, card = finetune(net, tiny_set.worlds, cfg, seed=0)  # PPO: one 16 x 128-step rollout; DAgger: four of 32
+    res = finetune(net, tiny_set.worlds, cfg, seed=0)  # PPO: one 16 x 128-step rollout; DAgger: four of 32
+    new, card = res.net, res.card
     assert new is not net and card["frames"] == 2048
     if algo == "ppo":
         assert {k: card["config"][k] for k in ppo_only} == ppo_only
+        # a second call continues the first one's critic and Adam moments (the loop's later iterations)
+        again = finetune(new, tiny_set.worlds, cfg, seed=1, learner=res.learner)
+
+        def steps(r):
+            return {int(s["step"]) for s in r.learner["optimizer"]["state"].values()}
+
+        assert steps(res) == {res.card["updates"]}
+        assert steps(again) == {res.card["updates"] + again.card["updates"]}
+        assert again.card["config"]["value_warmup_iters"] == 0
     else:
+        assert res.learner is None
         with pytest.raises(ConfigError, match="PPO only"):
             finetune(net, tiny_set.worlds, FinetuneConfig(algo=algo, kl_coef=0.5), seed=0)
     assert all(torch.equal(v, net.state_dict()[k]) for k, v in before.items())

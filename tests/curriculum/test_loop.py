@@ -164,6 +164,34 @@ def test_the_loop_fine_tunes_by_anchored_ppo(tiny_policy, tmp_path, monkeypatch)
 
 
 @pytest.mark.slow
+@pytest.mark.parametrize("keep", [True, False])
+def test_ppo_fine_tuning_continues_its_critic_across_iterations(tiny_policy, tmp_path, monkeypatch, keep):
+    import torch
+
+    from adaptenv.agents import ppo
+    from adaptenv.curriculum.loop import LEARNER_FILE
+
+    given, real = [], ppo.train_ppo
+
+    def spy(pc, **kw):
+        given.append((kw.get("learner"), pc.value_warmup_iters))
+        return real(pc, **kw)
+
+    monkeypatch.setattr(ppo, "train_ppo", spy)
+    cfg = tiny_config(tiny_policy, "dr", iterations=2, finetune_algo="ppo", finetune_frames=4 * 16 * 128,
+                      finetune_kl_coef=0.3, finetune_keep_learner=keep)
+    run_loop(cfg, tmp_path / "r")
+    saved = [tmp_path / "r" / f"iter_{t:04d}" / LEARNER_FILE for t in (1, 2)]
+    assert [p.is_file() for p in saved] == [keep, keep]
+    assert given[0] == (None, 1), "the first iteration starts a fresh critic with a value warm-up"
+    if keep:
+        first = torch.load(saved[0], weights_only=True)
+        assert given[1][1] == 0 and all(torch.equal(v, given[1][0]["value"][k]) for k, v in first["value"].items())
+    else:
+        assert given[1] == (None, 1)
+
+
+@pytest.mark.slow
 def test_dr_matched_spends_the_environment_steps_of_the_run_it_matches(tiny_policy, tmp_path):
     ours = run_loop(tiny_config(tiny_policy, "ours", iterations=2, buffer_capacity=16), tmp_path / "ours")
     cfg = tiny_config(tiny_policy, "dr-matched", iterations=2, match_run=str(tmp_path / "ours"))

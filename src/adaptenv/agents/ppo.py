@@ -241,16 +241,17 @@ def _initial_net(cfg: PPOConfig, init_net: NavNet | None) -> NavNet:
 
 
 def train_ppo(cfg: PPOConfig, *, worlds: Sequence[Any] | None = None, init_net: NavNet | None = None,
-              command: str = "") -> TrainResult:
-    """Run PPO as configured; returns the trained network, its card and the logged rows (torch's thread count is
-    the caller's again afterwards)."""
+              learner: dict[str, Any] | None = None, command: str = "") -> TrainResult:
+    """Run PPO as configured; returns the trained network, its card, the logged rows and the learner state (value
+    head and optimizer) that ``learner`` takes to continue the run later (torch's thread count is the caller's
+    again afterwards)."""
     check_ppo_config(cfg)
     with torch_threads(cfg.threads or available_cores()) as threads:
-        return _train_ppo(cfg, worlds, init_net, command, threads)
+        return _train_ppo(cfg, worlds, init_net, learner, command, threads)
 
 
-def _train_ppo(cfg: PPOConfig, worlds: Sequence[Any] | None, init_net: NavNet | None, command: str,
-               threads: int) -> TrainResult:
+def _train_ppo(cfg: PPOConfig, worlds: Sequence[Any] | None, init_net: NavNet | None,
+               learner: dict[str, Any] | None, command: str, threads: int) -> TrainResult:
     run_dir = default_ppo_run_dir(cfg)
     if run_dir:
         run_dir.mkdir(parents=True, exist_ok=True)
@@ -262,6 +263,9 @@ def _train_ppo(cfg: PPOConfig, worlds: Sequence[Any] | None, init_net: NavNet | 
     anchor = copy.deepcopy(net).eval().requires_grad_(False)  # pi_0, frozen
     agent = ActorCritic(net)
     optimizer = torch.optim.Adam(agent.parameters(), lr=cfg.learning_rate, eps=1e-5)
+    if learner is not None:  # a previous run's critic and Adam moments: this run continues it
+        agent.value.load_state_dict(learner["value"])
+        optimizer.load_state_dict(copy.deepcopy(learner["optimizer"]))  # Adam steps its tensors in place
     B, T, L = cfg.num_envs, cfg.rollout_steps, cfg.chunk_len
     H = net.config.hidden
     n_iterations = -(-cfg.frames // (B * T))
@@ -477,4 +481,5 @@ def _train_ppo(cfg: PPOConfig, worlds: Sequence[Any] | None, init_net: NavNet | 
     if cfg.output:
         save_checkpoint(cfg.output, net, {k: v for k, v in card.items() if k != "config"})
         Path(cfg.output).with_suffix(".json").write_text(json.dumps(card, indent=1) + "\n", encoding="utf-8")
-    return TrainResult(net, card, logger.rows)
+    return TrainResult(net, card, logger.rows,
+                       learner=copy.deepcopy({"value": agent.value.state_dict(), "optimizer": optimizer.state_dict()}))

@@ -288,6 +288,8 @@ class TrainResult:
     net: NavNet
     card: dict[str, Any]
     rows: list[dict[str, Any]] = field(default_factory=list)
+    learner: dict[str, Any] | None = None
+    """PPO's value head and optimizer state (``train_ppo(learner=...)`` continues from them); None for DAgger."""
 
     def policy(self, *, name: str = "finetuned") -> NeuralPolicy:
         return NeuralPolicy(self.net, name=name, end_threshold=self.card.get("end_threshold", END_THRESHOLD))
@@ -546,8 +548,10 @@ def _train(cfg: TrainConfig, worlds: Sequence[NavWorld] | None, init_net: NavNet
     return TrainResult(net, card, logger.rows)
 
 
-def finetune(net: NavNet, worlds: Sequence[NavWorld], cfg: FinetuneConfig, seed: int) -> tuple[NavNet, dict[str, Any]]:
-    """Fine-tune a copy of ``net`` (a NavNet) on ``worlds`` (NavWorlds) as ``cfg`` says; returns (new net, card).
+def finetune(net: NavNet, worlds: Sequence[NavWorld], cfg: FinetuneConfig, seed: int,
+             learner: dict[str, Any] | None = None) -> TrainResult:
+    """Fine-tune a copy of ``net`` (a NavNet) on ``worlds`` (NavWorlds) as ``cfg`` says; returns the new net, its
+    card and, for PPO, the learner state that ``learner`` takes to continue this run (no value warm-up then).
 
     ``algo='dagger'``: DAgger from the current weights with a fresh Adam optimizer, expert-action
     probability ``beta`` throughout, labels from ``cfg.teacher``, ``rollout_steps``-step blocks that are also the training
@@ -570,15 +574,15 @@ def finetune(net: NavNet, worlds: Sequence[NavWorld], cfg: FinetuneConfig, seed:
         from adaptenv.agents.ppo import train_ppo
 
         iterations = -(-cfg.frames // (cfg.num_envs * PPOConfig.rollout_steps))
-        pc = PPOConfig(houses="(in memory)", value_warmup_iters=min(PPOConfig.value_warmup_iters, iterations // 4),
+        warmup = 0 if learner is not None else min(PPOConfig.value_warmup_iters, iterations // 4)
+        pc = PPOConfig(houses="(in memory)", value_warmup_iters=warmup,
                        frames=cfg.frames, init="", output="", seed=seed, num_envs=cfg.num_envs,
                        learning_rate=cfg.learning_rate, end_threshold=cfg.end_threshold,
                        calibrate_episodes=cfg.calibrate_episodes, eval_every=0, final_eval_episodes=evals,
                        min_start_distance=cfg.min_start_distance, max_episode_steps=cfg.max_episode_steps,
                        kl_coef=cfg.kl_coef, explore_bonus=cfg.explore_bonus, threads=1, progress=False,
                        tensorboard=False)
-        result = train_ppo(pc, worlds=worlds, init_net=net)
-        return result.net, result.card
+        return train_ppo(pc, worlds=worlds, init_net=net, learner=learner)
     steps = cfg.rollout_steps
     tc = TrainConfig(houses="(in memory)", frames=cfg.frames, output="", seed=seed, num_envs=cfg.num_envs,
                      rollout_steps=steps, chunk_len=steps, batch_chunks=cfg.batch_chunks,
@@ -588,8 +592,7 @@ def finetune(net: NavNet, worlds: Sequence[NavWorld], cfg: FinetuneConfig, seed:
                      min_start_distance=cfg.min_start_distance, progress=False, tensorboard=False,
                      learning_rate=cfg.learning_rate, save_every=10**9, precision=cfg.precision,
                      max_episode_steps=cfg.max_episode_steps)
-    result = train(tc, worlds=worlds, init_net=net)
-    return result.net, result.card
+    return train(tc, worlds=worlds, init_net=net)
 
 
 def finetune_policy(policy: NeuralPolicy | NavNet | str | Path, houses: Sequence[House | NavWorld] | str, frames: int, *,

@@ -105,6 +105,9 @@ def loop(
                                            "to pi_t (0.3 in docs/agent.md's runs)."),
     finetune_explore_bonus: float = typer.Option(0.0, "--finetune-explore-bonus", min=0.0, help="ppo: reward per "
                                                  "newly seen map cell (0.002 in docs/agent.md's runs)."),
+    finetune_keep_learner: bool = typer.Option(True, "--finetune-keep-learner/--finetune-fresh-learner",
+                                               help="ppo: every iteration continues the last one's value head and "
+                                               "Adam moments (one PPO run across the loop), or starts them afresh."),
     score_rollouts: int = typer.Option(4, "--score-rollouts", min=1, help="Episodes of pi_t per rolled-out scene; "
                                        "scene scores average them."),
     level_score: str = typer.Option("regret", "--level-score", help="Scene score of plr, accel and ours: regret, "
@@ -174,6 +177,7 @@ def loop(
                      scenes_per_iteration=scenes, edit_steps=edit_steps, finetune_frames=finetune_frames,
                      finetune_lr=finetune_lr, finetune_teacher=finetune_teacher, finetune_algo=finetune_algo,
                      finetune_kl_coef=finetune_kl_coef, finetune_explore_bonus=finetune_explore_bonus,
+                     finetune_keep_learner=finetune_keep_learner,
                      score_rollouts=score_rollouts, level_score=level_score, sfl_candidates=sfl_candidates,
                      match_run=match_run,
                      finetune_min_start=finetune_min_start, finetune_precision=finetune_precision,

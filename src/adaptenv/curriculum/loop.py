@@ -41,6 +41,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+import torch
 
 from adaptenv.adapt.llm.accounting import check_llm_section, run_changes, scenes_usage
 from adaptenv.agents.checkpoint import load_checkpoint, save_checkpoint
@@ -142,6 +143,9 @@ class LoopConfig:
     """ppo: weight of the KL anchor to pi_t (0.3 in the PPO runs of docs/agent.md)."""
     finetune_explore_bonus: float = 0.0
     """ppo: reward per newly seen map cell (0.002 in the PPO runs of docs/agent.md)."""
+    finetune_keep_learner: bool = True
+    """ppo: each iteration continues the last one's value head and Adam moments (one PPO run across the loop, as
+    UED methods train); false starts every iteration with a fresh critic and a value warm-up."""
     replay_fraction: float = 0.5
     """Share of the fine-tuning scenes drawn from earlier scenes so the policy does not forget."""
     heldout_episodes: int = 100
@@ -362,14 +366,17 @@ def _run_loop(cfg: LoopConfig, run_dir: str | Path, resume: bool, executor: Exec
         # 3. fine-tune pi on the chosen scenes (DAgger with the teacher's labels, or anchored PPO)
         ft = replace(finetune_config(cfg, pi_t.end_threshold), frames=method.finetune_frames(it))
         say(f"t={t}: fine-tuning on {len(train_names)} scenes ({ft.frames} frames)")
-        net, card = finetune(pi_t.net, [store.world(x) for x in train_names], ft,
-                             seed=it.seed(Stream.FINETUNE) % 2**31)
+        tuned = finetune(pi_t.net, [store.world(x) for x in train_names], ft, seed=it.seed(Stream.FINETUNE) % 2**31,
+                         learner=_load_learner(iteration_dir(run_dir, t - 1)) if cfg.finetune_keep_learner else None)
+        net, card = tuned.net, tuned.card
         state.env_steps += int(card["frames"])
         state.grad_updates += int(card["updates"])
         pi_next = NeuralPolicy(net, end_threshold=pi_t.end_threshold)
         stages.lap("finetune")
         save_checkpoint(iteration_dir(run_dir, t) / "policy.pt", net,
                         {"iteration": t, "method": cfg.method, "end_threshold": pi_next.end_threshold})
+        if tuned.learner is not None and cfg.finetune_keep_learner:
+            torch.save(tuned.learner, iteration_dir(run_dir, t) / LEARNER_FILE)
 
         # 4. held-out evaluation of pi_{t+1}
         say(f"t={t}: evaluating on the held-out sets")
@@ -388,6 +395,16 @@ def _run_loop(cfg: LoopConfig, run_dir: str | Path, resume: bool, executor: Exec
             encoding="utf-8")
         _checkpoint(run_dir, cfg, state, records)
     return records
+
+
+#: PPO's value head and optimizer state after an iteration's fine-tuning (the next iteration continues from it).
+LEARNER_FILE = "learner.pt"
+
+
+def _load_learner(folder: Path) -> dict[str, Any] | None:
+    """The learner state an iteration saved, or None (the first iteration, DAgger, or a run made without it)."""
+    path = folder / LEARNER_FILE
+    return torch.load(path, weights_only=True) if path.is_file() else None
 
 
 class StageClock:
