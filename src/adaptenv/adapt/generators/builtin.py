@@ -32,6 +32,7 @@ Cost: one ``compile_world`` plus one distance field and a few line-of-sight walk
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -338,14 +339,20 @@ class BuiltinGenerator:
             return None
         cand.proposal = proposal
         moved = moved_geometry(geometry, res)
-        cand.world = compile_world(v.house, "candidate", geometry=moved)
-        cand.values = measure(cand.world, route)
+        return self._measure(cand, compile_world(v.house, "candidate", geometry=moved), route, original, episode,
+                             lambda: edited_copy(v.house, res, share=True))
+
+    def _measure(self, cand: Candidate, world: NavWorld, route: RouteSpec, original: RealismReference,
+                 episode: Episode, edited: Callable[[], House]) -> Candidate | None:
+        """A candidate's objectives, expert check and realism in its edited ``world`` (``edited()`` builds its house
+        for the realism term); None when the route is gone or the expert no longer solves the episode."""
+        cand.world, cand.values = world, measure(world, route)
         if not math.isfinite(cand.values.lengthen_route):
             return None
-        if self.require_expert and not run_episode(cand.world, episode, self._expert, record=False).metrics.success:
+        if self.require_expert and not run_episode(world, episode, self._expert, record=False).metrics.success:
             return None
         if self.realism_weight > 0:
-            cand.realism = realism_score(edited_copy(v.house, res, share=True), original, geometry=moved)
+            cand.realism = realism_score(edited(), original, geometry=world.geometry)
         return cand
 
     def _rank(self, tried: list[Candidate], sug: Suggestion, suggestions: list[Suggestion], before: ObjectiveValues,

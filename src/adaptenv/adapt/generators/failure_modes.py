@@ -56,8 +56,6 @@ from adaptenv.adapt.objectives import (
     MAX_VISIBILITY_POINTS,
     ObjectiveValues,
     RouteSpec,
-    measure,
-    realism_score,
     route_points,
     shortest_route,
     visibility_fraction,
@@ -68,7 +66,6 @@ from adaptenv.agents.rollout import checking_episodes, mean_spl, run_in_worlds, 
 from adaptenv.scene.assets import load_catalog
 from adaptenv.scene.geometry import SceneGeometry
 from adaptenv.scene.house import House, is_interior_leaf_door
-from adaptenv.sim.rollout import run_episode
 from adaptenv.sim.spec import AGENT_RADIUS, MAX_RANGE
 from adaptenv.sim.task import Episode, visible_points
 from adaptenv.sim.world import NavWorld, compile_world
@@ -324,15 +321,7 @@ class FailureModeGenerator(BuiltinGenerator):
         house, problems = v.propose_door(cand.object_id, cand.openness)
         if house is None or problems:
             return None
-        cand.world = compile_world(house, "candidate")
-        cand.values = measure(cand.world, route)
-        if not np.isfinite(cand.values.lengthen_route):
-            return None
-        if self.require_expert and not run_episode(cand.world, episode, self._expert, record=False).metrics.success:
-            return None
-        if self.realism_weight > 0:
-            cand.realism = realism_score(house, original, geometry=cand.world.geometry)
-        return cand
+        return self._measure(cand, compile_world(house, "candidate"), route, original, episode, lambda: house)
 
     # ----------------------------------------------------------------------------- candidates per family
     def _mode_candidates(self, family: str, v: EditValidator, world: NavWorld, route: RouteSpec, targets: set[str],
