@@ -111,3 +111,14 @@ def test_timeout_edits_shut_a_door_that_forces_a_detour():
     after = geodesic_distance(compile_world(res.house, "after"), ep.target_type, *ep.start[:2])
     assert math.isfinite(after) and after > before
     _valid_and_solvable(scene, res)
+
+
+def test_a_validator_over_a_door_edited_scene_judges_moves_with_the_doors_as_they_are():
+    house, _, ep, _, _ = procedural_scene(5, 4, [1, 1])
+    v = EditValidator(house, episode_targets=[ep.target_type], start=ep.start[:2])
+    door = next(d.id for d in house.doors if is_interior_leaf_door(d) and not v.propose_door(d.id, 0.0)[1])
+    assert v.set_door(door, 0.0).accepted
+    again = EditValidator(v.house, episode_targets=[ep.target_type], start=ep.start[:2], original=house)
+    mover = next(oid for oid, m in zip(again.ctx.ids, again.ctx.movable, strict=True) if m)
+    edit = again.try_edit(mover, 3.0, 0.0)
+    assert edit.accepted and not any("can no longer be reached" in p for p in edit.problems)

@@ -618,6 +618,10 @@ class EditValidator:
         self.start_cell = None if self.start is None else _cell(occ, self.start)
         base_house, base_geometry = (original, None) if original is not None else (self.house, self.geometry)
         need = scene_reachability(base_house, start=self.start, targets=episode_targets, geometry=base_geometry)
+        if original is not None and (doored := _doors_as_in(original, self.house)) is not original:
+            # doors opened or shut since the original: rooms and doorways are judged with them as they are now
+            now = scene_reachability(doored, start=self.start, targets=[])
+            need = replace(need, rooms=now.rooms, doors=now.doors)
         self.need_rooms = need.rooms
         self.need_doors = need.doors & set(self.doors)
         self.approach = approach_zones(self.geometry)
