@@ -166,3 +166,36 @@ def test_invalid_verification_answers_leave_the_edit_unverified(llm_scene):
     res = _run(llm_scene, Mock(move(), bad, bad, bad))
     step = res.steps[0]
     assert step.status == "applied" and step.verified is None and "verification skipped" in step.reason
+
+
+def test_g_with_door_edits_offers_both_tools_and_opens_a_shut_door():
+    from adaptenv.adapt.analysis import analyze_trajectory
+    from adaptenv.adapt.edits import replay
+    from adaptenv.agents.policy import ExpertPolicy
+    from adaptenv.agents.rollout import draw_episode, rollout
+    from adaptenv.scene.procedural import GenerationConfig, generate_house
+    from adaptenv.scene.procedural.checks import closed_interior_doors
+    from adaptenv.sim.world import compile_world
+
+    house = generate_house(0, GenerationConfig(n_rooms=6, closed_door_prob=0.4))
+    world = compile_world(house, "h")
+    ep = draw_episode(world, np.random.default_rng([1, 1]))
+    traj = rollout(world, ep, ExpertPolicy())
+    shut = closed_interior_doors(house)
+    mock = Mock((200, srv.chat_tool_reply("set_door_openness", {"door_id": "door|2|5", "open": True})), verify(True))
+    ctx = GenerationContext(episode=ep, trajectory=traj, render_size=320)
+    res = LLMGenerator(mock.backend(), door_edits=True).generate(house, analyze_trajectory(traj, world), steps=1,
+                                                                 context=ctx, rng=np.random.default_rng(0))
+    first, second = mock.bodies
+    assert [t["function"]["name"] for t in first["tools"]] == ["propose_move_instruction", "set_door_openness"]
+    assert first["tool_choice"] == "required"
+    assert "door|2|5" in shut and "- door|2|5: between room|2 and room|5, shut" in first["messages"][1]["content"][0]["text"]
+    assert "door door|2|5 is now open (it was shut)" in second["messages"][-1]["content"][0]["text"]
+    (step,) = res.steps
+    assert step.status == "applied" and step.verified is True and step.edit.is_door and step.edit.openness == 1.0
+    assert set(closed_interior_doors(res.house)) == set(shut) - {"door|2|5"}
+    assert replay(house, res.edit_log).model_dump() == res.house.model_dump()
+    plain = Mock(move(oid="Sofa|9"))
+    LLMGenerator(plain.backend(), max_attempts=1).generate(house, analyze_trajectory(traj, world), steps=1,
+                                                          context=ctx, rng=np.random.default_rng(0))
+    assert len(plain.bodies[0]["tools"]) == 1, "without door_edits G has the paper's move tool only"

@@ -158,3 +158,18 @@ def test_verification_errors(args, allowed, needle):
         parse_verification(args, allowed)
     assert needle in info.value.feedback
     assert "verify_move" in info.value.feedback
+
+
+def test_the_door_tool_and_its_answers():
+    from adaptenv.adapt.llm.tools import DoorInstruction, door_tool, parse_door_instruction
+
+    doors = ["door|2|3", "door|3|4"]
+    params = door_tool(doors).parameters
+    assert params["properties"]["door_id"]["enum"] == doors and params["required"] == ["door_id", "open"]
+    assert parse_door_instruction({"door_id": "door|3|4", "open": False}, doors) == DoorInstruction(
+        door_id="door|3|4", open=False)
+    with pytest.raises(MoveInstructionError) as exc:
+        parse_door_instruction({"door_id": "door|9|9", "open": "yes", "why": 1}, doors)
+    text = exc.value.feedback
+    assert "door_id 'door|9|9' is not allowed" in text and "open must be true or false" in text
+    assert "unexpected field(s): why" in text and "set_door_openness" in text

@@ -147,8 +147,8 @@ def adapt(
     steps: int = typer.Option(5, "--steps", min=1, max=50, help="Single-object edits to make."),
     generator: str = typer.Option("builtin", "--generator", help="builtin (offline), failure-modes (offline, aims at "
                                   "F's failure families), llm, or random."),
-    door_edits: bool = typer.Option(False, "--door-edits", help="With --generator failure-modes: G may also open or "
-                                    "shut interior doors."),
+    door_edits: bool = typer.Option(False, "--door-edits", help="With --generator failure-modes or llm: G may also "
+                                    "open or shut interior doors."),
     analyzer: str = typer.Option("builtin", "--analyzer", help="builtin (offline) or llm."),
     model: str | None = MODEL_OPTION,
     base_url: str | None = BASE_URL_OPTION,
@@ -190,9 +190,9 @@ def adapt(
 
     if generator not in GENERATORS:
         raise ConfigError(f"--generator {generator!r}: unknown generator; use one of {', '.join(GENERATORS)}")
-    if door_edits and generator != "failure-modes":
-        raise ConfigError(f"--door-edits: only the failure-modes generator edits doors; add --generator failure-modes "
-                          f"or drop --door-edits (got --generator {generator})")
+    if door_edits and generator not in ("failure-modes", "llm"):
+        raise ConfigError(f"--door-edits: only the failure-modes and llm generators edit doors; add --generator "
+                          f"failure-modes or drop --door-edits (got --generator {generator})")
     if analyzer not in ("builtin", "llm"):
         raise ConfigError(f"--analyzer {analyzer!r}: unknown analyzer; use builtin or llm")
     writable_folder(out, "-o")
@@ -220,8 +220,8 @@ def adapt(
             d = backend.describe()
             console.print(f"LLM: {d['model']} at {d['base_url']} ({d['api']} API, prompts {d['prompts']})",
                           highlight=False)
-    gen = (make_generator(generator, backend=backend) if generator == "llm"
-           else make_generator(generator, door_edits=True) if door_edits else make_generator(generator))
+    doors = {"door_edits": True} if door_edits else {}
+    gen = make_generator(generator, backend=backend, **doors) if generator == "llm" else make_generator(generator, **doors)
     if generator == "llm" and not as_json:
         gen.progress = lambda text: console.print(f"[dim]{text}[/]", highlight=False)
     f = LLMAnalyzer(backend) if analyzer == "llm" else BuiltinAnalyzer()

@@ -133,8 +133,8 @@ def loop(
     relocate_targets: bool = typer.Option(False, "--relocate-targets", help="The failure-mode G may move a target "
                                           "inside its room or to a far room where its type plausibly stands (search "
                                           "failures); otherwise no edit moves a target."),
-    door_edits: bool = typer.Option(False, "--door-edits", help="The failure-mode G may also open or shut interior "
-                                    "doors (search, looping and timeout failures)."),
+    door_edits: bool = typer.Option(False, "--door-edits", help="G may also open or shut interior doors (the "
+                                    "failure-mode G for search, looping and timeout failures; the LLM G by a tool)."),
     heldout_episodes: int = typer.Option(100, "--heldout-episodes", min=1, help="Episodes per held-out set."),
     heldout: list[str] = typer.Option(None, "--heldout", help="Held-out set NAME=HOUSES (repeatable); default: "
                                       "rearranged=preset:pretrain-rearranged and unseen=preset:pretrain-unseen."),

@@ -217,7 +217,7 @@ class GenerateJob:
     relocate_targets: bool = False
     """``failure-modes``: G may relocate a target instance to a far room (``LoopConfig.relocate_targets``)."""
     door_edits: bool = False
-    """``failure-modes``: G may open or shut interior doors (``LoopConfig.door_edits``)."""
+    """``failure-modes`` and ``llm``: G may open or shut interior doors (``LoopConfig.door_edits``)."""
 
 
 @dataclass
@@ -265,7 +265,7 @@ def run_generate(job: GenerateJob) -> Generated:
         return _run_diagnosed(job, rng)
     if job.rollout is None or job.weights is None:
         raise ValueError(f"GenerateJob {job.name}: kind {job.kind!r} needs the policy weights and its rollout")
-    analyzer, generator = make_fg(job.kind, job.llm)
+    analyzer, generator = make_fg(job.kind, job.llm, door_edits=job.door_edits)
     res = adapt_scene(job.house, job.rollout.episode, policy=job.weights.policy(), analyzer=analyzer,
                       generator=generator, steps=job.edit_steps, rng=rng, before=job.rollout.trajectory,
                       name=job.name)
@@ -314,7 +314,7 @@ def make_fg(kind: GeneratorKind, llm: dict[str, Any], *, relocate_targets: bool 
     """Analyzer F and generator G: built-in, or LLM-backed (one backend shared by F and G)."""
     if kind == "llm":
         backend = make_backend(LLMConfig(**llm))
-        return LLMAnalyzer(backend), make_generator("llm", backend=backend)
+        return LLMAnalyzer(backend), make_generator("llm", backend=backend, door_edits=door_edits)
     if kind == "failure-modes":
         return BuiltinAnalyzer(), make_generator("failure-modes", relocate_targets=relocate_targets,
                                                      door_edits=door_edits)

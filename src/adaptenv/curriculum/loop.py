@@ -170,7 +170,8 @@ class LoopConfig:
     to a far room of a type where it plausibly stands (the methods with the failure-mode G: ours,
     ours-randomscene, ours-dr); otherwise no edit moves a target."""
     door_edits: bool = False
-    """The failure-mode G may also open or shut interior doors (search, looping and timeout failures)."""
+    """G may also open or shut interior doors: the failure-mode G for search, looping and timeout failures, the LLM
+    G (ours-llm) through its set_door_openness tool."""
 
     __pydantic_config__ = STRICT
 

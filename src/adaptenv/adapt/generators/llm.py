@@ -26,6 +26,10 @@ with the edits of the finished steps; an edit of the unfinished step is undone (
 edit log is marked ``undone``). A bad answer never raises. Clamped answers (units above 100,
 rotations outside [0, 360)) are applied as clamped and the clamp is written into the edit's intent.
 
+With ``door_edits`` (and adaptenv's prompts) the step prompt also lists the interior doors with a leaf,
+open or shut, and the model may answer with ``set_door_openness`` instead (one door opened or shut,
+through :meth:`~adaptenv.adapt.validation.EditValidator.set_door`'s check, verified the same way).
+
 The episode's target objects are not in the move tool's enum (as with the built-in G) unless
 ``allow_target_moves``. With ``prompts="paper"`` the paper's appendix prompt is sent verbatim
 (:data:`adaptenv.adapt.llm.prompts.PAPER_G_PROMPT`), without a system message or object list.
@@ -52,11 +56,19 @@ from adaptenv.adapt.generators import (
 from adaptenv.adapt.llm.errors import BudgetExceeded, LLMUnavailableError, ModelAnswerError
 from adaptenv.adapt.llm.messages import Message
 from adaptenv.adapt.llm.prompts import PAPER_G_PROMPT
-from adaptenv.adapt.llm.tools import MoveInstruction, move_tool, parse_move_instruction
+from adaptenv.adapt.llm.tools import (
+    DOOR_TOOL_NAME,
+    DoorInstruction,
+    MoveInstruction,
+    door_tool,
+    move_tool,
+    parse_door_instruction,
+    parse_move_instruction,
+)
 from adaptenv.adapt.objectives import OBJECTIVE_KINDS, RouteSpec, gain, measure
 from adaptenv.adapt.validation import EditValidator
 from adaptenv.adapt.verification import Check, ask_llm, revise_until_verified
-from adaptenv.scene.house import House
+from adaptenv.scene.house import House, is_interior_leaf_door
 from adaptenv.sim.world import compile_world
 
 if TYPE_CHECKING:
@@ -99,7 +111,13 @@ Rules:
   and chairs their table (facing_broken).
 
 Movable objects (id: type at grid x, y, rotation):
-{objects}"""
+{objects}{doors}"""
+
+DOORS_PROMPT = """
+
+Instead of moving an object you may open or shut ONE of these interior doors with the
+set_door_openness function (a shut door is a wall to the robot; the target must stay reachable):
+{doors}"""
 
 VERIFY_PROMPT = """This is the apartment after your move ({oid} is highlighted in gold).
 Intended effect: {intent}
@@ -110,6 +128,8 @@ true if it does; otherwise false, with the reason and a revised_move that would 
 revised move replaces this one and is applied to the apartment as it was before this move."""
 
 REVISE_PROMPT = "{reason} Propose a revised move with propose_move_instruction; it replaces the previous one."
+REVISE_DOOR_PROMPT = ("{reason} Propose a revised edit with propose_move_instruction or set_door_openness; it "
+                      "replaces the previous one.")
 
 NOOP_FEEDBACK = ("Your move changed nothing: the object kept its position and heading ({achieved}). Propose a "
                  "move that changes its position or its heading.")
@@ -133,7 +153,20 @@ def object_list(v: EditValidator, exclude_types: frozenset[str] = frozenset()) -
     return ids, "\n".join(lines)
 
 
-def describe_request(move: MoveInstruction) -> str:
+def door_list(v: EditValidator) -> tuple[list[str], str]:
+    """Interior doors with a leaf and the prompt's door lines (rooms joined, open or shut)."""
+    ids, lines = [], []
+    for d in v.house.doors:
+        if is_interior_leaf_door(d):
+            shut = d.openness is not None and d.openness <= 0
+            ids.append(d.id)
+            lines.append(f"- {d.id}: between {d.room0} and {d.room1}, {'shut' if shut else 'open'}")
+    return ids, "\n".join(lines)
+
+
+def describe_request(move: MoveInstruction | DoorInstruction) -> str:
+    if isinstance(move, DoorInstruction):
+        return f"{'open' if move.open else 'shut'} door {move.door_id}"
     return (f"{move.object_id} {move.x_direction} {move.x_units:g} units, {move.y_direction} {move.y_units:g} units, "
             f"rotation {move.rotation:g}")
 
@@ -141,6 +174,10 @@ def describe_request(move: MoveInstruction) -> str:
 def describe_achieved(edit: Edit) -> str:
     if not edit.accepted:
         return "rejected by validation (" + "; ".join(edit.problems) + "); the apartment is unchanged"
+    if edit.is_door:
+        state = {True: "open", False: "shut"}
+        was = edit.openness_before is None or edit.openness_before > 0
+        return f"door {edit.object_id} is now {state[edit.openness > 0]} (it was {state[was]})"
     stop = {"reached": "it reached the requested position",
             "blocked_by_object": f"it stopped early, blocked by {edit.blocked_by}",
             "blocked_by_wall": f"it stopped early at the wall {edit.blocked_by}",
@@ -162,8 +199,9 @@ class LLMGenerator:
 
     def __init__(self, backend: LLMBackend, *, max_attempts: int = 3, max_revisions: int = 2, verify: bool = True,
                  prompts: str | None = None, allow_target_moves: bool | None = None,
-                 progress: Callable[[str], None] | None = None):
+                 progress: Callable[[str], None] | None = None, door_edits: bool = False):
         self.backend = backend
+        self.door_edits = door_edits
         self.max_attempts = max_attempts
         self.max_revisions = max_revisions
         self.verify = verify
@@ -182,14 +220,17 @@ class LLMGenerator:
         (self.progress or log.info)(text)
 
     # ----------------------------------------------------------------------------- model calls
-    def _ask_move(self, messages: list[Message], ids: list[str]) -> tuple[MoveInstruction | None, int, str]:
-        """(a validated move or None, attempts used, reason when None); ``messages`` grows with the exchange."""
-        tool = move_tool(ids)
+    def _ask_move(self, messages: list[Message], ids: list[str], doors: list[str] | None = None
+                  ) -> tuple[MoveInstruction | DoorInstruction | None, int, str]:
+        """(a validated move, or door edit when ``doors`` are offered, or None; attempts used; reason when None);
+        ``messages`` grows with the exchange."""
+        tools = [move_tool(ids), door_tool(doors)] if doors else move_tool(ids)
         last = ""
         for attempt in range(1, self.max_attempts + 1):
             try:
-                call = self.backend.call_tool(self.system, messages, None, tool, role="G")
-                move = parse_move_instruction(call.arguments, ids)
+                call = self.backend.call_tool(self.system, messages, None, tools, role="G")
+                move = (parse_door_instruction(call.arguments, doors) if doors and call.name == DOOR_TOOL_NAME
+                        else parse_move_instruction(call.arguments, ids))
             except ModelAnswerError as exc:
                 last = str(exc)
                 log.info("move answer %d rejected: %s", attempt, exc)
@@ -199,13 +240,13 @@ class LLMGenerator:
             return move, attempt, ""
         return None, self.max_attempts, f"no valid move after {self.max_attempts} answers (last: {last})"
 
-    def _prompt(self, analysis: Analysis, sug: Suggestion | None, intent: str, lines: str) -> str:
-        """G's user message for one step (the paper's verbatim, or adaptenv's with the object list)."""
+    def _prompt(self, analysis: Analysis, sug: Suggestion | None, intent: str, lines: str, doors: str = "") -> str:
+        """G's user message for one step (the paper's verbatim, or adaptenv's with the object and door lists)."""
         if self.prompts == "paper":
             return PAPER_G_PROMPT.format(analysis=analysis.to_text())
         return STEP_PROMPT.format(analysis=analysis.to_text(), sid=sug.id if sug else "-",
                                   skind=sug.kind if sug else "any", sdesc=sug.description if sug else intent,
-                                  objects=lines)
+                                  objects=lines, doors=DOORS_PROMPT.format(doors=doors) if doors else "")
 
     # ----------------------------------------------------------------------------- the loop
     def generate(self, house: House, analysis: Analysis, *, steps: int, context: GenerationContext,
@@ -255,7 +296,9 @@ class LLMGenerator:
                                                                  " besides the episode's targets")
             return v, values
         intent = f"[{sug.id}] {sug.kind}: {sug.description}" if sug else "make the apartment more challenging"
-        messages = [Message.user(self._prompt(analysis, sug, intent, lines), png_bytes(render_scene(v.house, context)))]
+        door_ids, door_lines = door_list(v) if self.door_edits and self.prompts != "paper" else ([], "")
+        messages = [Message.user(self._prompt(analysis, sug, intent, lines, door_lines),
+                                 png_bytes(render_scene(v.house, context)))]
         snapshot = v.house.model_copy(deep=True)
         state = {"v": v, "image": None, "unverified": False, "noops": 0, "log_at": None}
 
@@ -272,17 +315,20 @@ class LLMGenerator:
             state["log_at"] = None
             return True
 
-        def apply(mv: MoveInstruction) -> Edit:
+        def apply(mv: MoveInstruction | DoorInstruction) -> Edit:
             restart()  # a revision replaces the previous attempt: restart from the snapshot
-            dx, dy = mv.signed_displacement()
-            note = f" [clamped: {', '.join(mv.clamped)}]" if mv.clamped else ""
-            edit = state["v"].try_edit(mv.object_id, dx, dy, mv.rotation, source=self.name, intent=intent + note)
+            if isinstance(mv, DoorInstruction):
+                edit = state["v"].set_door(mv.door_id, 1.0 if mv.open else 0.0, source=self.name, intent=intent)
+            else:
+                dx, dy = mv.signed_displacement()
+                note = f" [clamped: {', '.join(mv.clamped)}]" if mv.clamped else ""
+                edit = state["v"].try_edit(mv.object_id, dx, dy, mv.rotation, source=self.name, intent=intent + note)
             state["log_at"] = len(edit_log.edits) if edit.changed else None
             edit_log.append(edit)
-            state["image"] = render_scene(state["v"].house, context, highlight={mv.object_id: "gold"})
+            state["image"] = render_scene(state["v"].house, context, highlight={edit.object_id: "gold"})
             return edit
 
-        def check(mv: MoveInstruction, edit: Edit) -> Check:
+        def check(mv: MoveInstruction | DoorInstruction, edit: Edit) -> Check:
             if not edit.accepted:
                 return Check(False, "Your move was " + describe_achieved(edit) + ".")
             if not edit.changed:
@@ -290,7 +336,7 @@ class LLMGenerator:
                 return Check(False, NOOP_FEEDBACK.format(achieved=describe_achieved(edit)))
             if not self.verify:
                 return Check(True, "not verified")
-            messages.append(Message.user(VERIFY_PROMPT.format(oid=mv.object_id, intent=intent,
+            messages.append(Message.user(VERIFY_PROMPT.format(oid=edit.object_id, intent=intent,
                                                               requested=describe_request(mv),
                                                               achieved=describe_achieved(edit)),
                                          png_bytes(state["image"])))
@@ -302,20 +348,21 @@ class LLMGenerator:
             messages.append(Message.assistant(answer.model_dump_json(exclude={"revised_move": {"clamped"}})))
             return Check(answer.matches_intent, answer.reason, revised=answer.revised_move)
 
-        def revise(mv: MoveInstruction, edit: Edit, chk: Check) -> MoveInstruction | None:
+        def revise(mv: MoveInstruction | DoorInstruction, edit: Edit, chk: Check
+                   ) -> MoveInstruction | DoorInstruction | None:
             if state["noops"] >= 2:  # a no-op is re-asked once, then the step is given up
                 return None
             if chk.revised is not None:
                 return chk.revised
-            messages.append(Message.user(REVISE_PROMPT.format(reason=chk.reason)))
-            nxt, n, why = self._ask_move(messages, ids)
+            messages.append(Message.user((REVISE_DOOR_PROMPT if door_ids else REVISE_PROMPT).format(reason=chk.reason)))
+            nxt, n, why = self._ask_move(messages, ids, door_ids)
             record.attempts += n
             if nxt is None:
                 record.reason = why
             return nxt
 
         try:
-            move, attempts, why = self._ask_move(messages, ids)
+            move, attempts, why = self._ask_move(messages, ids, door_ids)
             record.attempts = attempts
             if move is None:
                 record.reason = why

@@ -20,7 +20,7 @@ import logging
 import math
 import re
 import time
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterator, Sequence
 from contextlib import AbstractContextManager, contextmanager
 from dataclasses import asdict, dataclass
 from typing import TYPE_CHECKING, Any, Generic, Protocol, TypeVar
@@ -91,8 +91,9 @@ class LLMBackend(Protocol):
     usage: Usage
 
     def call_tool(self, system: str, messages: list[Message], image_png: bytes | None,
-                  tool: ToolSpec, *, role: Role = "other") -> ToolCallResult:
-        """Force one call of ``tool``; ``image_png`` is attached to the last user turn; ``role`` tags the count."""
+                  tool: ToolSpec | Sequence[ToolSpec], *, role: Role = "other") -> ToolCallResult:
+        """Force one call of ``tool`` (of one of several tools: the result's ``name`` says which); ``image_png`` is
+        attached to the last user turn; ``role`` tags the count."""
         ...
 
     def parse(self, system: str, messages: list[Message], image_png: bytes | None,
@@ -330,8 +331,8 @@ class _OpenAIBackendBase:
     # ----- the two calls ----------------------------------------------------------------------
 
     def call_tool(self, system: str, messages: list[Message], image_png: bytes | None,
-                  tool: ToolSpec, *, role: Role = "other") -> ToolCallResult:
-        """Force one call of ``tool`` and return its decoded arguments.
+                  tool: ToolSpec | Sequence[ToolSpec], *, role: Role = "other") -> ToolCallResult:
+        """Force one call of ``tool`` (or of one of several tools) and return its name and decoded arguments.
 
         Raises:
             ToolCallError: no call of ``tool`` in the answer, or arguments that are not a JSON
@@ -339,7 +340,9 @@ class _OpenAIBackendBase:
             LLMError: transport failures (after retries), rejected key, rejected request.
         """
         msgs = with_image(messages, image_png)
-        key = self._key("tool", system, msgs, {"tool": tool.as_dict()})
+        tools = [tool] if isinstance(tool, ToolSpec) else list(tool)
+        what = {"tool": tools[0].as_dict()} if len(tools) == 1 else {"tools": [t.as_dict() for t in tools]}
+        key = self._key("tool", system, msgs, what)
         record = self._cache_get(key)
         if record is not None and record.get("kind") == "tool":
             usage = Tokens(**record["usage"])
@@ -347,12 +350,12 @@ class _OpenAIBackendBase:
             res = record["result"]
             return ToolCallResult(res["name"], res["arguments"], res["raw_arguments"], res["text"], usage,
                                   record["model"], cached=True)
-        answer = self._tool_request(system, msgs, tool)
+        answer = self._tool_request(system, msgs, tools)
         self._record(CallRecord(role, answer.usage, retries=answer.retries, model=answer.model))
-        raw, arguments = _decode_tool_call(answer, tool.name)
-        result = ToolCallResult(tool.name, arguments, raw, answer.text, answer.usage, answer.model)
+        name, raw, arguments = _decode_tool_call(answer, [t.name for t in tools])
+        result = ToolCallResult(name, arguments, raw, answer.text, answer.usage, answer.model)
         self._cache_put(key, {"kind": "tool", "model": answer.model, "usage": asdict(answer.usage),
-                              "result": {"name": tool.name, "arguments": arguments, "raw_arguments": raw,
+                              "result": {"name": name, "arguments": arguments, "raw_arguments": raw,
                                          "text": answer.text}})
         return result
 
@@ -389,23 +392,24 @@ class _OpenAIBackendBase:
         """Optional sampling arguments common to both APIs."""
         return {} if self.config.temperature is None else {"temperature": self.config.temperature}
 
-    def _tool_request(self, system: str, msgs: list[Message], tool: ToolSpec) -> _Answer:
+    def _tool_request(self, system: str, msgs: list[Message], tools: list[ToolSpec]) -> _Answer:
         raise NotImplementedError
 
     def _parse_request(self, system: str, msgs: list[Message], schema: type[BaseModel]) -> _Answer:
         raise NotImplementedError
 
 
-def _decode_tool_call(answer: _Answer, name: str) -> tuple[str, dict[str, Any]]:
-    """The raw and decoded arguments of the first call of ``name``; ToolCallError otherwise."""
-    raws = [args for called, args in answer.calls if called == name]
-    if not raws:
+def _decode_tool_call(answer: _Answer, names: list[str]) -> tuple[str, str, dict[str, Any]]:
+    """The name, raw and decoded arguments of the first call of one of ``names``; ToolCallError otherwise."""
+    calls = [(called, args) for called, args in answer.calls if called in names]
+    name = names[0] if len(names) == 1 else " or ".join(names)
+    if not calls:
         got = f"called {answer.calls[0][0]!r}" if answer.calls else "answered without a tool call"
         raise ToolCallError(f"the model {got} instead of calling {name}",
                             feedback=f"You must answer by calling the function {name} exactly once, "
                                      f"not with plain text. Call {name} now.",
                             raw=answer.text or f"(no call of {name})")
-    raw = raws[0]
+    name, raw = calls[0]
     try:
         arguments = json.loads(raw)
     except json.JSONDecodeError as exc:
@@ -419,7 +423,7 @@ def _decode_tool_call(answer: _Answer, name: str) -> tuple[str, dict[str, Any]]:
                             feedback=f"The arguments of your {name} call must be one JSON object with the "
                                      f"function's parameters as keys. Call {name} again.",
                             raw=raw)
-    return raw, arguments
+    return name, raw, arguments
 
 
 def _validate_answer(answer: _Answer, schema: type[T]) -> T:
@@ -471,11 +475,11 @@ class OpenAIResponsesBackend(_OpenAIBackendBase):
             kwargs["max_output_tokens"] = self.config.max_output_tokens
         return kwargs
 
-    def _tool_request(self, system: str, msgs: list[Message], tool: ToolSpec) -> _Answer:
+    def _tool_request(self, system: str, msgs: list[Message], tools: list[ToolSpec]) -> _Answer:
         kwargs = self._common(system, msgs)
+        choice = {"type": "function", "name": tools[0].name} if len(tools) == 1 else "required"
         body, retries = self._send(lambda: self._client.responses.with_raw_response.create(
-            **kwargs, tools=[tool.responses_param()], tool_choice={"type": "function", "name": tool.name},
-            parallel_tool_calls=False))
+            **kwargs, tools=[t.responses_param() for t in tools], tool_choice=choice, parallel_tool_calls=False))
         return self._answer(body, retries)
 
     def _parse_request(self, system: str, msgs: list[Message], schema: type[BaseModel]) -> _Answer:
@@ -524,11 +528,11 @@ class ChatCompletionsBackend(_OpenAIBackendBase):
             kwargs["max_tokens"] = self.config.max_output_tokens
         return kwargs
 
-    def _tool_request(self, system: str, msgs: list[Message], tool: ToolSpec) -> _Answer:
+    def _tool_request(self, system: str, msgs: list[Message], tools: list[ToolSpec]) -> _Answer:
         kwargs = self._common(to_chat_messages(system, msgs))
+        choice = {"type": "function", "function": {"name": tools[0].name}} if len(tools) == 1 else "required"
         body, retries = self._send(lambda: self._client.chat.completions.with_raw_response.create(
-            **kwargs, tools=[tool.chat_param()],
-            tool_choice={"type": "function", "function": {"name": tool.name}}, parallel_tool_calls=False))
+            **kwargs, tools=[t.chat_param() for t in tools], tool_choice=choice, parallel_tool_calls=False))
         return self._answer(body, retries)
 
     def _parse_request(self, system: str, msgs: list[Message], schema: type[BaseModel]) -> _Answer:

@@ -1,4 +1,5 @@
-"""The generator's function tools: the paper's ``propose_move_instruction`` and a verification tool.
+"""The generator's function tools: the paper's ``propose_move_instruction``, a verification tool, and (for G with
+door edits) ``set_door_openness``.
 
 ``move_tool`` reproduces the paper's schema field for field (names, types, enums, bounds), so runs
 can be compared with the paper's. Servers enforce schemas only on a best-effort basis, so every
@@ -35,6 +36,11 @@ ROTATION_MAX = 360.0
 VERIFY_TOOL_NAME = "verify_move"
 VERIFY_TOOL_DESCRIPTION = ("Compare the rendered scene after your move with the effect you intended. Say whether "
                            "it matches; if it does not, you may propose a revised move of the same object.")
+DOOR_TOOL_NAME = "set_door_openness"
+DOOR_TOOL_DESCRIPTION = ("Instead of moving an object, open or shut exactly one interior door. A shut door is a "
+                         "wall to the robot: it has to find another way, or search other rooms.")
+DOOR_FIELDS = ("door_id", "open")
+
 #: At most this many ids are listed in an "unknown object_id" message.
 MAX_LISTED_IDS = 30
 
@@ -66,6 +72,19 @@ class MoveInstruction(BaseModel):
     def to_arguments(self) -> dict[str, Any]:
         """The tool-call arguments this move corresponds to (for logs and replayed turns)."""
         return self.model_dump(mode="json", exclude={"clamped"})
+
+
+class DoorInstruction(BaseModel):
+    """One validated door edit: which interior door, and whether to open (true) or shut (false) it."""
+
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+    door_id: str
+    open: bool
+
+    def to_arguments(self) -> dict[str, Any]:
+        """The tool-call arguments this door edit corresponds to."""
+        return self.model_dump(mode="json")
 
 
 class Verification(BaseModel):
@@ -106,6 +125,15 @@ def move_parameters(allowed_object_ids: list[str]) -> dict[str, Any]:
 def move_tool(allowed_object_ids: list[str]) -> ToolSpec:
     """The paper's ``propose_move_instruction`` tool, restricted to the scene's movable object ids."""
     return ToolSpec(MOVE_TOOL_NAME, MOVE_TOOL_DESCRIPTION, move_parameters(allowed_object_ids))
+
+
+def door_tool(door_ids: list[str]) -> ToolSpec:
+    """``set_door_openness``, restricted to the scene's interior doors with a leaf."""
+    return ToolSpec(DOOR_TOOL_NAME, DOOR_TOOL_DESCRIPTION, {
+        "type": "object",
+        "properties": {"door_id": {"type": "string", "enum": _dedupe(door_ids)},
+                       "open": {"type": "boolean", "description": "true opens the door, false shuts it"}},
+        "required": list(DOOR_FIELDS), "additionalProperties": False})
 
 
 def verify_tool(allowed_object_ids: list[str] | None = None) -> ToolSpec:
@@ -219,6 +247,18 @@ def parse_move_instruction(args: object, allowed_ids: list[str]) -> MoveInstruct
     if problems:
         _raise(problems, args, MOVE_TOOL_NAME)
     return MoveInstruction(**values)
+
+
+def parse_door_instruction(args: object, allowed_ids: list[str]) -> DoorInstruction:
+    """Validate set_door_openness arguments; every problem goes back to the model as one MoveInstructionError."""
+    problems: list[str] = []
+    a = _fields(args, DOOR_FIELDS, problems)
+    door = _choice("door_id", a["door_id"], [str(i) for i in allowed_ids], problems) if "door_id" in a else None
+    if "open" in a and not isinstance(a["open"], bool):
+        problems.append(f"open must be true or false, got {json.dumps(a['open'], default=str)[:40]}")
+    if problems:
+        _raise(problems, args, DOOR_TOOL_NAME)
+    return DoorInstruction(door_id=str(door), open=bool(a["open"]))
 
 
 def parse_verification(args: object, allowed_ids: list[str] | None = None) -> Verification:
