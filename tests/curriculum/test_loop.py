@@ -339,3 +339,21 @@ def test_door_edits_reach_the_failure_mode_generator(tiny_policy, tmp_path, monk
     monkeypatch.setattr(jobs, "make_fg", recording)
     run_loop(tiny_config(tiny_policy, "ours-dr", iterations=1, door_edits=True), tmp_path / "r")
     assert seen and all(s == ("failure-modes", True) for s in seen)
+
+
+def test_evaluation_jobs_refill_their_slots_and_change_no_episode():
+    """A job's finished slots take its next episodes; every episode ends as it does in a batch of its own chunk."""
+    from adaptenv.agents.evaluate import run_episodes, sample_episodes
+    from adaptenv.agents.registry import resolve_policy
+    from adaptenv.curriculum.jobs import EVAL_BATCH, EvalJob, heldout_set, run_eval
+    from adaptenv.curriculum.loop import PolicyWeights
+
+    policy = resolve_policy("pretrained")
+    n = 2 * EVAL_BATCH + 7
+    results, _ = run_eval(EvalJob(PolicyWeights.of(policy), "preset:tiny", 3, 0, n))
+    worlds = heldout_set("preset:tiny").worlds
+    eps = sample_episodes(worlds, n, 3)
+    alone = [r for a in range(0, n, EVAL_BATCH)
+             for r in run_episodes(worlds, eps[a:a + EVAL_BATCH], policy, batch=EVAL_BATCH)[0]]
+    assert [(r.success, r.steps, r.spl, r.collisions) for r in results] == \
+        [(r.success, r.steps, r.spl, r.collisions) for r in alone]

@@ -39,7 +39,10 @@ if TYPE_CHECKING:
     from adaptenv.agents.network import NeuralPolicy
 
 #: Episodes per evaluation job: fixed, so results never depend on the worker count.
-EVAL_CHUNK = 50
+EVAL_CHUNK = 250
+#: Simulator slots of an evaluation job: a slot whose episode ended takes the chunk's next episode, so few slots
+#: idle while the longest episodes finish. An episode's result does not depend on which others share the batch.
+EVAL_BATCH = 50
 
 
 @dataclass(frozen=True)
@@ -105,7 +108,8 @@ def run_eval(job: EvalJob) -> tuple[list[EpisodeResult], dict[int, Recorded]]:
     """
     hs = heldout_set(job.spec)
     eps = sample_episodes(hs.worlds, job.stop, job.seed, start=job.start)
-    results, recs = run_episodes(hs.worlds, eps, job.weights.policy(), batch=len(eps), record=lambda r: not r.success)
+    results, recs = run_episodes(hs.worlds, eps, job.weights.policy(), batch=min(len(eps), EVAL_BATCH),
+                                 record=lambda r: not r.success)
     for r in results:
         r.index += job.start
     return results, {k + job.start: rec for k, rec in recs.items()}
