@@ -52,8 +52,8 @@ def expert_level(item: tuple[int, int]) -> tuple[int, int, int, float]:
     return seed, successes, steps, spl
 
 
-#: Held-out episodes of the ``heldout`` workload (chunks of ``jobs.EVAL_CHUNK``) and their set.
-HELDOUT_EPISODES = 400
+#: Held-out episodes of the ``heldout`` workload (4 chunks of ``jobs.EVAL_CHUNK``) and their set.
+HELDOUT_EPISODES = 1000
 HELDOUT_SET = "preset:pretrain-rearranged"
 
 
@@ -76,8 +76,14 @@ def heldout_chunk(job: Any) -> list[tuple[bool, float, int, int]]:
 #: workload name -> (item function, items builder taking the item count or None for its default).
 WORKLOADS = {
     "levels": (expert_level, lambda n: items(n or N_ITEMS)),
-    "heldout": (heldout_chunk, lambda n: heldout_items(50 * n if n else HELDOUT_EPISODES)),
+    "heldout": (heldout_chunk, lambda n: heldout_items(_eval_chunk() * n if n else HELDOUT_EPISODES)),
 }
+
+
+def _eval_chunk() -> int:
+    from adaptenv.curriculum.jobs import EVAL_CHUNK
+
+    return EVAL_CHUNK
 
 
 def identity(x: Any) -> Any:
