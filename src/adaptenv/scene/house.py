@@ -189,6 +189,11 @@ def is_interior_leaf_door(door: Opening) -> bool:
     return bool(door.openable) and door.room0 != door.room1 and "exterior" not in door.wall1
 
 
+def is_shut(door: Opening) -> bool:
+    """Whether a door is shut (openness 0); a door without an openness is open."""
+    return door.openness is not None and door.openness <= 0
+
+
 def set_door_openness(house: House, door_id: str, openness: float) -> None:
     """Set one door's openness (0 shut, 1 open) in place; KeyError when the house has no such door."""
     for door in house.doors:

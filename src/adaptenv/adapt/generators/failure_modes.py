@@ -65,7 +65,7 @@ from adaptenv.adapt.validation import EditValidator
 from adaptenv.agents.rollout import checking_episodes, mean_spl, run_in_worlds, total_steps
 from adaptenv.scene.assets import load_catalog
 from adaptenv.scene.geometry import SceneGeometry
-from adaptenv.scene.house import House, is_interior_leaf_door
+from adaptenv.scene.house import House, is_interior_leaf_door, is_shut
 from adaptenv.sim.spec import AGENT_RADIUS, MAX_RANGE
 from adaptenv.sim.task import Episode, visible_points
 from adaptenv.sim.world import NavWorld, compile_world
@@ -307,7 +307,7 @@ class FailureModeGenerator(BuiltinGenerator):
         out = []
         for d in v.house.doors:
             if is_interior_leaf_door(d):
-                shut = d.openness is not None and d.openness <= 0
+                shut = is_shut(d)
                 out.append(Candidate(d.id, 0.0, 0.0, None, "open_door" if shut else "close_door",
                                      openness=1.0 if shut else 0.0))
         return out

@@ -68,7 +68,7 @@ from adaptenv.adapt.llm.tools import (
 from adaptenv.adapt.objectives import OBJECTIVE_KINDS, RouteSpec, gain, measure
 from adaptenv.adapt.validation import EditValidator
 from adaptenv.adapt.verification import Check, ask_llm, revise_until_verified
-from adaptenv.scene.house import House, is_interior_leaf_door
+from adaptenv.scene.house import House, is_interior_leaf_door, is_shut
 from adaptenv.sim.world import compile_world
 
 if TYPE_CHECKING:
@@ -158,9 +158,8 @@ def door_list(v: EditValidator) -> tuple[list[str], str]:
     ids, lines = [], []
     for d in v.house.doors:
         if is_interior_leaf_door(d):
-            shut = d.openness is not None and d.openness <= 0
             ids.append(d.id)
-            lines.append(f"- {d.id}: between {d.room0} and {d.room1}, {'shut' if shut else 'open'}")
+            lines.append(f"- {d.id}: between {d.room0} and {d.room1}, {'shut' if is_shut(d) else 'open'}")
     return ids, "\n".join(lines)
 
 

@@ -14,7 +14,7 @@ import shapely
 
 from adaptenv.scene.assets import AssetCatalog
 from adaptenv.scene.geometry import Footprint, SceneGeometry, yaw_axes
-from adaptenv.scene.house import House
+from adaptenv.scene.house import House, is_shut
 from adaptenv.scene.occupancy import OccupancyGrid, rasterize
 from adaptenv.scene.procedural.config import GenerationConfig, StageFailed
 from adaptenv.scene.validate import validate_house
@@ -170,7 +170,7 @@ def house_problems(house: House, cfg: GenerationConfig, catalog: AssetCatalog,
 
 def closed_interior_doors(house: House) -> list[str]:
     """Ids of the interior doors that are shut (openness 0)."""
-    return [d.id for d in house.doors if d.room0 != d.room1 and d.openness is not None and d.openness <= 0]
+    return [d.id for d in house.doors if d.room0 != d.room1 and is_shut(d)]
 
 
 def opened(house: House) -> House:
