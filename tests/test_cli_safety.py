@@ -168,6 +168,23 @@ def test_loop_resume_names_a_missing_run_folder(tmp_path, monkeypatch):
     assert f"the run folder {tmp_path / 'nope'} does not exist" in text
 
 
+def test_loop_passes_the_ppo_fine_tuning_flags(tmp_path, monkeypatch):
+    import adaptenv.curriculum.loop as loop_module
+
+    seen = []
+
+    def capture(cfg, *args, **kwargs):  # the settings the loop would run with, then stop
+        seen.append(cfg)
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(loop_module, "run_loop", capture)
+    res = invoke(*LOOP, "-o", tmp_path / "r", "--finetune-algo", "ppo", "--finetune-freeze-encoder",
+                 "--finetune-fresh-learner")
+    assert res.exit_code == 130, res.output
+    [cfg] = seen
+    assert (cfg.finetune_algo, cfg.finetune_freeze_encoder, cfg.finetune_keep_learner) == ("ppo", True, False)
+
+
 def test_ctrl_c_during_the_loop_says_how_to_resume(tmp_path, monkeypatch):
     import adaptenv.curriculum.loop as loop_module
 

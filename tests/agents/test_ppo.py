@@ -15,6 +15,7 @@ from adaptenv.agents.network import MapObserver, NavNet, NetConfig, observe
 from adaptenv.agents.ppo import (
     ExplorationBonus,
     anchor_kl,
+    anchor_rollout_logits,
     check_ppo_config,
     log_prob_entropy,
     sample_actions,
@@ -174,6 +175,47 @@ def test_ppo_fine_tunes_a_map_reading_network_with_anchor_and_bonus(tmp_path):
     assert any(not torch.equal(v, after[k]) for k, v in before.items() if k.startswith("map_encoder"))
     header = (tmp_path / "run" / "metrics.csv").read_text().splitlines()[0]
     assert "losses/kl_anchor" in header and "charts/explore_bonus" in header
+
+
+def test_anchor_logits_from_shared_features_equal_those_from_observations():
+    torch.manual_seed(0)
+    net = NavNet(NetConfig(hidden=32, feature_dim=32, conv_channels=8, map_channels=MAP_CHANNELS)).eval()
+    c, (T, B) = net.config, (8, 3)
+    obs = {"depth": torch.rand(T, B, c.n_rays), "semantic": torch.randint(0, c.n_classes, (T, B, c.n_rays)),
+           "target": torch.randint(0, c.n_classes, (T, B)), "prev_action": torch.randint(0, 7, (T, B)),
+           "collided": torch.randint(0, 2, (T, B)),
+           "map": torch.randint(0, 256, (T, B, c.map_crop, c.map_crop), dtype=torch.uint8)}
+    first = torch.rand(T, B) < 0.2
+    h0 = torch.randn(B, c.hidden)
+    from_obs, h_obs = anchor_rollout_logits(net, obs, first, h0, 4)
+    with torch.no_grad():
+        feats = net.encode(obs)
+    from_feats, h_feats = anchor_rollout_logits(net, feats, first, h0, 4)
+    assert torch.allclose(from_obs, from_feats, atol=1e-6) and torch.allclose(h_obs, h_feats, atol=1e-6)
+
+
+@pytest.mark.slow
+def test_a_frozen_encoder_keeps_its_weights_and_collects_as_the_full_update_does(tmp_path):
+    torch.manual_seed(0)
+    init = NavNet(NetConfig(hidden=32, feature_dim=32, conv_channels=8, map_channels=MAP_CHANNELS))
+    before = {k: v.clone() for k, v in init.state_dict().items()}
+    runs = {freeze: train_ppo(tiny_ppo(tmp_path, output="", run_dir="", kl_coef=1.0, final_eval_episodes=0,
+                                       learning_rate=1e-3, freeze_encoder=freeze), init_net=init)
+            for freeze in (False, True)}
+    encoder = {f"{name}." for name, m in init.named_children() if any(m is e for e in init.encoder_modules())}
+    assert encoder >= {"map_encoder.", "conv.", "features."} and not encoder & {"gru.", "head."}
+    for freeze, result in runs.items():
+        after = result.net.state_dict()
+        moved = {k for k, v in before.items() if not torch.equal(v, after[k])}
+        in_encoder = {k for k in moved if any(k.startswith(e) for e in encoder)}
+        assert (not in_encoder) if freeze else in_encoder  # only the full update moves the encoder
+        assert any(k.startswith(("gru.", "head.")) for k in moved)
+        assert all(p.requires_grad for p in result.net.parameters())  # the returned network is trainable again
+    full, frozen = ([r for r in runs[f].rows if "losses/kl_anchor" in r] for f in (False, True))
+    # the first rollout is collected by the same weights from the same seeds: the same episodes end
+    assert full[0]["charts/episodes"] == frozen[0]["charts/episodes"]
+    assert full[0]["charts/episodic_return"] == pytest.approx(frozen[0]["charts/episodic_return"])
+    assert frozen[0]["losses/kl_anchor"] < 1e-3  # pi_0 reads the same stored features
 
 
 @pytest.mark.slow

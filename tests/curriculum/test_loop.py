@@ -131,13 +131,16 @@ def test_loop_config_refuses_ppo_settings_that_do_not_apply():
         LoopConfig(finetune_algo="sac").check()
     with pytest.raises(ConfigError, match="ppo only"):
         LoopConfig(finetune_kl_coef=0.3).check()
+    with pytest.raises(ConfigError, match="finetune_freeze_encoder apply to ppo only"):
+        LoopConfig(finetune_freeze_encoder=True).check()
     with pytest.raises(ConfigError, match="fp32"):
         LoopConfig(finetune_algo="ppo", finetune_precision="bf16").check()
     with pytest.raises(ConfigError, match="level_score"):
         LoopConfig(level_score="novelty").check()
     cfg = finetune_config(LoopConfig(finetune_algo="ppo", finetune_kl_coef=0.3, finetune_explore_bonus=0.002,
-                                     finetune_max_steps=600), end_threshold=0.7)
-    assert (cfg.algo, cfg.kl_coef, cfg.explore_bonus, cfg.max_episode_steps) == ("ppo", 0.3, 0.002, 600)
+                                     finetune_max_steps=600, finetune_freeze_encoder=True), end_threshold=0.7)
+    assert (cfg.algo, cfg.kl_coef, cfg.explore_bonus, cfg.max_episode_steps, cfg.freeze_encoder) == \
+        ("ppo", 0.3, 0.002, 600, True)
 
 
 @pytest.mark.slow
@@ -154,13 +157,14 @@ def test_the_loop_fine_tunes_by_anchored_ppo(tiny_policy, tmp_path, monkeypatch)
 
     monkeypatch.setattr(ppo, "train_ppo", spy)
     cfg = tiny_config(tiny_policy, "dr", iterations=1, finetune_algo="ppo", finetune_frames=8192,
-                      finetune_kl_coef=0.3, finetune_explore_bonus=0.002, finetune_max_steps=600)
+                      finetune_kl_coef=0.3, finetune_explore_bonus=0.002, finetune_max_steps=600,
+                      finetune_freeze_encoder=True)
     records = run_loop(cfg, tmp_path / "ppo")
     assert records[1].grad_updates > 0 and records[1].env_steps >= 8192
     [card] = cards
     assert card["algo"] == "ppo" and card["torch_threads"] == 1
-    assert {k: card["config"][k] for k in ("kl_coef", "explore_bonus", "max_episode_steps")} == \
-        {"kl_coef": 0.3, "explore_bonus": 0.002, "max_episode_steps": 600}
+    assert {k: card["config"][k] for k in ("kl_coef", "explore_bonus", "max_episode_steps", "freeze_encoder")} == \
+        {"kl_coef": 0.3, "explore_bonus": 0.002, "max_episode_steps": 600, "freeze_encoder": True}
 
 
 @pytest.mark.slow

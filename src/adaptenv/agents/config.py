@@ -153,6 +153,9 @@ class PPOConfig:
     """Reward per fine map cell (0.2 m) an agent sees for the first time in its episode, from its own map (suggested 0.002; 0: off)."""
     value_warmup_iters: int = 4
     """First iterations train only the value head, so a warm-started policy is not moved by a random critic."""
+    freeze_encoder: bool = False
+    """Keep the observation encoder (scan, map, embeddings) at the warm start's weights and train the memory and heads:
+    its features are computed once while collecting and the updates skip it (faster: docs/BENCHMARKS.md)."""
     stop_rule: str = "threshold"
     """How end is chosen while collecting: 'threshold' (as the saved policy acts; RL trains the motions) or 'sample' (from the full softmax)."""
     end_threshold: float = 0.8
@@ -222,6 +225,8 @@ class FinetuneConfig:
     """PPO: weight of the KL anchor to the starting policy (PPOConfig.kl_coef; 0: off)."""
     explore_bonus: float = 0.0
     """PPO: reward per newly seen fine map cell (PPOConfig.explore_bonus; 0: off)."""
+    freeze_encoder: bool = False
+    """PPO: train the memory and heads only, the observation encoder fixed (PPOConfig.freeze_encoder)."""
 
 
 def field_docs(cls: type) -> dict[str, str]:

@@ -161,6 +161,11 @@ class NavNet(nn.Module):
             return unpack_map(m.reshape(-1, *m.shape[-2:]), self.config.map_channels)
         return m.reshape(-1, *m.shape[-3:]).float().contiguous(memory_format=torch.channels_last)
 
+    def encoder_modules(self) -> list[nn.Module]:
+        """The modules :meth:`encode` runs (scan, map and embeddings): the observation encoder, without the memory and head."""
+        return [m for m in (self.class_embed, self.conv, self.target_embed, self.action_embed, self.collided_embed,
+                            self.map_encoder, self.features) if m is not None]
+
     def initial_state(self, batch: int) -> torch.Tensor:
         return torch.zeros(batch, self.config.hidden)
 
@@ -176,7 +181,10 @@ class NavNet(nn.Module):
     def core(self, obs: dict[str, torch.Tensor], done: torch.Tensor, h0: torch.Tensor
              ) -> tuple[torch.Tensor, torch.Tensor]:
         """What the heads read, (T, B, hidden + feature_dim): memory and current features; and the final memory."""
-        feats = self.encode(obs)
+        return self.recur(self.encode(obs), done, h0)
+
+    def recur(self, feats: torch.Tensor, done: torch.Tensor, h0: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """:meth:`core` from features (T, B, feature_dim) that :meth:`encode` computed."""
         keep = (~done).float()[..., None]
         h = h0
         outs = []

@@ -124,7 +124,12 @@ class ActorCritic(nn.Module):
     def forward(self, obs: dict[str, torch.Tensor], done: torch.Tensor, h0: torch.Tensor, *,
                 detach_value: bool = False) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
         """Logits (T, B, A), values (T, B) and the final memory of a (T, B) sequence."""
-        z, h = self.net.core(obs, done, h0)
+        return self.from_features(self.net.encode(obs), done, h0, detach_value=detach_value)
+
+    def from_features(self, feats: torch.Tensor, done: torch.Tensor, h0: torch.Tensor, *,
+                      detach_value: bool = False) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+        """:meth:`forward` from the encoder's features (T, B, feature_dim), e.g. a frozen encoder's stored ones."""
+        z, h = self.net.recur(feats, done, h0)
         value = self.value(z.detach() if detach_value else z).squeeze(-1)
         return self.net.head(z), value, h
 
@@ -180,15 +185,21 @@ def anchor_kl(logits: torch.Tensor, anchor_logits: torch.Tensor, stop_rule: str)
 
 
 @torch.no_grad()
-def anchor_rollout_logits(anchor: NavNet, obs: dict[str, torch.Tensor], first: torch.Tensor, h: torch.Tensor,
-                          chunk_len: int) -> tuple[torch.Tensor, torch.Tensor]:
+def anchor_rollout_logits(anchor: NavNet, obs: dict[str, torch.Tensor] | torch.Tensor, first: torch.Tensor,
+                          h: torch.Tensor, chunk_len: int) -> tuple[torch.Tensor, torch.Tensor]:
     """pi_0's logits (T, B, A) over a whole rollout with its own memory ``h`` (B, H) carried in, and the memory after.
 
-    Unrolled in ``chunk_len``-step pieces (the update's sequence length) to bound the memory of the map encoder.
+    ``obs`` is the observations, or the features (T, B, feature_dim) of an encoder pi_0 shares. Unrolled in
+    ``chunk_len``-step pieces (the update's sequence length) to bound the memory of the map encoder.
     """
     pieces = []
     for lo in range(0, first.shape[0], chunk_len):
-        logits, h = anchor({k: v[lo: lo + chunk_len] for k, v in obs.items()}, first[lo: lo + chunk_len], h)
+        done = first[lo: lo + chunk_len]
+        if isinstance(obs, torch.Tensor):
+            z, h = anchor.recur(obs[lo: lo + chunk_len], done, h)
+            logits = anchor.head(z)
+        else:
+            logits, h = anchor({k: v[lo: lo + chunk_len] for k, v in obs.items()}, done, h)
         pieces.append(logits)
     return torch.cat(pieces), h
 
@@ -261,8 +272,11 @@ def _train_ppo(cfg: PPOConfig, worlds: Sequence[Any] | None, init_net: NavNet | 
     worlds = list(worlds) if worlds is not None else load_house_set(cfg.houses).worlds
     net = _initial_net(cfg, init_net)
     anchor = copy.deepcopy(net).eval().requires_grad_(False)  # pi_0, frozen
+    freeze = cfg.freeze_encoder  # the encoder keeps pi_0's weights: its features are computed once, while collecting
+    for module in net.encoder_modules() if freeze else ():
+        module.requires_grad_(False)
     agent = ActorCritic(net)
-    optimizer = torch.optim.Adam(agent.parameters(), lr=cfg.learning_rate, eps=1e-5)
+    optimizer = torch.optim.Adam([p for p in agent.parameters() if p.requires_grad], lr=cfg.learning_rate, eps=1e-5)
     if learner is not None:  # a previous run's critic and Adam moments: this run continues it
         agent.value.load_state_dict(learner["value"])
         optimizer.load_state_dict(copy.deepcopy(learner["optimizer"]))  # Adam steps its tensors in place
@@ -284,6 +298,7 @@ def _train_ppo(cfg: PPOConfig, worlds: Sequence[Any] | None, init_net: NavNet | 
     rewards_buf = np.zeros((T, B), np.float32)
     labels_buf = np.zeros((T, B), np.int64)
     h0_buf = torch.zeros(T // L, B, H)
+    feats_buf = torch.zeros(T, B, net.config.feature_dim) if freeze else None
 
     sampler = EpisodeSampler(worlds, min_distance=cfg.min_start_distance)
     sim = BatchSim(worlds, max_steps=cfg.max_episode_steps)
@@ -334,8 +349,10 @@ def _train_ppo(cfg: PPOConfig, worlds: Sequence[Any] | None, init_net: NavNet | 
             if teacher is not None:
                 labels_buf[t] = teacher.label(obs, first)
             with torch.no_grad():
-                seq = {k: v[None] for k, v in obs_to_tensors(obs).items()}
-                logits, value, h = agent(seq, torch.from_numpy(first)[None], h)
+                feats = net.encode({k: v[None] for k, v in obs_to_tensors(obs).items()})
+                if feats_buf is not None:
+                    feats_buf[t] = feats[0]
+                logits, value, h = agent.from_features(feats, torch.from_numpy(first)[None], h)
                 logits, value = logits[0], value[0]
                 action = sample_actions(logits, rng.random(B), cfg.stop_rule, cfg.end_threshold)
                 logprob, _, _ = log_prob_entropy(logits, torch.from_numpy(action), cfg.stop_rule)
@@ -380,7 +397,8 @@ def _train_ppo(cfg: PPOConfig, worlds: Sequence[Any] | None, init_net: NavNet | 
         b_obs = {k: torch.from_numpy(v) for k, v in obs_buf.items()}
         b_first, b_actions = torch.from_numpy(first_buf), torch.from_numpy(actions_buf)
         # pi_0 over the same observations (map included) with its own memory of the same histories
-        b_anchor_logits, h_anchor = anchor_rollout_logits(anchor, b_obs, b_first, h_anchor, L)
+        b_anchor_logits, h_anchor = anchor_rollout_logits(anchor, b_obs if feats_buf is None else feats_buf,
+                                                          b_first, h_anchor, L)
         b_logprobs, b_adv = torch.from_numpy(logprobs_buf), torch.from_numpy(advantages)
         b_returns, b_labels = torch.from_numpy(returns), torch.from_numpy(labels_buf)
         n_chunks = T // L
@@ -394,8 +412,12 @@ def _train_ppo(cfg: PPOConfig, worlds: Sequence[Any] | None, init_net: NavNet | 
                 chunk, env = mb // B, mb % B
                 tt = chunk[None, :] * L + np.arange(L)[:, None]  # (L, mb)
                 idx = (torch.from_numpy(tt), torch.from_numpy(env)[None, :])
-                mb_obs = {k: v[idx] for k, v in b_obs.items()}
-                logits, new_value, _ = agent(mb_obs, b_first[idx], h0_buf[chunk, env], detach_value=warmup)
+                if feats_buf is None:
+                    logits, new_value, _ = agent({k: v[idx] for k, v in b_obs.items()}, b_first[idx],
+                                                 h0_buf[chunk, env], detach_value=warmup)
+                else:
+                    logits, new_value, _ = agent.from_features(feats_buf[idx], b_first[idx], h0_buf[chunk, env],
+                                                               detach_value=warmup)
                 new_logprob, entropy, drawn = log_prob_entropy(logits, b_actions[idx], cfg.stop_rule)
                 log_ratio = new_logprob - b_logprobs[idx]
                 ratio = log_ratio.exp()
@@ -456,7 +478,7 @@ def _train_ppo(cfg: PPOConfig, worlds: Sequence[Any] | None, init_net: NavNet | 
         progress.stop()
 
     # the stop decision on fresh held-in episodes, then the final evaluation on the training houses
-    net.eval()
+    net.eval().requires_grad_(True)
     end_threshold, calibration = cfg.end_threshold, None
     if cfg.calibrate_episodes:
         calibration = calibrate_end_threshold(net, worlds, episodes=cfg.calibrate_episodes, seed=cfg.seed + 4_241)

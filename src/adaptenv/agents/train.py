@@ -566,8 +566,9 @@ def finetune(net: NavNet, worlds: Sequence[NavWorld], cfg: FinetuneConfig, seed:
     check_precision(cfg.precision, "FinetuneConfig.precision")
     if cfg.algo == "ppo" and cfg.precision != "fp32":
         raise ConfigError(f"FinetuneConfig.precision {cfg.precision!r} applies to DAgger only; use fp32 with algo='ppo'")
-    if cfg.algo == "dagger" and (cfg.kl_coef or cfg.explore_bonus):
-        raise ConfigError("FinetuneConfig.kl_coef and explore_bonus apply to PPO only; leave them 0 with algo='dagger'")
+    if cfg.algo == "dagger" and (cfg.kl_coef or cfg.explore_bonus or cfg.freeze_encoder):
+        raise ConfigError("FinetuneConfig.kl_coef, explore_bonus and freeze_encoder apply to PPO only; leave them unset "
+                          "with algo='dagger'")
     evals = cfg.final_eval_episodes or len(worlds)
     if cfg.algo == "ppo":
         # cycle: ppo imports this module (RunLogger, TrainResult)
@@ -580,7 +581,8 @@ def finetune(net: NavNet, worlds: Sequence[NavWorld], cfg: FinetuneConfig, seed:
                        learning_rate=cfg.learning_rate, end_threshold=cfg.end_threshold,
                        calibrate_episodes=cfg.calibrate_episodes, eval_every=0, final_eval_episodes=evals,
                        min_start_distance=cfg.min_start_distance, max_episode_steps=cfg.max_episode_steps,
-                       kl_coef=cfg.kl_coef, explore_bonus=cfg.explore_bonus, threads=1, progress=False,
+                       kl_coef=cfg.kl_coef, explore_bonus=cfg.explore_bonus, freeze_encoder=cfg.freeze_encoder,
+                       threads=1, progress=False,
                        tensorboard=False)
         return train_ppo(pc, worlds=worlds, init_net=net, learner=learner)
     steps = cfg.rollout_steps

@@ -14,7 +14,8 @@ Figures (median of repeated timings, houses of the ``pretrain-train`` preset, wa
   evaluation included), and of the loop with the learner thread (``--overlap``), timed alternately
   in this one process, and their ratio;
 - ``--resume``: frames/s of a fresh run and of its resumed continuation (same iterations), and their ratio;
-- with ``--algo ppo``: PPO end to end (``adaptenv ppo`` with PPOConfig's defaults), frames/s.
+- with ``--algo ppo``: PPO end to end as the loop fine-tunes the map-reading agent, the whole network trained
+  and its encoder frozen, timed alternately: frames/s and their ratio.
 
 Each throughput is given per wall-clock second and per CPU-second of this process (all threads,
 ``time.process_time``), with the load average before and after: on a shared machine the wall
@@ -162,32 +163,49 @@ def run_map(*, as_json: bool = False, iterations: int = 3, repeats: int = 3,
     return figures
 
 
-def run_ppo(*, as_json: bool = False, iterations: int = 3, houses: str = "preset:pretrain-train") -> dict:
-    """PPO end to end (``train_ppo`` with PPOConfig's defaults, evaluation off): frames/s."""
+LOOP_PPO = {"init": "pretrained-ppo", "kl_coef": 0.03, "explore_bonus": 0.002, "max_episode_steps": 600,
+            "min_start_distance": 6.0, "threads": 1}
+"""The loop's PPO fine-tuning (configs/experiment-lever-ppo4.json's finetune_* settings) on the shipped map-reading agent."""
+
+
+def run_ppo(*, as_json: bool = False, iterations: int = 3, repeats: int = 3,
+            houses: str = "preset:pretrain-train") -> dict:
+    """PPO end to end as the loop fine-tunes (LOOP_PPO, evaluation off), the whole network trained and the encoder
+    frozen (``freeze_encoder``), timed alternately (median of ``repeats`` each): frames/s and their ratio."""
     from adaptenv.agents.config import PPOConfig
     from adaptenv.agents.houses import load_house_set
-    from adaptenv.agents.network import configure_torch
     from adaptenv.agents.ppo import train_ppo
     from adaptenv.bench import emit
 
-    threads = configure_torch()
     worlds = load_house_set(houses).worlds
     block = PPOConfig().num_envs * PPOConfig().rollout_steps
 
-    def one(n: int) -> tuple[float, float]:
+    def one(n: int, freeze: bool) -> tuple[float, float]:
         cfg = PPOConfig(frames=n * block, output="", run_dir="", eval_every=0, final_eval_episodes=0,
-                        calibrate_episodes=0, progress=False, tensorboard=False, value_warmup_iters=0)
+                        calibrate_episodes=0, progress=False, tensorboard=False, value_warmup_iters=0,
+                        freeze_encoder=freeze, **LOOP_PPO)
         w, c = time.perf_counter(), time.process_time()
         train_ppo(cfg, worlds=worlds)
         return n * block / (time.perf_counter() - w), n * block / (time.process_time() - c)
 
     load_before = os.getloadavg()[0]
-    one(1)  # warm-up
-    wall, cpu = one(iterations)
-    figures = {"ppo_end_to_end_frames_per_s": wall, "ppo_end_to_end_frames_per_cpu_s": cpu,
-               "ppo_frames_timed": iterations * block, "houses": len(worlds), "torch_threads": threads,
-               "load_average_1min_before": load_before, "load_average_1min_after": os.getloadavg()[0]}
-    emit("PPO throughput", figures, as_json, notes=["collection + 4 epochs x 4 minibatches per 8,192-frame rollout"])
+    for freeze in (False, True):
+        one(1, freeze)  # warm-up
+    runs: dict[bool, list[tuple[float, float]]] = {False: [], True: []}
+    for _ in range(repeats):
+        for freeze in (False, True):
+            runs[freeze].append(one(iterations, freeze))
+    figures: dict = {}
+    for freeze, name in ((False, "full"), (True, "frozen_encoder")):
+        figures[f"ppo_end_to_end_frames_per_s_{name}"] = statistics.median(w for w, _ in runs[freeze])
+        figures[f"ppo_end_to_end_frames_per_cpu_s_{name}"] = statistics.median(c for _, c in runs[freeze])
+    figures.update({"frozen_over_full": statistics.median(f[0] / w[0] for w, f in zip(runs[False], runs[True],
+                                                                                        strict=True)),
+                    "ppo_frames_timed": iterations * block, "repeats": repeats, "houses": len(worlds),
+                    "recipe": LOOP_PPO, "load_average_1min_before": load_before,
+                    "load_average_1min_after": os.getloadavg()[0]})
+    emit("PPO throughput, the loop's recipe", figures, as_json,
+         notes=["collection + 4 epochs x 4 minibatches per 8,192-frame rollout; one torch thread, as the loop"])
     return figures
 
 

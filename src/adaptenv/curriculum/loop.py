@@ -143,6 +143,9 @@ class LoopConfig:
     """ppo: weight of the KL anchor to pi_t (0.3 in the PPO runs of docs/agent.md)."""
     finetune_explore_bonus: float = 0.0
     """ppo: reward per newly seen map cell (0.002 in the PPO runs of docs/agent.md)."""
+    finetune_freeze_encoder: bool = False
+    """ppo: train pi_t's memory and heads only, its observation encoder fixed at pi_0's weights (faster updates;
+    docs/BENCHMARKS.md)."""
     finetune_keep_learner: bool = True
     """ppo: each iteration continues the last one's value head and Adam moments (one PPO run across the loop, as
     UED methods train); false starts every iteration with a fresh critic and a value warm-up."""
@@ -195,9 +198,10 @@ class LoopConfig:
         if self.finetune_algo == "ppo" and self.finetune_precision != "fp32":
             raise ConfigError(f"{source}: finetune_precision {self.finetune_precision!r} applies to dagger only; "
                               "use fp32 with finetune_algo ppo")
-        if self.finetune_algo == "dagger" and (self.finetune_kl_coef or self.finetune_explore_bonus):
-            raise ConfigError(f"{source}: finetune_kl_coef and finetune_explore_bonus apply to ppo only; set "
-                              "finetune_algo to ppo or leave them 0")
+        if self.finetune_algo == "dagger" and (self.finetune_kl_coef or self.finetune_explore_bonus
+                                               or self.finetune_freeze_encoder):
+            raise ConfigError(f"{source}: finetune_kl_coef, finetune_explore_bonus and finetune_freeze_encoder apply "
+                              "to ppo only; set finetune_algo to ppo or leave them unset")
         if not 0.0 <= self.finetune_beta <= 1.0 or self.finetune_max_steps < 1:
             raise ConfigError(f"{source}: finetune_beta must lie in [0, 1] and finetune_max_steps be positive, got "
                               f"{self.finetune_beta} and {self.finetune_max_steps}")
@@ -281,7 +285,8 @@ def finetune_config(cfg: LoopConfig, end_threshold: float) -> FinetuneConfig:
     """The loop's fine-tuning recipe (identical for every method): DAgger at ``finetune_beta`` with
     ``finetune_teacher``'s labels, or anchored PPO; episodes start ``finetune_min_start`` or more from the target."""
     return FinetuneConfig(algo=cfg.finetune_algo, kl_coef=cfg.finetune_kl_coef,
-                          explore_bonus=cfg.finetune_explore_bonus, frames=cfg.finetune_frames, num_envs=cfg.finetune_envs, learning_rate=cfg.finetune_lr,
+                          explore_bonus=cfg.finetune_explore_bonus, freeze_encoder=cfg.finetune_freeze_encoder,
+                          frames=cfg.finetune_frames, num_envs=cfg.finetune_envs, learning_rate=cfg.finetune_lr,
                           end_threshold=end_threshold, teacher=cfg.finetune_teacher,
                           min_start_distance=cfg.finetune_min_start, precision=cfg.finetune_precision,
                           beta=cfg.finetune_beta, max_episode_steps=cfg.finetune_max_steps)
