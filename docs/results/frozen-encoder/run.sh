@@ -27,8 +27,8 @@ for s in ("val-far", "val-clutter", "val-long"):
     diffs += [float(y) - float(x) for x, y in zip(a, b, strict=True)]
 d = np.asarray(diffs)
 half = stats.t.ppf(0.975, d.size - 1) * d.std(ddof=1) / np.sqrt(d.size)
-print("full", {k: round(v, 3) for k, v in full.items()}, "mean", round(np.mean(list(full.values())), 4))
-print("frozen", {k: round(v, 3) for k, v in frozen.items()}, "mean", round(np.mean(list(frozen.values())), 4))
+print("full", {k: round(float(v), 3) for k, v in full.items()}, "mean", round(float(np.mean(list(full.values()))), 4))
+print("frozen", {k: round(float(v), 3) for k, v in frozen.items()}, "mean", round(float(np.mean(list(frozen.values()))), 4))
 print(f"frozen - full, paired over {d.size} episodes: {100 * d.mean():+.1f} points [{100 * (d.mean() - half):+.1f}, "
       f"{100 * (d.mean() + half):+.1f}]")
 PY

@@ -32,6 +32,8 @@ Each iteration:
    warm start run over the same sequences (:func:`anchor_kl`; logged always as ``losses/kl_anchor``).
    For the first ``value_warmup_iters`` iterations only the value head learns (it reads the
    policy's memory and features, detached), so a random critic cannot move a warm-started policy.
+   With ``freeze_encoder`` the observation encoder keeps the warm start's weights: its features are
+   stored while collecting, and the update and the anchor run only the memory and heads on them.
 
 Warm start: ``init`` is a checkpoint written by ``adaptenv train`` (behaviour cloning + DAgger)
 or ``pretrained``. Outputs: the policy checkpoint at ``output`` (the network only; the value head
