@@ -257,7 +257,9 @@ def table(folder: Path) -> None:
     for m, effects in summary["effects"].items():
         for key, e in sorted(effects.items(), key=lambda kv: sets.index(kv[0].split(":", 1)[1])):
             p, ph = summary["tests"][m][key], summary["holm"][m][key]
-            print(f"| `{m}` | {key.split(':', 1)[1]} | {100 * e['diff']:+.1f} | [{100 * e['low']:+.1f}, {100 * e['high']:+.1f}] "
+            diff = "n/a (one seed) | n/a" if e is None else \
+                f"{100 * e['diff']:+.1f} | [{100 * e['low']:+.1f}, {100 * e['high']:+.1f}]"
+            print(f"| `{m}` | {key.split(':', 1)[1]} | {diff} "
                   f"| {'n/a' if p is None else f'{p:.3f}'} | {'n/a' if ph is None else f'{ph:.2f}'} |")
 
 

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import shutil
 from pathlib import Path
 
 import pytest
@@ -108,6 +109,21 @@ def test_assemble_gathers_methods_from_two_experiments_and_tests_them(tmp_path, 
     with pytest.raises(SystemExit, match="no run of seed 0 has pi_0's figures"):
         config.write_text(json.dumps({"methods": ["ours-dr"], "seeds": [0], "reference": "ours-dr", "loop": {}}))
         _tool().assemble(config, tmp_path / "y", [f"ours-dr={tmp_path / 'a' / 'ours-dr'}:heldout"])
+
+
+def test_table_of_a_single_seed_says_the_effects_need_two(tmp_path, capsys):
+    source = TOOLS.parent / "docs" / "results" / "efficacy-item4"
+    summary = json.loads((source / "summary_final.json").read_text())
+    summary["seeds"] = [0]
+    for name in ("effects", "tests", "holm"):  # as summarize writes them for one seed: no paired effect
+        summary[name] = {m: dict.fromkeys(v) for m, v in summary[name].items()}
+    (tmp_path / "summary_final.json").write_text(json.dumps(summary))
+    shutil.copy(source / "experiment.json", tmp_path)
+    shutil.copytree(source / "initial_eval", tmp_path / "initial_eval")
+    _tool().table(tmp_path)
+    out = capsys.readouterr().out
+    assert out.startswith("seeds [0], 1000 episodes per suite")
+    assert "| `dr` | clutter | n/a (one seed) | n/a | n/a | n/a |" in out
 
 
 def test_table_prints_a_committed_experiment_in_points(capsys):
