@@ -219,11 +219,11 @@ def timing(folder: Path, logs: list[Path], seeds: list[int] | None = None) -> No
                                  "with --log")
             row["final"] += seconds
         rows[m] = row
-    total = {c: sum(r[c] for r in rows.values()) for c in (*STAGES, "final")}
-    whole = sum(total.values())
     if not seeds_done:
         raise SystemExit(f"time: no run in {folder} has a final evaluation yet (final_eval.json); run "
                          "`adaptenv experiment ... --final-episodes N` to the end first")
+    total = {c: sum(r[c] for r in rows.values()) for c in (*STAGES, "final")}
+    whole = sum(total.values())
     print(f"seconds per method, summed over seeds {sorted(seeds_done)} (each run's own clock; two run at once)")
     print("| method | rollouts | scenes (F, G, checks) | fine-tuning | held-out evaluation | final evaluation | total |\n"
           "|---|---|---|---|---|---|---|")
