@@ -2,6 +2,7 @@
 
     python tools/evaluate_runs.py evaluate --name val --suites val-long,val-far,val-clutter [--episodes 100] RUN...
     python tools/evaluate_runs.py compare --name val --seeds 0,1,2,3 METHOD_A_FOLDER METHOD_B_FOLDER
+    python tools/evaluate_runs.py reference --name explorer --policy map-explorer --suites far,clutter --seeds 0,1 OUT
     python tools/evaluate_runs.py layouts --seeds 0,1,2,3 METHOD_FOLDER...
     python tools/evaluate_runs.py assemble --config EXPERIMENT.json --out FOLDER METHOD=FOLDER[:NAME]...
     python tools/evaluate_runs.py pack EXPERIMENT_FOLDER DEST
@@ -11,7 +12,9 @@
 ``evaluate`` writes ``RUN/<name>.json`` with the last iteration's policy on each suite (a suite name,
 or any house-set spec with a colon such as ``preset:NAME``), on the
 episodes of the run's seed (as ``adaptenv experiment --final-episodes`` draws them, so two methods'
-runs of one seed are paired); runs that have the file are skipped. ``compare`` prints, per suite
+runs of one seed are paired); runs that have the file are skipped. ``reference`` plays a fixed policy (``--policy`` spec: ``map-explorer``, a checkpoint, ...) on the
+same episodes, seed by seed, into ``OUT/seed_K/<name>.json``, so ``compare --name-b <name>`` pairs runs with
+it. ``compare`` prints, per suite
 and for the mean of the suites, the difference A - B averaged over the seeds, its 95% interval,
 the paired t test (scipy) and, per suite, Holm's adjusted p over the suites. ``layouts`` counts,
 per run, the distinct house layouts fine-tuned on over all iterations (a child ``house~t02f03``
@@ -57,6 +60,31 @@ def evaluate(name: str, suites: list[str], episodes: int, runs: list[Path]) -> N
         doc = {"episodes": episodes, "seed": seed, "iteration": last, "final": {k: v.model_dump() for k, v in final.items()}}
         out.write_text(json.dumps(doc, indent=1), encoding="utf-8")
         print(run, {k: round(v.success, 3) for k, v in final.items()}, flush=True)
+
+
+def reference(name: str, policy: str, suites: list[str], episodes: int, seeds: list[int], out: Path) -> None:
+    """Play ``policy`` on each seed's final episodes of ``suites`` (as ``adaptenv experiment --final-episodes``
+    draws them) into ``out/seed_K/<name>.json``, in the layout ``compare`` reads; finished seeds are skipped."""
+    from adaptenv.agents.evaluate import run_episodes, sample_episodes
+    from adaptenv.agents.registry import resolve_policy
+    from adaptenv.curriculum.jobs import EVAL_BATCH, heldout_set
+    from adaptenv.curriculum.loop import set_metrics
+
+    player = resolve_policy(policy)  # sampler seed 0, as the loop's PolicyWeights.policy(); episodes seed the rest
+    for seed in seeds:
+        path = out / f"seed_{seed}" / f"{name}.json"
+        if path.is_file():
+            continue
+        final = {}
+        for suite in suites:
+            hs = heldout_set(suite if ":" in suite else f"suite:{suite}")
+            results, _ = run_episodes(hs.worlds, sample_episodes(hs.worlds, episodes, seed),
+                                      player, batch=EVAL_BATCH)
+            final[suite] = set_metrics(results).model_dump()
+        path.parent.mkdir(parents=True, exist_ok=True)
+        doc = {"policy": policy, "episodes": episodes, "seed": seed, "final": final}
+        path.write_text(json.dumps(doc, indent=1), encoding="utf-8")
+        print(path, {k: round(v["success"], 3) for k, v in final.items()}, flush=True)
 
 
 def compare(name: str, seeds: list[int], a: Path, b: Path, name_b: str | None = None) -> None:
@@ -277,6 +305,13 @@ def main() -> None:
     cmp.add_argument("--name-b", default=None, help="B's file name when it differs (e.g. final_eval)")
     cmp.add_argument("a", type=Path)
     cmp.add_argument("b", type=Path)
+    ref = sub.add_parser("reference")
+    ref.add_argument("--name", required=True)
+    ref.add_argument("--policy", required=True, help="a --policy spec: map-explorer, a checkpoint path, ...")
+    ref.add_argument("--suites", required=True)
+    ref.add_argument("--episodes", type=int, default=1000)
+    ref.add_argument("--seeds", required=True)
+    ref.add_argument("out", type=Path)
     asm = sub.add_parser("assemble")
     asm.add_argument("--config", required=True, type=Path, help="experiment config naming the methods, seeds, reference")
     asm.add_argument("--out", required=True, type=Path)
@@ -298,6 +333,9 @@ def main() -> None:
         evaluate(args.name, args.suites.split(","), args.episodes, args.runs)
     elif args.command == "compare":
         compare(args.name, [int(s) for s in args.seeds.split(",")], args.a, args.b, args.name_b)
+    elif args.command == "reference":
+        reference(args.name, args.policy, args.suites.split(","), args.episodes,
+                  [int(k) for k in args.seeds.split(",")], args.out)
     elif args.command == "assemble":
         assemble(args.config, args.out, args.sources)
     elif args.command == "pack":

@@ -60,6 +60,26 @@ def test_evaluate_reproduces_the_loops_own_evaluation_and_skips_finished_runs(ti
     assert capsys.readouterr().out == "", "a run with the file is skipped"
 
 
+def test_reference_plays_the_loops_final_episodes_and_pairs_with_compare(tiny_policy, tmp_path, capsys):
+    from adaptenv.agents.checkpoint import load_checkpoint
+    from adaptenv.curriculum.executor import InProcessExecutor
+    from adaptenv.curriculum.jobs import PolicyWeights
+    from adaptenv.curriculum.loop import evaluate_sets
+
+    tool = _tool()
+    tool.reference("ref", str(tiny_policy), ["preset:tiny"], 6, [3, 4], tmp_path / "ref")
+    weights = PolicyWeights.of(load_checkpoint(tiny_policy).policy())
+    for seed in (3, 4):
+        doc = json.loads((tmp_path / "ref" / f"seed_{seed}" / "ref.json").read_text())
+        loop = evaluate_sets(weights, {"preset:tiny": "preset:tiny"}, 6, seed, InProcessExecutor())
+        assert doc["final"]["preset:tiny"] == loop["preset:tiny"].model_dump(), "the loop's episodes and figures"
+    capsys.readouterr()
+    tool.reference("ref", str(tiny_policy), ["preset:tiny"], 6, [3, 4], tmp_path / "ref")
+    assert capsys.readouterr().out == "", "finished seeds are skipped"
+    tool.compare("ref", [3, 4], tmp_path / "ref", tmp_path / "ref")
+    assert "| preset:tiny |" in capsys.readouterr().out
+
+
 def test_layouts_counts_a_child_as_its_parents_layout(tmp_path, capsys):
     run = tmp_path / "ours" / "seed_0"
     for t, names in ((0, []), (1, ["dr0001", "pretrain-train_0003"]), (2, ["dr0001~t02f00", "dr0002", "dr0001"])):

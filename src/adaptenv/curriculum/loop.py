@@ -244,7 +244,8 @@ class LoopState:
     generated: int = 0
 
 
-def _set_metrics(results: list[EpisodeResult]) -> SetMetrics:
+def set_metrics(results: list[EpisodeResult]) -> SetMetrics:
+    """A set's figures (success, SPL, collisions, with standard errors) from its episodes' results."""
     s, s_se = mean_se([float(r.success) for r in results])
     spl, spl_se = mean_se([r.spl for r in results])
     col, _ = mean_se([float(r.collisions) for r in results])
@@ -272,7 +273,7 @@ def evaluate_sets(weights: PolicyWeights, specs: dict[str, str], episodes: int, 
     metrics = {}
     for name, spec in specs.items():
         results = [r for (n, _), (rs, _) in zip(tagged, chunks, strict=True) if n == name for r in rs]
-        metrics[name] = _set_metrics(results)
+        metrics[name] = set_metrics(results)
         if out_dir is not None:
             recordings = {k: v for (n, _), (_, recs) in zip(tagged, chunks, strict=True) if n == name
                           for k, v in recs.items()}
@@ -355,7 +356,7 @@ def _run_loop(cfg: LoopConfig, run_dir: str | Path, resume: bool, executor: Exec
                                   episodes=cfg.score_rollouts, explorer=cfg.level_score == "explorer_regret")
         stages.lap("rollouts")
         state.env_steps += sum(ro.steps for ro in rollouts)
-        train_metrics = _set_metrics([r for ro in rollouts for r in ro.results])
+        train_metrics = set_metrics([r for ro in rollouts for r in ro.results])
 
         # 2. the method's buffer and its new training scenes e_{t+1}
         method.update_buffer(it, rolled, rollouts)
