@@ -12,10 +12,10 @@
 ``evaluate`` writes ``RUN/<name>.json`` with the last iteration's policy on each suite (a suite name,
 or any house-set spec with a colon such as ``preset:NAME``), on the
 episodes of the run's seed (as ``adaptenv experiment --final-episodes`` draws them, so two methods'
-runs of one seed are paired); runs that have the file are skipped. ``reference`` plays a fixed policy (``--policy`` spec: ``map-explorer``, a checkpoint, ...) on the
-same episodes, seed by seed, into ``OUT/seed_K/<name>.json``, so ``compare --name-b <name>`` pairs runs with
-it. ``compare`` prints, per suite
-and for the mean of the suites, the difference A - B averaged over the seeds, its 95% interval,
+runs of one seed are paired); runs that have the file are skipped. ``reference`` plays a fixed
+policy (a ``--policy`` spec: ``map-explorer``, a checkpoint, ...) on the same episodes, seed by seed,
+into ``OUT/seed_K/<name>.json``, so that ``compare --name-b <name>`` pairs runs with it. ``compare``
+prints, per suite and for the mean of the suites, the difference A - B averaged over the seeds, its 95% interval,
 the paired t test (scipy) and, per suite, Holm's adjusted p over the suites. ``layouts`` counts,
 per run, the distinct house layouts fine-tuned on over all iterations (a child ``house~t02f03``
 has its parent's layout) and the scenes by kind. ``assemble`` gathers methods run in different
