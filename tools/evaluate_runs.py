@@ -280,6 +280,9 @@ def table(folder: Path) -> None:
         gains = ", ".join(f"{100 * row[f'success_gain:{s}']['mean']:+.1f}" for s in sets)
         budget = [f"{row[k]['mean']:,.0f}" for k in ("env_steps:all", "grad_updates:all", "edits:all")]
         print(f"| `{m}` | " + " | ".join(cells) + f" | {gains} | " + " | ".join(budget) + " |")
+    if not summary["effects"]:
+        print(f"\n`{ref}` is the only method: no comparison (pair it with another experiment's runs by `compare`)")
+        return
     print(f"\n`{ref}` minus each method, points (paired over seeds; Holm over all {sum(len(v) for v in summary['effects'].values())} comparisons)")
     print("| method | suite | difference | 95% interval | p | p (Holm) |\n|---|---|---|---|---|---|")
     for m, effects in summary["effects"].items():

@@ -146,6 +146,13 @@ def test_table_of_a_single_seed_says_the_effects_need_two(tmp_path, capsys):
     assert "| `dr` | clutter | n/a (one seed) | n/a | n/a | n/a |" in out
 
 
+def test_table_of_a_single_method_says_there_is_no_comparison(capsys):
+    _tool().table(TOOLS.parent / "docs" / "results" / "lever-episodes" / "near")
+    out = capsys.readouterr().out
+    assert "| `none` | 80.4 ± 0.2 | 88.7 ± 0.8 | 90.6 ± 0.6 | +3.4, +1.3, +1.4 |" in out
+    assert out.rstrip().endswith("no comparison (pair it with another experiment's runs by `compare`)")
+
+
 def test_table_prints_a_committed_experiment_in_points(capsys):
     """The item-4 experiment's figures as docs/results/ARCHIVE.md quotes them, from its committed summary_final.json."""
     _tool().table(TOOLS.parent / "docs" / "results" / "efficacy-item4")
