@@ -58,6 +58,38 @@ def test_map_explorer_teacher_labels_every_agent(tiny_set):
         first = np.zeros(4, dtype=bool)
 
 
+def test_map_explorer_teacher_on_the_students_map_labels_as_on_its_own(tiny_set):
+    """Planning on the student's MapObserver map (what DAgger does) gives the labels of the explorer's own map,
+    across episode ends, and the map it plans on is the student's."""
+    import pytest
+
+    from adaptenv.agents.network import MapObserver
+    from adaptenv.sim.vector import BatchSim, EpisodeSampler
+
+    rng = np.random.default_rng(3)
+    sampler = EpisodeSampler(tiny_set.worlds)
+    sim = BatchSim(tiny_set.worlds, max_steps=40)
+    obs, _ = sim.reset(*sampler.draw(rng, 6))
+    observer = MapObserver(6)
+    shared, own = make_teacher("map-explorer", sim, emap=observer.emap), make_teacher("map-explorer", sim)
+    first, ends = np.ones(6, dtype=bool), 0
+    for _ in range(90):
+        obs = observer(obs, first)
+        labels = shared.label(obs, first)
+        assert labels.tolist() == own.label(obs, first).tolist()
+        obs, _, terminated, truncated, _ = sim.step(np.where(rng.random(6) < 0.5, labels, rng.integers(0, 3, 6)))
+        done = np.flatnonzero(terminated | truncated)
+        first = np.zeros(6, dtype=bool)
+        if done.size:
+            ends += done.size
+            obs = sim.reset_at(done, *sampler.draw(rng, done.size))
+            first[done] = True
+    assert ends > 0 and shared.explorer.emap is observer.emap
+    assert (own.explorer.emap.grid == observer.emap.grid).all()
+    with pytest.raises(ValueError, match="act_on needs an EgoMap of 6 agents"):
+        MapExplorerPolicy().act_on(EgoMap(5), obs, first)
+
+
 def test_labelling_benchmark_times_both_teachers_on_the_same_states():
     from adaptenv.bench.teachers import bench_labelling
 

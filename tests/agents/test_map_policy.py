@@ -42,6 +42,22 @@ def test_unpack_map_matches_the_numpy_unpacking():
     assert np.array_equal(ours, unpack(packed))
 
 
+def test_packed_and_unpacked_maps_give_the_same_features_in_either_precision():
+    """Packed crops are unpacked straight to the autocast dtype; the features equal those of the Gym env's float map."""
+    net = map_net()
+    rng = np.random.default_rng(1)
+    packed = rng.integers(0, 256, (2, 3, 32, 32), dtype=np.uint8)
+    obs = {"depth": torch.rand(2, 3, net.config.n_rays), "semantic": torch.randint(0, 5, (2, 3, net.config.n_rays)),
+           "target": torch.randint(0, 5, (2, 3)), "prev_action": torch.zeros(2, 3, dtype=torch.int64),
+           "collided": torch.zeros(2, 3, dtype=torch.int64)}
+    for autocast in (False, True):
+        with torch.no_grad(), torch.autocast("cpu", torch.bfloat16, enabled=autocast):
+            a = net.encode({**obs, "map": torch.from_numpy(packed)})
+            b = net.encode({**obs, "map": torch.from_numpy(unpack(packed))})
+        assert a.shape == (2, 3, net.config.feature_dim) and torch.equal(a, b)
+    assert unpack_map(torch.from_numpy(packed[0]), MAP_CHANNELS, torch.bfloat16).dtype == torch.bfloat16
+
+
 def test_the_map_changes_the_network_output_and_is_required(tiny_set):
     net = map_net().eval()
     _, obs = first_obs(tiny_set)

@@ -132,8 +132,12 @@ def test_finetune_returns_a_new_policy(tiny_set, tmp_path):
 
 @pytest.mark.slow
 def test_overlapped_learning_does_not_depend_on_timing(tmp_path):
+    import numba
+
+    threads = numba.get_num_threads()
     runs = [train(tiny_config(tmp_path, frames=2048, output="", run_dir="", final_eval_episodes=1, overlap=True))
             for _ in range(2)]
+    assert numba.get_num_threads() == threads  # the collector's one-thread setting ends with the run
     a, b = (r.net.state_dict() for r in runs)
     assert all(torch.equal(a[k], b[k]) for k in a)
     serial = train(tiny_config(tmp_path, frames=2048, output="", run_dir="", final_eval_episodes=1, overlap=False))

@@ -41,7 +41,7 @@ import numba
 import numpy as np
 
 from adaptenv.agents.policy import Observation, State
-from adaptenv.sim.egomap import CELL, FREE, OBSTACLE, TARGET, EgoMap
+from adaptenv.sim.egomap import CELL, FREE, OBSTACLE, SIZE, TARGET, EgoMap
 from adaptenv.sim.expert import ALIGN_TOLERANCE, _best_turn, _n_turns
 from adaptenv.sim.spec import (
     END,
@@ -365,67 +365,78 @@ def _face_target(g, cls, box, bumps, x, z, yaw, ar, ac, half):
 
 
 @numba.njit(cache=True)
+def _act_one(i, grid, pose, first, prev, collided, depth, sem, target, cls, dist, box, plan_box, mode, age, sighted,
+             bumps, n_bumps, heading, goal, hk, hv, out):
+    """Agent i's action into ``out[i]``; ``goal``, ``hk`` and ``hv`` are its chunk's scratch."""
+    n = grid.shape[1]
+    half = n // 2
+    x, z, yaw = pose[i, 0], pose[i, 1], pose[i, 2]
+    ar, ac = _cell(x, z, half)
+    ar, ac = min(max(ar, 0), n - 1), min(max(ac, 0), n - 1)
+    if first[i]:
+        sighted[i] = False
+        mode[i] = -1
+        bumps[i, :, :] = np.nan
+        n_bumps[i] = 0
+        heading[i] = np.nan
+        box[i, 0], box[i, 1], box[i, 2], box[i, 3] = ar, ar + 1, ac, ac + 1
+    elif collided[i] != 0:
+        k = n_bumps[i] % BUMPS
+        bumps[i, k, 0], bumps[i, k, 1] = x, z
+        bumps[i, k, 2] = yaw if prev[i] == MOVE_AHEAD else yaw + 180.0
+        n_bumps[i] += 1
+    box[i, 0] = max(min(box[i, 0], ar - REACH), 0)
+    box[i, 1] = min(max(box[i, 1], ar + REACH + 1), n)
+    box[i, 2] = max(min(box[i, 2], ac - REACH), 0)
+    box[i, 3] = min(max(box[i, 3], ac + REACH + 1), n)
+    stop, seen = False, False
+    for k in range(depth.shape[1]):
+        if sem[i, k] == target[i] and depth[i, k] < MAX_RANGE - 1e-6:
+            seen = True
+            if depth[i, k] <= STOP_DISTANCE:
+                stop = True
+    if stop:
+        out[i] = END
+        return
+    new_sighting = seen and not sighted[i]
+    sighted[i] = sighted[i] or seen
+    age[i] += 1
+    g, d, ci, pb = grid[i], dist[i], cls[i], plan_box[i]
+    # replan on schedule, without a plan, after a bump, on the first sighting, or at a reached frontier cell
+    if (mode[i] < 0 or age[i] >= REPLAN_EVERY or collided[i] != 0 or new_sighting
+            or (mode[i] == _EXPLORE and d[ar, ac] == 0.0)):
+        pb[:] = box[i]
+        mode[i] = _plan(g, ci, d, pb, ar, ac, sighted[i], goal, hk, hv)
+        age[i] = 0
+    if heading[i] == heading[i]:
+        # finish the turn a heading search chose, then take its move (no dithering around a blocked move)
+        turn = _best_turn(wrap_deg(heading[i] - yaw), ROTATE_LARGE, ROTATE_SMALL)
+        if turn >= 0:
+            out[i] = turn
+            return
+        heading[i] = np.nan
+        if _clear_ahead(ci, pb, bumps[i], x, z, yaw, ar, ac, half):
+            out[i] = MOVE_AHEAD
+            return
+    if mode[i] < 0 or not (pb[0] <= ar < pb[1] and pb[2] <= ac < pb[3]) or not d[ar, ac] < np.inf:
+        out[i] = ROTATE_RIGHT
+    elif mode[i] == _APPROACH and d[ar, ac] == 0.0:
+        out[i] = _face_target(g, ci, pb, bumps[i], x, z, yaw, ar, ac, half)
+    else:
+        heading[i], out[i] = _steer(ci, d, pb, bumps[i], x, z, yaw, ar, ac, half)
+
+
+
+@numba.njit(cache=True, parallel=True)
 def _act(grid, pose, first, prev, collided, depth, sem, target, cls, dist, box, plan_box, mode, age, sighted, bumps,
          n_bumps, heading, goal, hk, hv, out):
-    """One action per agent from its EgoMap (see the module docstring); updates the plan arrays in place."""
-    b, n = grid.shape[0], grid.shape[1]
-    half = n // 2
-    for i in range(b):
-        x, z, yaw = pose[i, 0], pose[i, 1], pose[i, 2]
-        ar, ac = _cell(x, z, half)
-        ar, ac = min(max(ar, 0), n - 1), min(max(ac, 0), n - 1)
-        if first[i]:
-            sighted[i] = False
-            mode[i] = -1
-            bumps[i, :, :] = np.nan
-            n_bumps[i] = 0
-            heading[i] = np.nan
-            box[i, 0], box[i, 1], box[i, 2], box[i, 3] = ar, ar + 1, ac, ac + 1
-        elif collided[i] != 0:
-            k = n_bumps[i] % BUMPS
-            bumps[i, k, 0], bumps[i, k, 1] = x, z
-            bumps[i, k, 2] = yaw if prev[i] == MOVE_AHEAD else yaw + 180.0
-            n_bumps[i] += 1
-        box[i, 0] = max(min(box[i, 0], ar - REACH), 0)
-        box[i, 1] = min(max(box[i, 1], ar + REACH + 1), n)
-        box[i, 2] = max(min(box[i, 2], ac - REACH), 0)
-        box[i, 3] = min(max(box[i, 3], ac + REACH + 1), n)
-        stop, seen = False, False
-        for k in range(depth.shape[1]):
-            if sem[i, k] == target[i] and depth[i, k] < MAX_RANGE - 1e-6:
-                seen = True
-                if depth[i, k] <= STOP_DISTANCE:
-                    stop = True
-        if stop:
-            out[i] = END
-            continue
-        new_sighting = seen and not sighted[i]
-        sighted[i] = sighted[i] or seen
-        age[i] += 1
-        g, d, ci, pb = grid[i], dist[i], cls[i], plan_box[i]
-        # replan on schedule, without a plan, after a bump, on the first sighting, or at a reached frontier cell
-        if (mode[i] < 0 or age[i] >= REPLAN_EVERY or collided[i] != 0 or new_sighting
-                or (mode[i] == _EXPLORE and d[ar, ac] == 0.0)):
-            pb[:] = box[i]
-            mode[i] = _plan(g, ci, d, pb, ar, ac, sighted[i], goal, hk, hv)
-            age[i] = 0
-        if heading[i] == heading[i]:
-            # finish the turn a heading search chose, then take its move (no dithering around a blocked move)
-            turn = _best_turn(wrap_deg(heading[i] - yaw), ROTATE_LARGE, ROTATE_SMALL)
-            if turn >= 0:
-                out[i] = turn
-                continue
-            heading[i] = np.nan
-            if _clear_ahead(ci, pb, bumps[i], x, z, yaw, ar, ac, half):
-                out[i] = MOVE_AHEAD
-                continue
-        if mode[i] < 0 or not (pb[0] <= ar < pb[1] and pb[2] <= ac < pb[3]) or not d[ar, ac] < np.inf:
-            out[i] = ROTATE_RIGHT
-        elif mode[i] == _APPROACH and d[ar, ac] == 0.0:
-            out[i] = _face_target(g, ci, pb, bumps[i], x, z, yaw, ar, ac, half)
-        else:
-            heading[i], out[i] = _steer(ci, d, pb, bumps[i], x, z, yaw, ar, ac, half)
-
+    """One action per agent from its EgoMap (see the module docstring); updates the plan arrays in place. Agents are
+    dealt round-robin to ``goal.shape[0]`` chunks, each with its own scratch (``goal[c]``, ``hk[c]``, ``hv[c]``)."""
+    b, chunks = grid.shape[0], goal.shape[0]
+    for c in numba.prange(chunks):
+        for i in range(c, b, chunks):
+            _act_one(i, grid, pose, first, prev, collided, depth, sem, target, cls, dist, box, plan_box, mode, age,
+                     sighted, bumps, n_bumps, heading, goal[c], hk[c], hv[c], out)
 
 class MapExplorerPolicy:
     """Frontier exploration and target approach planned on the agent's own EgoMap (see the module docstring).
@@ -454,9 +465,10 @@ class MapExplorerPolicy:
         self._bumps = np.full((batch, BUMPS, 3), np.nan)
         self._n_bumps = np.zeros(batch, dtype=np.int64)
         self._heading = np.full(batch, np.nan)
-        self._goal = np.zeros((n, n), dtype=np.bool_)
-        self._heap_k = np.empty(9 * n * n, dtype=np.float32)
-        self._heap_v = np.empty(9 * n * n, dtype=np.int64)
+        chunks = max(1, min(batch, numba.get_num_threads()))  # planning scratch per chunk of agents (see _act)
+        self._goal = np.zeros((chunks, n, n), dtype=np.bool_)
+        self._heap_k = np.empty((chunks, 9 * n * n), dtype=np.float32)
+        self._heap_v = np.empty((chunks, 9 * n * n), dtype=np.int64)
 
     def initial_state(self, batch: int) -> State:
         return None
@@ -465,16 +477,38 @@ class MapExplorerPolicy:
         b = len(done)
         if self.emap.batch != b:
             self._alloc(b)
-        prev = np.asarray(obs["prev_action"], dtype=np.int64).reshape(b)
-        first = np.asarray(done, dtype=np.bool_).reshape(b) | (prev == NO_ACTION)
+        first = _first(obs, done)
         self.emap.update(obs, first)
+        return self._decide(self.emap, obs, first), state
+
+    def act_on(self, emap: EgoMap, obs: Observation, done: np.ndarray) -> np.ndarray:
+        """Actions planned on ``emap``, a map someone else keeps and has already updated with ``obs`` and ``done``
+        (a trainer's MapObserver): the same actions as :meth:`act`, without marking the scan twice. Call one of
+        the two for a batch, not both."""
+        b = len(done)
+        if emap.size != SIZE or emap.batch != b:
+            raise ValueError(f"act_on needs an EgoMap of {b} agents and size {SIZE}, got {emap.batch} and {emap.size}")
+        if len(self._mode) != b:
+            self._alloc(b)
+        self.emap = emap
+        return self._decide(emap, obs, _first(obs, done))
+
+    def _decide(self, emap: EgoMap, obs: Observation, first: np.ndarray) -> np.ndarray:
+        """Run the planner on ``emap`` (already updated with ``obs``)."""
+        b = len(first)
         out = np.empty(b, dtype=np.int64)
-        _act(self.emap.grid, self.emap.pose, first, prev, np.asarray(obs["collided"], dtype=np.int64).reshape(b),
+        _act(emap.grid, emap.pose, first, np.asarray(obs["prev_action"], dtype=np.int64).reshape(b),
+             np.asarray(obs["collided"], dtype=np.int64).reshape(b),
              np.ascontiguousarray(obs["depth"], dtype=np.float64).reshape(b, -1) * MAX_RANGE,
              np.ascontiguousarray(obs["semantic"], dtype=np.int64).reshape(b, -1),
              np.asarray(obs["target"], dtype=np.int64).reshape(b), self._cls, self._dist, self._box, self._plan_box,
              self._mode, self._age, self._sighted, self._bumps, self._n_bumps, self._heading, self._goal, self._heap_k, self._heap_v, out)
-        return out, state
+        return out
 
+
+def _first(obs: Observation, done: np.ndarray) -> np.ndarray:
+    """Where an agent's map starts fresh: a new episode, or no previous action."""
+    b = len(done)
+    return np.asarray(done, dtype=np.bool_).reshape(b) | (np.asarray(obs["prev_action"], dtype=np.int64).reshape(b) == NO_ACTION)
 
 __all__ = ["MapExplorerPolicy"]

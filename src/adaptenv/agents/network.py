@@ -97,10 +97,11 @@ def observe(observer: MapObserver | None, obs: dict[str, np.ndarray], first: np.
     return obs if observer is None or "map" in obs else observer(obs, first)
 
 
-def unpack_map(packed: torch.Tensor, channels: int) -> torch.Tensor:
-    """float (N, channels, S, S) in channels-last memory from packed crops (N, S, S) uint8 (bit k is channel k)."""
-    table = ((torch.arange(256)[:, None] >> torch.arange(channels)) & 1).float()
-    return torch.nn.functional.embedding(packed.long(), table).permute(0, 3, 1, 2)
+def unpack_map(packed: torch.Tensor, channels: int, dtype: torch.dtype = torch.float32) -> torch.Tensor:
+    """0/1 values of ``dtype`` (N, channels, S, S) in channels-last memory from packed crops (N, S, S) uint8 (bit k is
+    channel k)."""
+    table = ((torch.arange(256)[:, None] >> torch.arange(channels)) & 1).to(dtype)
+    return torch.nn.functional.embedding(packed.int(), table).permute(0, 3, 1, 2)
 
 
 class NavNet(nn.Module):
@@ -158,7 +159,10 @@ class NavNet(nn.Module):
     def _map_input(self, m: torch.Tensor, lead_dims: int) -> torch.Tensor:
         """Encoder input (N, C, S, S) from packed crops (lead..., S, S) or the Gym env's unpacked (lead..., C, S, S)."""
         if m.dim() == lead_dims + 2:
-            return unpack_map(m.reshape(-1, *m.shape[-2:]), self.config.map_channels)
+            # under bf16 autocast the convolution would cast a float32 input: unpack to its dtype at once (same values)
+            cpu_autocast = torch.is_autocast_enabled("cpu")
+            return unpack_map(m.reshape(-1, *m.shape[-2:]), self.config.map_channels,
+                              torch.get_autocast_dtype("cpu") if cpu_autocast else torch.float32)
         return m.reshape(-1, *m.shape[-3:]).float().contiguous(memory_format=torch.channels_last)
 
     def encoder_modules(self) -> list[nn.Module]:

@@ -24,6 +24,7 @@ from adaptenv.agents.explorer import ExplorerPolicy
 from adaptenv.agents.map_explorer import MapExplorerPolicy
 from adaptenv.agents.policy import Observation, PolicyContext
 from adaptenv.errors import ConfigError
+from adaptenv.sim.egomap import EgoMap
 from adaptenv.sim.expert import ShortestPathExpert
 
 TeacherKind = Literal["expert", "explorer", "map-explorer", "mix"]
@@ -80,13 +81,18 @@ class ExplorerTeacher(_SimTeacher):
 
 
 class MapExplorerTeacher:
-    """The map explorer's action on the student's observations (it keeps its EgoMap from ``obs`` and ``first``)."""
+    """The map explorer's action on the student's observations: on its own EgoMap kept from ``obs`` and ``first``,
+    or on ``emap``, the student's map, which its MapObserver has already updated with them (the same map)."""
 
-    def __init__(self, sim: Any):
+    def __init__(self, sim: Any, emap: EgoMap | None = None):
         self.explorer = MapExplorerPolicy()
+        self.emap = emap
 
     def label(self, obs: Observation, first: np.ndarray) -> np.ndarray:
-        actions, _ = self.explorer.act(obs, None, np.asarray(first, dtype=bool))
+        done = np.asarray(first, dtype=bool)
+        if self.emap is not None:
+            return self.explorer.act_on(self.emap, obs, done)
+        actions, _ = self.explorer.act(obs, None, done)
         return actions
 
 
@@ -107,14 +113,16 @@ class MixTeacher:
         return np.where(self.use_explorer, b, a)
 
 
-def make_teacher(kind: str, sim: Any, *, mix: float = 0.5, seed: int = 0) -> Teacher:
-    """The teacher named by ``--teacher`` for a BatchSim; ConfigError for an unknown name."""
+def make_teacher(kind: str, sim: Any, *, mix: float = 0.5, seed: int = 0, emap: EgoMap | None = None) -> Teacher:
+    """The teacher named by ``--teacher`` for a BatchSim; ConfigError for an unknown name.
+
+    ``emap``: the student's map, updated before each label; the map explorer plans on it instead of keeping its own."""
     if kind == "expert":
         return ExpertTeacher(sim)
     if kind == "explorer":
         return ExplorerTeacher(sim)
     if kind == "map-explorer":
-        return MapExplorerTeacher(sim)
+        return MapExplorerTeacher(sim, emap)
     if kind == "mix":
         return MixTeacher(sim, mix, seed)
     raise ConfigError(f"--teacher {kind!r}: unknown teacher; choose one of {', '.join(TEACHERS)}")
@@ -152,10 +160,10 @@ def label_agreement(net: Any, worlds: list, beta: float, *, teacher: str = "expe
     rng = np.random.default_rng(seed)
     sampler = EpisodeSampler(worlds)
     sim = BatchSim(worlds, max_steps=300)
-    labeller = make_teacher(teacher, sim, seed=seed)
+    observer = MapObserver.of(net, envs)
+    labeller = make_teacher(teacher, sim, seed=seed, emap=observer.emap if observer else None)
     obs, _ = sim.reset(*sampler.draw(rng, envs))
     first, h = np.ones(envs, dtype=bool), net.initial_state(envs)
-    observer = MapObserver.of(net, envs)
     logits_all, labels_all, episodes = [], [], 0
     for _ in range(steps):
         obs = observe(observer, obs, first)

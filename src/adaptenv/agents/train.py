@@ -42,12 +42,14 @@ import csv
 import json
 import os
 import time
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
 from concurrent.futures import ThreadPoolExecutor
+from contextlib import contextmanager
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
 
+import numba
 import numpy as np
 import torch
 import torch.nn.functional as F
@@ -311,8 +313,22 @@ def train(cfg: TrainConfig, *, worlds: Sequence[NavWorld] | None = None, init_ne
     caller's again afterwards.
     """
     check_config(cfg)
-    with torch_threads(cfg.threads or (None if cfg.overlap else available_cores())) as threads:
+    with torch_threads(cfg.threads or (None if cfg.overlap else available_cores())) as threads, \
+            _collector_threads(1 if cfg.overlap else None):
         return _train(cfg, worlds, init_net, command, threads)
+
+
+@contextmanager
+def _collector_threads(n: int | None) -> Iterator[None]:
+    """Run a block with ``n`` numba threads for the collecting thread's kernels (map memory, map explorer), then
+    restore the count; None leaves it. With the learner thread on the second core they run on one."""
+    before = numba.get_num_threads()
+    if n is not None:
+        numba.set_num_threads(min(n, before))
+    try:
+        yield
+    finally:
+        numba.set_num_threads(before)
 
 
 def _train(cfg: TrainConfig, worlds: Sequence[NavWorld] | None, init_net: NavNet | None, command: str,
@@ -441,7 +457,6 @@ def _train(cfg: TrainConfig, worlds: Sequence[NavWorld] | None, init_net: NavNet
     sampler = EpisodeSampler(worlds, min_distance=cfg.min_start_distance)
     # with overlap the learner thread takes the second core, so the simulator kernel runs serially
     sim = BatchSim(worlds, max_steps=cfg.max_episode_steps, threads=1 if cfg.overlap else None)
-    teacher = make_teacher(cfg.teacher, sim, mix=cfg.teacher_mix, seed=cfg.seed)  # agents/teachers.py
     B, T, L = cfg.num_envs, cfg.rollout_steps, cfg.chunk_len
     eps, envs = new_episodes(B)
     obs, _ = sim.reset(eps, envs)
@@ -450,6 +465,8 @@ def _train(cfg: TrainConfig, worlds: Sequence[NavWorld] | None, init_net: NavNet
     actor.requires_grad_(False)
     h = actor.initial_state(B)
     observer = MapObserver.of(actor, B)
+    teacher = make_teacher(cfg.teacher, sim, mix=cfg.teacher_mix, seed=cfg.seed,  # agents/teachers.py
+                           emap=observer.emap if observer else None)
     first = np.ones(B, dtype=bool)
     logger = RunLogger(run_dir, cfg.tensorboard)
     progress = ProgressBar("DAgger" if cfg.progress else None, cfg.frames, transient=False).start()

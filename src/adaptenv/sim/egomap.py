@@ -91,13 +91,13 @@ def _mark(grid, coarse, seen, i, x, z, bits, cell, f):
         coarse[i, row // f, col // f] |= bits
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, parallel=True)
 def _update(grid, coarse, seen, pose, first, prev_action, collided, depth, sem, target, offsets, yaw_delta, move_delta,
             max_range, n_interp, cell, f, bump):
     """Integrate each agent's pose from its last action, then mark its scan (see the module docstring)."""
     b = grid.shape[0]
     n_rays = offsets.shape[0]
-    for i in range(b):
+    for i in numba.prange(b):  # agents are independent: each writes only its own rows
         a = prev_action[i]
         if first[i]:
             grid[i, :, :] = 0
@@ -141,14 +141,14 @@ def _update(grid, coarse, seen, pose, first, prev_action, collided, depth, sem, 
                     _mark(grid, coarse, seen, i, x + r * ux, z + r * uz, bits, cell, f)
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, parallel=True)
 def _crop(grid, coarse, pose, out, crop, cell, f):
     """Egocentric windows of every agent, rotated to its heading, packed 8 bits per pixel into ``out``."""
     b = grid.shape[0]
     n = grid.shape[1]
     nc = coarse.shape[1]
     half = crop / 2.0
-    for i in range(b):
+    for i in numba.prange(b):
         x, z = pose[i, 0], pose[i, 1]
         t = math.radians(pose[i, 2])
         fx, fz = math.sin(t), math.cos(t)  # forward
