@@ -3,7 +3,8 @@
     python tools/time_egomap.py [B] [STEPS] [HOUSES]
 
 Records STEPS batched observations of B agents taking random motion actions in HOUSES (default
-``preset:tiny``, one thread), then replays them through a fresh EgoMap, timing each call
+``preset:tiny``, the simulator on one thread), then replays them through a fresh EgoMap, whose kernels
+run on numba's threads (``NUMBA_NUM_THREADS``), timing each call
 (``time.perf_counter`` and ``time.process_time``); a first pass compiles the kernels and is not timed.
 Prints agent-frames per second (B x calls / s) and the load average, since the machine may be
 shared. docs/simulator.md quotes it.
