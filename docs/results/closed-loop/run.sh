@@ -1,0 +1,12 @@
+#!/bin/bash
+# The experiment of DECLARED.md, resumable: finished runs are skipped, runs go seed by seed (every method of
+# seed 0, then seed 1, ...). pi_0 is the shipped pretrained-ppo of this clone.
+# Usage, from a clone with the virtual environment of `make install-dev`: bash docs/results/closed-loop/run.sh [OUT]
+set -euo pipefail
+root=$(git rev-parse --show-toplevel)
+out=$(realpath -m "${1:-runs/closed-loop}")
+mkdir -p "$out"
+cd "$out"
+export NUMBA_NUM_THREADS=1
+PYTHONPATH="$root/src" "$root/.venv/bin/adaptenv" experiment --config "$root/configs/experiment-closed-loop.json" \
+  -o "$out" --final-episodes 1000 --executor process --workers 2
