@@ -426,7 +426,6 @@ def _act_one(i, grid, pose, first, prev, collided, depth, sem, target, cls, dist
         heading[i], out[i] = _steer(ci, d, pb, bumps[i], x, z, yaw, ar, ac, half)
 
 
-
 @numba.njit(cache=True, parallel=True)
 def _act(grid, pose, first, prev, collided, depth, sem, target, cls, dist, box, plan_box, mode, age, sighted, bumps,
          n_bumps, heading, goal, hk, hv, out):
@@ -437,6 +436,14 @@ def _act(grid, pose, first, prev, collided, depth, sem, target, cls, dist, box, 
         for i in range(c, b, chunks):
             _act_one(i, grid, pose, first, prev, collided, depth, sem, target, cls, dist, box, plan_box, mode, age,
                      sighted, bumps, n_bumps, heading, goal[c], hk[c], hv[c], out)
+
+
+def _first(obs: Observation, done: np.ndarray) -> np.ndarray:
+    """Where an agent's map starts fresh: a new episode, or no previous action."""
+    b = len(done)
+    prev = np.asarray(obs["prev_action"], dtype=np.int64).reshape(b)
+    return np.asarray(done, dtype=np.bool_).reshape(b) | (prev == NO_ACTION)
+
 
 class MapExplorerPolicy:
     """Frontier exploration and target approach planned on the agent's own EgoMap (see the module docstring).
@@ -505,10 +512,5 @@ class MapExplorerPolicy:
              self._mode, self._age, self._sighted, self._bumps, self._n_bumps, self._heading, self._goal, self._heap_k, self._heap_v, out)
         return out
 
-
-def _first(obs: Observation, done: np.ndarray) -> np.ndarray:
-    """Where an agent's map starts fresh: a new episode, or no previous action."""
-    b = len(done)
-    return np.asarray(done, dtype=np.bool_).reshape(b) | (np.asarray(obs["prev_action"], dtype=np.int64).reshape(b) == NO_ACTION)
 
 __all__ = ["MapExplorerPolicy"]
