@@ -448,3 +448,24 @@ def test_seen_counts_match_the_marked_cells():
     counts = emap.seen_counts()
     counts[:] = -1  # a copy: the map's own count is untouched
     assert np.array_equal(emap.seen_counts(), counted(emap))
+
+
+def test_maps_and_crops_do_not_depend_on_the_thread_count():
+    """The kernels run agents in parallel; one thread and all of numba's give the same maps, poses and crops."""
+    import numba
+
+    rng = np.random.default_rng(4)
+    trace = [random_obs(rng, 7, first=k == 0) for k in range(15)]
+    results = []
+    before = numba.get_num_threads()
+    try:
+        for threads in (1, before):
+            numba.set_num_threads(threads)
+            emap = EgoMap(7)
+            for k, obs in enumerate(trace):
+                emap.update(obs, np.full(7, k == 0))
+            results.append((emap.grid.copy(), emap.coarse.copy(), emap.pose.copy(), emap.seen.copy(), emap.crop()))
+    finally:
+        numba.set_num_threads(before)
+    assert all(np.array_equal(a, b) for a, b in zip(*results, strict=True))
+    assert results[0][0].any()
