@@ -28,6 +28,8 @@ import statistics
 import subprocess
 import sys
 
+# The timing snippets run in BEFORE_SRC too, so they use only what both trees have (TrainConfig, train, train_ppo,
+# bench_labelling, MAP_RECIPE, LOOP_PPO), not a helper that only the newer tree would define.
 MAP = """
 from adaptenv.agents.config import TrainConfig
 from adaptenv.agents.train import train

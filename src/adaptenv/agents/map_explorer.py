@@ -458,9 +458,9 @@ class MapExplorerPolicy:
         self.emap = EgoMap(0)
         self._alloc(0)
 
-    def _alloc(self, batch: int) -> None:
-        """Fresh map and plan arrays for ``batch`` agents."""
-        self.emap = EgoMap(batch)
+    def _alloc(self, batch: int, emap: EgoMap | None = None) -> None:
+        """Fresh plan arrays for ``batch`` agents, and a fresh map unless ``emap`` (someone else's) is given."""
+        self.emap = EgoMap(batch) if emap is None else emap
         n = self.emap.size
         self._cls = np.zeros((batch, n, n), dtype=np.uint8)
         self._dist = np.full((batch, n, n), np.inf, dtype=np.float32)
@@ -496,7 +496,7 @@ class MapExplorerPolicy:
         if emap.size != SIZE or emap.batch != b:
             raise ValueError(f"act_on needs an EgoMap of {b} agents and size {SIZE}, got {emap.batch} and {emap.size}")
         if len(self._mode) != b:
-            self._alloc(b)
+            self._alloc(b, emap)
         self.emap = emap
         return self._decide(emap, obs, _first(obs, done))
 
