@@ -12,7 +12,7 @@ order; each process warms what it times once, untimed. Figures:
 - ``loop``: what one worker of ``adaptenv experiment`` runs, on one torch thread: the loop's PPO
   fine-tuning (``adaptenv.bench.train.LOOP_PPO``, 3 x 8,192 frames, frames/s) and a held-out
   evaluation job (250 ``val-far`` episodes of ``pretrained-ppo`` on refilled slots, seconds), with a
-  digest of the episodes' outcomes (both trees should end every episode the same). Set
+  digest of the fine-tuned weights and the episodes' outcomes (both trees should give the same). Set
   ``NUMBA_NUM_THREADS=1`` to time it as the experiment's workers run.
 
 Prints each round and, as JSON, the medians per tree and the medians of the paired ratios (after /
@@ -71,10 +71,13 @@ def ppo_fps(n):
     cfg = PPOConfig(frames=n * block, output="", run_dir="", eval_every=0, final_eval_episodes=0,
                     calibrate_episodes=0, progress=False, tensorboard=False, value_warmup_iters=0, **LOOP_PPO)
     start = time.perf_counter()
-    train_ppo(cfg, worlds=worlds)
-    return n * block / (time.perf_counter() - start)
+    net = train_ppo(cfg, worlds=worlds).net
+    seconds = time.perf_counter() - start
+    weights.update(b"".join(v.numpy().tobytes() for v in net.state_dict().values()))
+    return n * block / seconds
 
 
+weights = hashlib.sha1()
 ppo_fps(1)
 figures["ppo_frames_per_s"] = ppo_fps(3)
 suite = heldout_set("suite:val-far").worlds
@@ -84,7 +87,8 @@ run_episodes(suite, eps[:EVAL_BATCH], policy, batch=EVAL_BATCH)
 start = time.perf_counter()
 results, _ = run_episodes(suite, eps, policy, batch=EVAL_BATCH)
 figures["eval_job_seconds"] = time.perf_counter() - start
-digest = hashlib.sha1(repr([(r.success, r.steps, round(r.spl, 9)) for r in results]).encode()).hexdigest()
+weights.update(repr([(r.success, r.steps, round(r.spl, 9)) for r in results]).encode())
+digest = weights.hexdigest()
 """
 
 HEAD = """
@@ -138,7 +142,7 @@ def main() -> None:
     digests = {r["digest"] for rs in runs.values() for r in rs}
     report.update(rounds=args.rounds, houses=args.houses, figures=chosen,
                   numba_num_threads=os.environ.get("NUMBA_NUM_THREADS", "default"),
-                  same_episode_outcomes=None if digests == {None} else len(digests) == 1,
+                  same_results=None if digests == {None} else len(digests) == 1,
                   load_average_1min_before=load_before, load_average_1min_after=os.getloadavg()[0])
     print(json.dumps(report, indent=2))
 

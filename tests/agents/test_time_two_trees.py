@@ -35,7 +35,7 @@ def test_rounds_alternate_and_the_report_pairs_them(tmp_path, monkeypatch, capsy
     assert calls == [before, after, after, before, before, after]
     assert report["before"]["ppo_frames_per_s"] == 100.0 and report["after"]["ppo_frames_per_s"] == 160.0
     assert report["after_over_before"]["ppo_frames_per_s"] == pytest.approx(150 / 100)  # median of 1.5, 1.45, 2
-    assert report["same_episode_outcomes"] is True
+    assert report["same_results"] is True
 
 
 def test_bad_figures_and_a_folder_without_the_package_are_named(tmp_path, monkeypatch, capsys):

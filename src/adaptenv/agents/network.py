@@ -14,6 +14,10 @@ small 2-D CNN beside the scan encoder. :class:`MapObserver` keeps the map and ad
 
 from __future__ import annotations
 
+import ctypes
+import functools
+import os
+import platform
 from collections.abc import Iterator
 from contextlib import contextmanager
 from dataclasses import asdict, dataclass
@@ -311,8 +315,6 @@ class NeuralPolicy:
 
 def available_cores() -> int:
     """Cores this process may use: the machine's, capped by ``OMP_NUM_THREADS`` (an executor's worker sets 1)."""
-    import os
-
     cores = os.cpu_count() or 2
     cap = os.environ.get("OMP_NUM_THREADS", "")
     return max(1, min(cores, int(cap))) if cap.isdigit() and int(cap) > 0 else cores
@@ -328,7 +330,41 @@ def configure_torch(threads: int | None = None) -> int:
     """
     n = threads or max(1, available_cores() // 2)
     torch.set_num_threads(n)
+    keep_freed_memory()
     return n
+
+
+KEEP_MEMORY = {-1: 2**31 - 1, -2: 256 << 20, -3: 32 << 20}
+"""glibc ``mallopt`` settings (malloc.h): M_TRIM_THRESHOLD (never give the heap's top back), M_TOP_PAD (grow the heap
+256 MiB at a time, so large buffers come from its top too), M_MMAP_THRESHOLD (its largest, 32 MiB)."""
+KEEP_MEMORY_ENV = "ADAPTENV_KEEP_MEMORY"
+"""Set to 0 to leave glibc's malloc at its defaults (see :func:`keep_freed_memory`)."""
+
+
+@functools.cache
+def keep_freed_memory() -> bool:
+    """Have glibc's malloc keep freed memory for reuse (:data:`KEEP_MEMORY`); once per process, called by
+    :func:`configure_torch`. Returns whether it applied.
+
+    Torch frees and reallocates the same activations every minibatch; by default glibc hands them back to the
+    system and the next minibatch page-faults them in again: 1.4 million faults in 24,576 frames of the loop's
+    PPO, about a fifth of its time (docs/BENCHMARKS.md). Results do not change. Skipped off glibc, when
+    ``ADAPTENV_KEEP_MEMORY=0``, or when glibc's own variables set these (yours win).
+    """
+    own = {"MALLOC_TRIM_THRESHOLD_", "MALLOC_TOP_PAD_", "MALLOC_MMAP_THRESHOLD_"} & os.environ.keys() or \
+        "glibc.malloc." in os.environ.get("GLIBC_TUNABLES", "")
+    if own or os.environ.get(KEEP_MEMORY_ENV, "1") == "0" or platform.libc_ver()[0] != "glibc":
+        return False
+    libc = ctypes.CDLL(None)
+    if not all(libc.mallopt(param, value) == 1 for param, value in KEEP_MEMORY.items()):
+        return False
+    # M_TOP_PAD acts when the heap next runs out, which a warm heap may never do: make it run out now (blocks below
+    # M_MMAP_THRESHOLD come from the heap), so its top has room for large buffers
+    libc.malloc.restype, libc.free.argtypes = ctypes.c_void_p, [ctypes.c_void_p]
+    blocks = [libc.malloc(16 << 20) for _ in range(20)]
+    for block in blocks:
+        libc.free(block)
+    return True
 
 
 @contextmanager
