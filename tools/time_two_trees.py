@@ -73,11 +73,11 @@ def ppo_fps(n):
     start = time.perf_counter()
     net = train_ppo(cfg, worlds=worlds).net
     seconds = time.perf_counter() - start
-    weights.update(b"".join(v.numpy().tobytes() for v in net.state_dict().values()))
+    fingerprint.update(b"".join(v.numpy().tobytes() for v in net.state_dict().values()))
     return n * block / seconds
 
 
-weights = hashlib.sha1()
+fingerprint = hashlib.sha1()  # the fine-tuned weights, then the episodes
 ppo_fps(1)
 figures["ppo_frames_per_s"] = ppo_fps(3)
 suite = heldout_set("suite:val-far").worlds
@@ -87,8 +87,8 @@ run_episodes(suite, eps[:EVAL_BATCH], policy, batch=EVAL_BATCH)
 start = time.perf_counter()
 results, _ = run_episodes(suite, eps, policy, batch=EVAL_BATCH)
 figures["eval_job_seconds"] = time.perf_counter() - start
-weights.update(repr([(r.success, r.steps, round(r.spl, 9)) for r in results]).encode())
-digest = weights.hexdigest()
+fingerprint.update(repr([(r.success, r.steps, round(r.spl, 9)) for r in results]).encode())
+digest = fingerprint.hexdigest()
 """
 
 HEAD = """
