@@ -334,9 +334,11 @@ def configure_torch(threads: int | None = None) -> int:
     return n
 
 
-KEEP_MEMORY = {-1: 2**31 - 1, -2: 256 << 20, -3: 32 << 20}
-"""glibc ``mallopt`` settings (malloc.h): M_TRIM_THRESHOLD (never give the heap's top back), M_TOP_PAD (grow the heap
-256 MiB at a time, so large buffers come from its top too), M_MMAP_THRESHOLD (its largest, 32 MiB)."""
+_M_TRIM_THRESHOLD, _M_TOP_PAD, _M_MMAP_THRESHOLD = -1, -2, -3
+"""glibc's ``mallopt`` parameters (malloc.h)."""
+KEEP_MEMORY = {_M_TRIM_THRESHOLD: 2**31 - 1, _M_TOP_PAD: 256 << 20, _M_MMAP_THRESHOLD: 32 << 20}
+"""What :func:`keep_freed_memory` sets: never give the heap's top back, grow the heap 256 MiB at a time (so large
+buffers come from its top too), and serve buffers up to glibc's largest mmap threshold (32 MiB) from the heap."""
 KEEP_MEMORY_ENV = "ADAPTENV_KEEP_MEMORY"
 """Set to 0 to leave glibc's malloc at its defaults (see :func:`keep_freed_memory`)."""
 
@@ -361,7 +363,7 @@ def keep_freed_memory() -> bool:
     # M_TOP_PAD acts when the heap next runs out, which a warm heap may never do: make it run out now (blocks below
     # M_MMAP_THRESHOLD come from the heap), so its top has room for large buffers
     libc.malloc.restype, libc.free.argtypes = ctypes.c_void_p, [ctypes.c_void_p]
-    blocks = [libc.malloc(16 << 20) for _ in range(20)]
+    blocks = [libc.malloc(KEEP_MEMORY[_M_MMAP_THRESHOLD] // 2) for _ in range(20)]
     for block in blocks:
         libc.free(block)
     return True
