@@ -221,3 +221,22 @@ def test_a_loop_on_ray_gives_the_in_process_records(ray_executor, tiny_policy, t
     remote = run_loop(cfg, tmp_path / "ray", executor=ray_executor)
     strip = [r.model_dump(exclude={"wall_time_s", "stage_seconds"}) for r in remote]
     assert strip == [r.model_dump(exclude={"wall_time_s", "stage_seconds"}) for r in local]
+
+
+def test_experiment_runs_go_to_the_workers_one_per_task(monkeypatch, tmp_path):
+    """Runs are long: one per task keeps them in order, so a stopped experiment leaves whole seeds."""
+    from typer.testing import CliRunner
+
+    from adaptenv.cli import app
+
+    asked = {}
+
+    def refuse(*args, **kwargs):
+        asked.update(kwargs)
+        raise ConfigError("stop here")
+
+    monkeypatch.setattr("adaptenv.curriculum.executor.make_executor", refuse)
+    res = CliRunner().invoke(app, ["experiment", "--config", "configs/experiment-small.json", "-o", str(tmp_path),
+                                   "--executor", "process", "--workers", "2"])
+    assert isinstance(res.exception, ConfigError) and str(res.exception) == "stop here"
+    assert asked == {"chunksize": 1}

@@ -234,7 +234,9 @@ def experiment(
     out = writable_folder(out or Path("runs") / config.stem, "-o")
     ref = cfg.loop_config(cfg.reference, cfg.seeds[0])
     check_house_sets([ref.houses, *ref.heldout.values()], strict, console.print)
-    ex = None if executor == "inprocess" else make_executor(executor, workers, address)
+    # one run per task: runs are long, and in order a stopped experiment leaves whole seeds
+    ex = None if executor == "inprocess" else make_executor(executor, workers, address, chunksize=1)
+
     def say(text: str) -> None:
         console.print(f"[dim]{text}[/]")
 

@@ -424,11 +424,11 @@ def _check_workers(workers: int, kind: str) -> int:
 
 
 def make_executor(kind: ExecutorKind = "inprocess", workers: int | None = None,
-                  address: str | None = None) -> Executor:
+                  address: str | None = None, *, chunksize: int | None = None) -> Executor:
     """Build the executor the ``--executor/--workers/--address`` options ask for.
 
     ``workers`` defaults to 1 in process and to the CPU count for ``process``; ``address`` is only
-    meaningful for ``ray``.
+    meaningful for ``ray``; ``chunksize`` (items per task) is ``process``'s and ``ray``'s.
 
     Raises:
         ConfigError: for an unknown kind, a non-positive worker count, ``--workers`` above 1 with
@@ -444,8 +444,8 @@ def make_executor(kind: ExecutorKind = "inprocess", workers: int | None = None,
             raise ConfigError(f"--workers {workers} needs --executor process or ray; inprocess runs one item at a time")
         return InProcessExecutor()
     if kind == "process":
-        return ProcessExecutor(workers)
-    return RayExecutor(workers, address)
+        return ProcessExecutor(workers, chunksize=chunksize)
+    return RayExecutor(workers, address, chunksize=chunksize)
 
 
 EXECUTOR_OPTION = typer.Option("inprocess", "--executor",
