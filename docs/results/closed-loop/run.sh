@@ -1,5 +1,5 @@
 #!/bin/bash
-# The experiment of DECLARED.md, resumable: finished runs are skipped, runs go seed by seed (every method of
+# The experiment of DECLARED.md, resumable: finished runs are skipped, runs go about seed by seed (every method of
 # seed 0, then seed 1, ...). pi_0 is the shipped pretrained-ppo of this clone.
 # Usage, from a clone with the virtual environment of `make install-dev`: bash docs/results/closed-loop/run.sh [OUT]
 set -euo pipefail
