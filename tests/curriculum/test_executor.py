@@ -10,6 +10,7 @@ from __future__ import annotations
 import importlib.util
 import math
 import os
+from pathlib import Path
 
 import pytest
 
@@ -236,7 +237,8 @@ def test_experiment_runs_go_to_the_workers_one_per_task(monkeypatch, tmp_path):
         raise ConfigError("stop here")
 
     monkeypatch.setattr("adaptenv.curriculum.executor.make_executor", refuse)
-    res = CliRunner().invoke(app, ["experiment", "--config", "configs/experiment-small.json", "-o", str(tmp_path),
+    config = Path(__file__).resolve().parents[2] / "configs" / "experiment-small.json"
+    res = CliRunner().invoke(app, ["experiment", "--config", str(config), "-o", str(tmp_path),
                                    "--executor", "process", "--workers", "2"])
     assert isinstance(res.exception, ConfigError) and str(res.exception) == "stop here"
     assert asked == {"chunksize": 1}
