@@ -55,6 +55,8 @@ def test_config_checks_name_the_flag(tmp_path):
         check_ppo_config(tiny_ppo(tmp_path, kl_coef=-1.0))
     with pytest.raises(ConfigError, match="--explore-bonus"):
         check_ppo_config(tiny_ppo(tmp_path, explore_bonus=-0.1))
+    with pytest.raises(ConfigError, match="--precision must be one of fp32, bf16"):
+        check_ppo_config(tiny_ppo(tmp_path, precision="fp16"))
 
 
 def test_threshold_rule_log_probs_are_the_motion_distribution():
@@ -150,6 +152,19 @@ def test_kl_anchor_is_zero_before_the_policy_moves(tmp_path, stop_rule):
 
 
 @pytest.mark.slow
+def test_bf16_updates_differ_from_the_collecting_policy_only_by_rounding(tmp_path):
+    torch.manual_seed(0)
+    init = NavNet(NetConfig(hidden=32, feature_dim=32, conv_channels=8, map_channels=MAP_CHANNELS))
+    # one update that sees pi == pi_0: in fp32 the minibatch pass equals collection's, in bf16 it is rounded
+    rows = {p: [r for r in train_ppo(tiny_ppo(tmp_path, output="", run_dir="", frames=512, num_minibatches=1,
+                                              update_epochs=1, kl_coef=1.0, final_eval_episodes=0, precision=p),
+                                     init_net=init).rows if "losses/kl_anchor" in r] for p in ("fp32", "bf16")}
+    assert [r["charts/episodic_return"] for r in rows["fp32"]] == [r["charts/episodic_return"] for r in rows["bf16"]]
+    assert rows["fp32"][0]["losses/kl_anchor"] == pytest.approx(0.0, abs=1e-9)
+    assert 0.0 < rows["bf16"][0]["losses/kl_anchor"] < 1e-3 and 0.0 < rows["bf16"][0]["losses/approx_kl"] < 1e-3
+
+
+@pytest.mark.slow
 def test_a_large_kl_coef_keeps_the_policy_near_its_warm_start(tmp_path):
     torch.manual_seed(0)
     init = NavNet(NetConfig(hidden=32, feature_dim=32))
@@ -236,14 +251,14 @@ def test_tiny_ppo_run_writes_checkpoint_card_and_metrics(tmp_path, bc_teacher):
 def test_finetune_with_a_named_config(tiny_set, algo):
     net = NavNet(NetConfig(hidden=32, feature_dim=32))
     before = {k: v.clone() for k, v in net.state_dict().items()}
-    ppo_only = {"kl_coef": 0.5, "explore_bonus": 0.001}
+    ppo_settings = {"kl_coef": 0.5, "explore_bonus": 0.001, "precision": "bf16"}
     cfg = FinetuneConfig(algo=algo, frames=2048, num_envs=16, learning_rate=1e-3, final_eval_episodes=3,
-                         **(ppo_only if algo == "ppo" else {}))
+                         **(ppo_settings if algo == "ppo" else {}))
     res = finetune(net, tiny_set.worlds, cfg, seed=0)  # PPO: one 16 x 128-step rollout; DAgger: four of 32
     new, card = res.net, res.card
     assert new is not net and card["frames"] == 2048
     if algo == "ppo":
-        assert {k: card["config"][k] for k in ppo_only} == ppo_only
+        assert {k: card["config"][k] for k in ppo_settings} == ppo_settings
         # a second call continues the first one's critic and Adam moments (the loop's later iterations)
         again = finetune(new, tiny_set.worlds, cfg, seed=1, learner=res.learner)
 

@@ -156,6 +156,9 @@ class PPOConfig:
     freeze_encoder: bool = False
     """Keep the observation encoder (scan, map, embeddings) at the warm start's weights and train the memory and heads:
     its features are computed once while collecting and the updates skip it (faster: docs/BENCHMARKS.md)."""
+    precision: str = "fp32"
+    """Arithmetic of the update's minibatch passes: fp32, or bf16 autocast (faster on CPUs with AVX512_BF16;
+    collection and pi_0's anchor logits stay fp32; docs/BENCHMARKS.md)."""
     stop_rule: str = "threshold"
     """How end is chosen while collecting: 'threshold' (as the saved policy acts; RL trains the motions) or 'sample' (from the full softmax)."""
     end_threshold: float = 0.8
@@ -218,7 +221,7 @@ class FinetuneConfig:
     min_start_distance: float = 0.0
     """Training episodes start at least this geodesic distance (m) from the target where the house allows (0: uniform)."""
     precision: str = "fp32"
-    """DAgger: arithmetic of the gradient steps, fp32 or bf16 (TrainConfig.precision)."""
+    """Arithmetic of the gradient steps, fp32 or bf16 (TrainConfig.precision, PPOConfig.precision)."""
     max_episode_steps: int = 300
     """Episode cap while collecting (the evaluation's is 600)."""
     kl_coef: float = 0.0

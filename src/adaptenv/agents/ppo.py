@@ -34,6 +34,8 @@ Each iteration:
    policy's memory and features, detached), so a random critic cannot move a warm-started policy.
    With ``freeze_encoder`` the observation encoder keeps the warm start's weights: its features are
    stored while collecting, and the update and the anchor run only the memory and heads on them.
+   With ``precision='bf16'`` the minibatch passes run under CPU bf16 autocast (logits and values cast
+   back to fp32 for the losses); collection and pi_0's anchor logits stay fp32.
 
 Warm start: ``init`` is a checkpoint written by ``adaptenv train`` (behaviour cloning + DAgger)
 or ``pretrained``. Outputs: the policy checkpoint at ``output`` (the network only; the value head
@@ -77,7 +79,7 @@ from adaptenv.agents.registry import init_checkpoint
 from adaptenv.agents.stop import calibrate_end_threshold
 from adaptenv.agents.suites import EpisodeFloor
 from adaptenv.agents.teachers import TEACHERS, make_teacher
-from adaptenv.agents.train import RunLogger, TrainResult
+from adaptenv.agents.train import RunLogger, TrainResult, check_precision
 from adaptenv.errors import ConfigError
 from adaptenv.progress import ProgressBar
 from adaptenv.sim.egomap import EgoMap
@@ -112,6 +114,7 @@ def check_ppo_config(cfg: PPOConfig) -> None:
     for name in ("kl_coef", "explore_bonus", "bc_coef"):
         if getattr(cfg, name) < 0:
             raise ConfigError(f"--{name.replace('_', '-')} must be >= 0, got {getattr(cfg, name)}")
+    check_precision(cfg.precision, "--precision")
 
 
 class ActorCritic(nn.Module):
@@ -414,12 +417,14 @@ def _train_ppo(cfg: PPOConfig, worlds: Sequence[Any] | None, init_net: NavNet | 
                 chunk, env = mb // B, mb % B
                 tt = chunk[None, :] * L + np.arange(L)[:, None]  # (L, mb)
                 idx = (torch.from_numpy(tt), torch.from_numpy(env)[None, :])
-                if feats_buf is None:
-                    logits, new_value, _ = agent({k: v[idx] for k, v in b_obs.items()}, b_first[idx],
-                                                 h0_buf[chunk, env], detach_value=warmup)
-                else:
-                    logits, new_value, _ = agent.from_features(feats_buf[idx], b_first[idx], h0_buf[chunk, env],
-                                                               detach_value=warmup)
+                with torch.autocast("cpu", dtype=torch.bfloat16, enabled=cfg.precision == "bf16"):
+                    if feats_buf is None:
+                        logits, new_value, _ = agent({k: v[idx] for k, v in b_obs.items()}, b_first[idx],
+                                                     h0_buf[chunk, env], detach_value=warmup)
+                    else:
+                        logits, new_value, _ = agent.from_features(feats_buf[idx], b_first[idx],
+                                                                   h0_buf[chunk, env], detach_value=warmup)
+                logits, new_value = logits.float(), new_value.float()  # the losses in fp32 whatever the precision
                 new_logprob, entropy, drawn = log_prob_entropy(logits, b_actions[idx], cfg.stop_rule)
                 log_ratio = new_logprob - b_logprobs[idx]
                 ratio = log_ratio.exp()

@@ -581,8 +581,6 @@ def finetune(net: NavNet, worlds: Sequence[NavWorld], cfg: FinetuneConfig, seed:
     if cfg.algo not in ("dagger", "ppo"):
         raise ConfigError(f"FinetuneConfig.algo must be 'dagger' or 'ppo', got {cfg.algo!r}")
     check_precision(cfg.precision, "FinetuneConfig.precision")
-    if cfg.algo == "ppo" and cfg.precision != "fp32":
-        raise ConfigError(f"FinetuneConfig.precision {cfg.precision!r} applies to DAgger only; use fp32 with algo='ppo'")
     if cfg.algo == "dagger" and (cfg.kl_coef or cfg.explore_bonus or cfg.freeze_encoder):
         raise ConfigError("FinetuneConfig.kl_coef, explore_bonus and freeze_encoder apply to PPO only; leave them unset "
                           "with algo='dagger'")
@@ -599,7 +597,7 @@ def finetune(net: NavNet, worlds: Sequence[NavWorld], cfg: FinetuneConfig, seed:
                        calibrate_episodes=cfg.calibrate_episodes, eval_every=0, final_eval_episodes=evals,
                        min_start_distance=cfg.min_start_distance, max_episode_steps=cfg.max_episode_steps,
                        kl_coef=cfg.kl_coef, explore_bonus=cfg.explore_bonus, freeze_encoder=cfg.freeze_encoder,
-                       threads=1, progress=False,
+                       precision=cfg.precision, threads=1, progress=False,
                        tensorboard=False)
         return train_ppo(pc, worlds=worlds, init_net=net, learner=learner)
     steps = cfg.rollout_steps

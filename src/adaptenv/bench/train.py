@@ -168,10 +168,14 @@ LOOP_PPO = {"init": "pretrained-ppo", "kl_coef": 0.03, "explore_bonus": 0.002, "
 """The loop's PPO fine-tuning (configs/experiment-lever-ppo4.json's finetune_* settings) on the shipped map-reading agent."""
 
 
+PPO_VARIANTS = {"full": {}, "frozen_encoder": {"freeze_encoder": True}, "bf16": {"precision": "bf16"}}
+"""The PPO updates ``bench train --algo ppo`` times beside each other: fp32 whole network, encoder frozen, bf16."""
+
+
 def run_ppo(*, as_json: bool = False, iterations: int = 3, repeats: int = 3,
             houses: str = "preset:pretrain-train") -> dict:
-    """PPO end to end as the loop fine-tunes (LOOP_PPO, evaluation off), the whole network trained and the encoder
-    frozen (``freeze_encoder``), timed alternately (median of ``repeats`` each): frames/s and their ratio."""
+    """PPO end to end as the loop fine-tunes (LOOP_PPO, evaluation off) with each of PPO_VARIANTS' updates, timed
+    alternately (median of ``repeats`` each): frames/s and each variant's ratio to the full fp32 update."""
     from adaptenv.agents.config import PPOConfig
     from adaptenv.agents.houses import load_house_set
     from adaptenv.agents.ppo import train_ppo
@@ -180,28 +184,29 @@ def run_ppo(*, as_json: bool = False, iterations: int = 3, repeats: int = 3,
     worlds = load_house_set(houses).worlds
     block = PPOConfig().num_envs * PPOConfig().rollout_steps
 
-    def one(n: int, freeze: bool) -> tuple[float, float]:
+    def one(n: int, variant: dict) -> tuple[float, float]:
         cfg = PPOConfig(frames=n * block, output="", run_dir="", eval_every=0, final_eval_episodes=0,
                         calibrate_episodes=0, progress=False, tensorboard=False, value_warmup_iters=0,
-                        freeze_encoder=freeze, **LOOP_PPO)
+                        **LOOP_PPO, **variant)
         w, c = time.perf_counter(), time.process_time()
         train_ppo(cfg, worlds=worlds)
         return n * block / (time.perf_counter() - w), n * block / (time.process_time() - c)
 
     load_before = os.getloadavg()[0]
-    for freeze in (False, True):
-        one(1, freeze)  # warm-up
-    runs: dict[bool, list[tuple[float, float]]] = {False: [], True: []}
+    for variant in PPO_VARIANTS.values():
+        one(1, variant)  # warm-up
+    runs: dict[str, list[tuple[float, float]]] = {name: [] for name in PPO_VARIANTS}
     for _ in range(repeats):
-        for freeze in (False, True):
-            runs[freeze].append(one(iterations, freeze))
+        for name, variant in PPO_VARIANTS.items():
+            runs[name].append(one(iterations, variant))
     figures: dict = {}
-    for freeze, name in ((False, "full"), (True, "frozen_encoder")):
-        figures[f"ppo_end_to_end_frames_per_s_{name}"] = statistics.median(w for w, _ in runs[freeze])
-        figures[f"ppo_end_to_end_frames_per_cpu_s_{name}"] = statistics.median(c for _, c in runs[freeze])
-    figures.update({"frozen_over_full": statistics.median(f[0] / w[0] for w, f in zip(runs[False], runs[True],
-                                                                                        strict=True)),
-                    "ppo_frames_timed": iterations * block, "repeats": repeats, "houses": len(worlds),
+    for name, timed in runs.items():
+        figures[f"ppo_end_to_end_frames_per_s_{name}"] = statistics.median(w for w, _ in timed)
+        figures[f"ppo_end_to_end_frames_per_cpu_s_{name}"] = statistics.median(c for _, c in timed)
+    for name in ("frozen_encoder", "bf16"):
+        figures[f"{name.split('_')[0]}_over_full"] = statistics.median(
+            v[0] / f[0] for f, v in zip(runs["full"], runs[name], strict=True))
+    figures.update({"ppo_frames_timed": iterations * block, "repeats": repeats, "houses": len(worlds),
                     "recipe": LOOP_PPO, "load_average_1min_before": load_before,
                     "load_average_1min_after": os.getloadavg()[0]})
     emit("PPO throughput, the loop's recipe", figures, as_json,

@@ -133,8 +133,8 @@ class LoopConfig:
     """Fine-tuning episodes start at least this geodesic distance (m) from the target where a house allows
     (0: uniform starts; the long suites use 6 m)."""
     finetune_precision: str = "fp32"
-    """Arithmetic of fine-tuning's gradient steps: fp32, or bf16 autocast (about 2.4x faster on CPUs with
-    AVX512_BF16, slower elsewhere; docs/BENCHMARKS.md)."""
+    """Arithmetic of fine-tuning's gradient steps: fp32, or bf16 autocast (on CPUs with AVX512_BF16 DAgger's steps
+    about 2.4x faster and PPO end to end 1.4x, slower elsewhere; docs/BENCHMARKS.md)."""
     finetune_beta: float = FinetuneConfig.beta
     """Probability that the teacher's action is executed while fine-tuning (DAgger's beta, constant)."""
     finetune_max_steps: int = FinetuneConfig.max_episode_steps
@@ -195,9 +195,6 @@ class LoopConfig:
         check_precision(self.finetune_precision, f"{source}: finetune_precision")
         if self.finetune_algo not in ("dagger", "ppo"):
             raise ConfigError(f"{source}: finetune_algo must be dagger or ppo, got {self.finetune_algo!r}")
-        if self.finetune_algo == "ppo" and self.finetune_precision != "fp32":
-            raise ConfigError(f"{source}: finetune_precision {self.finetune_precision!r} applies to dagger only; "
-                              "use fp32 with finetune_algo ppo")
         if self.finetune_algo == "dagger" and (self.finetune_kl_coef or self.finetune_explore_bonus
                                                or self.finetune_freeze_encoder):
             raise ConfigError(f"{source}: finetune_kl_coef, finetune_explore_bonus and finetune_freeze_encoder apply "
