@@ -203,9 +203,8 @@ def run_ppo(*, as_json: bool = False, iterations: int = 3, repeats: int = 3,
     for name, timed in runs.items():
         figures[f"ppo_end_to_end_frames_per_s_{name}"] = statistics.median(w for w, _ in timed)
         figures[f"ppo_end_to_end_frames_per_cpu_s_{name}"] = statistics.median(c for _, c in timed)
-    for name in ("frozen_encoder", "bf16"):
-        figures[f"{name.split('_')[0]}_over_full"] = statistics.median(
-            v[0] / f[0] for f, v in zip(runs["full"], runs[name], strict=True))
+    for name, key in (("frozen_encoder", "frozen_over_full"), ("bf16", "bf16_over_full")):
+        figures[key] = statistics.median(v[0] / f[0] for f, v in zip(runs["full"], runs[name], strict=True))
     figures.update({"ppo_frames_timed": iterations * block, "repeats": repeats, "houses": len(worlds),
                     "recipe": LOOP_PPO, "load_average_1min_before": load_before,
                     "load_average_1min_after": os.getloadavg()[0]})
