@@ -199,6 +199,25 @@ def test_ctrl_c_during_the_loop_says_how_to_resume(tmp_path, monkeypatch):
                                                  f"{tmp_path / 'r'} --resume")
 
 
+# -- adaptenv experiment -----------------------------------------------------------------------
+
+def test_experiment_shows_the_finished_runs_then_names_the_failed_ones(tmp_path, monkeypatch):
+    import adaptenv.curriculum.experiment as experiment
+    from adaptenv.errors import RunsFailed
+
+    def one_run_failed(cfg, out, **kwargs):
+        out.mkdir(parents=True)
+        (out / "summary.md").write_text("| method | success:tiny |\n| none | 0.5 |\n")
+        raise RunsFailed("1 of 4 runs failed (dr seed 0: boom); the others are in OUT")
+
+    monkeypatch.setattr(experiment, "run_experiment", one_run_failed)
+    monkeypatch.setattr(experiment, "final_evaluation", refuse_work)  # not over a partial experiment
+    config = Path(__file__).parents[1] / "configs" / "experiment-small.json"
+    res = invoke("experiment", "--config", config, "-o", tmp_path / "exp", "--final-episodes", "8")
+    assert isinstance(res.exception, RunsFailed) and "\n" not in str(res.exception)
+    assert "| none | 0.5 |" in res.output and "experiment folder:" in res.output
+
+
 # -- output paths that cannot be written --------------------------------------------------------
 
 @pytest.mark.parametrize("command, flag", [

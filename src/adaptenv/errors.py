@@ -35,3 +35,7 @@ class HouseError(AdaptenvError):
 
 class ConfigError(AdaptenvError):
     """A command-line option or config file value is invalid."""
+
+
+class RunsFailed(AdaptenvError):
+    """Some runs of an experiment failed; the others ran to the end (each failure is one line of the message)."""

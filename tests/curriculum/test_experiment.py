@@ -234,3 +234,31 @@ def _check_timing(out: Path, cfg: ExperimentConfig, log: str, tmp_path: Path, ca
 def _write_text(path: Path, text: str) -> Path:
     path.write_text(text, encoding="utf-8")
     return path
+
+
+@pytest.mark.slow
+def test_a_failed_run_does_not_stop_the_others_and_is_named_at_the_end(tiny_policy, tmp_path, monkeypatch, capsys):
+    from adaptenv.curriculum import experiment
+    from adaptenv.errors import RunsFailed
+
+    real = experiment.run_loop
+
+    def failing_for_dr(cfg, folder, **kw):
+        if cfg.method == "dr" and cfg.seed == 0:
+            raise ConfigError("match_run OUT/ours/seed_0: no such run folder")
+        return real(cfg, folder, **kw)
+
+    monkeypatch.setattr(experiment, "run_loop", failing_for_dr)
+    cfg = ExperimentConfig.load(REPO / "configs" / "experiment-small.json")
+    cfg.methods, cfg.reference, cfg.primary = ["none", "dr"], "dr", []
+    cfg.loop["policy"] = str(tiny_policy)
+    with pytest.raises(RunsFailed, match=r"^1 of 4 runs failed \(dr seed 0: match_run OUT/ours/seed_0: no such"):
+        run_experiment(cfg, tmp_path)
+    assert "run failed: dr seed 0: match_run" in capsys.readouterr().err
+    # the runs after the failed one ran to the end, and the summary holds them
+    for m, s in (("none", 0), ("none", 1), ("dr", 1)):
+        assert read_iterations(tmp_path / m / f"seed_{s}")[-1].iteration == cfg.loop["iterations"]
+    assert (tmp_path / "summary.md").is_file()
+    monkeypatch.setattr(experiment, "run_loop", real)  # running again retries the failed run alone
+    run_experiment(cfg, tmp_path)
+    assert read_iterations(tmp_path / "dr" / "seed_0")[-1].iteration == cfg.loop["iterations"]

@@ -26,7 +26,7 @@ from adaptenv.cli.adapt import (
     TARGET_MOVES_OPTION,
 )
 from adaptenv.curriculum.executor import ADDRESS_OPTION, EXECUTOR_OPTION, WORKERS_OPTION
-from adaptenv.errors import ConfigError
+from adaptenv.errors import ConfigError, RunsFailed
 
 
 def _heldout(values: list[str] | None) -> dict[str, str] | None:
@@ -240,11 +240,15 @@ def experiment(
     def say(text: str) -> None:
         console.print(f"[dim]{text}[/]")
 
+    failed: RunsFailed | None = None
     try:
-        run_experiment(cfg, out, executor=ex, command=" ".join(["adaptenv"] + sys.argv[1:]), progress=say,
-                       final_episodes=final_episodes)
+        try:
+            run_experiment(cfg, out, executor=ex, command=" ".join(["adaptenv"] + sys.argv[1:]), progress=say,
+                           final_episodes=final_episodes)
+        except RunsFailed as exc:  # the other runs finished: show them, then say which failed
+            failed = exc
         console.print((out / "summary.md").read_text(encoding="utf-8"))
-        if final_episodes:
+        if final_episodes and failed is None:
             from adaptenv.curriculum.experiment import final_evaluation
 
             final_evaluation(out, cfg, final_episodes, executor=ex, progress=say)
@@ -256,6 +260,8 @@ def experiment(
         if ex is not None:
             ex.close()
     console.print(f"experiment folder: [bold]{out}[/]  (report: adaptenv report {out})")
+    if failed is not None:
+        raise failed
 
 
 def register(app: typer.Typer, bench: typer.Typer) -> None:

@@ -59,7 +59,7 @@ from adaptenv.curriculum.records import (
     read_iterations,
 )
 from adaptenv.curriculum.verdict import verdict_lines
-from adaptenv.errors import ConfigError
+from adaptenv.errors import AdaptenvError, ConfigError, RunsFailed
 
 METRICS = ("success", "spl", "collisions")
 #: Figures of the summary table and its tests: the held-out metrics and the paper's Delta R
@@ -137,9 +137,10 @@ def run_dir(out: Path, method: str, seed: int) -> Path:
     return Path(out) / method / f"seed_{seed}"
 
 
-def _run_one(args: tuple[dict[str, Any], str, str, int]) -> str:
+def _run_one(args: tuple[dict[str, Any], str, str, int]) -> str | None:
     """Worker entry point (picklable): run or resume one (method, seed), then (``final_episodes`` > 0) its final
     evaluation, so a finished run is complete on its own and an interrupted experiment loses no evaluation.
+    Returns None, or a line saying why the run failed: one run's failure does not stop the others.
 
     When stderr is a log rather than a terminal (a background experiment), each finished stage and
     run gets a timestamped line there, so hours of work are not silent; on a terminal the progress bar speaks.
@@ -147,13 +148,18 @@ def _run_one(args: tuple[dict[str, Any], str, str, int]) -> str:
     loop_fields, folder, command, final_episodes = args
     cfg = LoopConfig(**loop_fields)
     say = None if sys.stderr.isatty() else _log_line(f"{cfg.method} seed {cfg.seed}")
-    records = run_loop(cfg, folder, resume=True, command=command, progress=say)
-    if say is not None:
-        say(f"run finished ({records[-1].iteration} iterations)" if records else "run finished")
-    if final_episodes and records and records[-1].iteration == cfg.iterations:
-        run_final_eval(Path(folder).parent.parent, cfg.method, cfg.seed, cfg.heldout, final_episodes,
-                       InProcessExecutor(), say or (lambda text: None))
-    return folder
+    try:
+        records = run_loop(cfg, folder, resume=True, command=command, progress=say)
+        if say is not None:
+            say(f"run finished ({records[-1].iteration} iterations)" if records else "run finished")
+        if final_episodes and records and records[-1].iteration == cfg.iterations:
+            run_final_eval(Path(folder).parent.parent, cfg.method, cfg.seed, cfg.heldout, final_episodes,
+                           InProcessExecutor(), say or (lambda text: None))
+    except Exception as exc:  # noqa: BLE001 -- reported with the others' results, not lost in a worker
+        why = f"{cfg.method} seed {cfg.seed}: {exc if isinstance(exc, AdaptenvError) else repr(exc)}"
+        print(f"{time.strftime('%H:%M:%S')} run failed: {why}", file=sys.stderr, flush=True)
+        return why
+    return None
 
 
 def _log_line(prefix: str) -> Callable[[str], None]:
@@ -168,7 +174,8 @@ def run_experiment(cfg: ExperimentConfig, out: str | Path, *, executor: Any = No
     """Run every (method, seed) that is not finished yet, then summarize; returns the summary.
 
     ``final_episodes`` > 0: each run is evaluated on that many held-out episodes per set as soon as it
-    finishes (its ``final_eval.json``; see :func:`final_evaluation`)."""
+    finishes (its ``final_eval.json``; see :func:`final_evaluation`). A run that fails does not stop the
+    others: once they are done and summarized, :class:`RunsFailed` names every failed run and why."""
     out = Path(out)
     cfg.check()  # before anything is saved
     out.mkdir(parents=True, exist_ok=True)
@@ -177,13 +184,18 @@ def run_experiment(cfg: ExperimentConfig, out: str | Path, *, executor: Any = No
     jobs = [(asdict(cfg.loop_config(m, s, out)), str(run_dir(out, m, s)), command, final_episodes) for s in cfg.seeds
             for m in cfg.methods]
     if executor is None:
+        failures = []
         for i, job in enumerate(jobs):
             if progress:
                 progress(f"run {i + 1}/{len(jobs)}: {job[0]['method']} seed {job[0]['seed']}")
-            _run_one(job)
+            failures.append(_run_one(job))
     else:
-        executor.map(_run_one, jobs, desc="experiment runs")
-    return summarize(out, cfg)
+        failures = executor.map(_run_one, jobs, desc="experiment runs")
+    summary = summarize(out, cfg)
+    if failed := [why for why in failures if why]:
+        raise RunsFailed(f"{len(failed)} of {len(jobs)} runs failed ({'; '.join(failed)}); the others are in "
+                         f"{out}, and running the same command again retries the failed ones where they stopped")
+    return summary
 
 
 def _mean_se(values: list[float]) -> tuple[float, float | None]:
