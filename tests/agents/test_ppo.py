@@ -192,6 +192,23 @@ def test_ppo_fine_tunes_a_map_reading_network_with_anchor_and_bonus(tmp_path):
     assert "losses/kl_anchor" in header and "charts/explore_bonus" in header
 
 
+@pytest.mark.slow
+def test_the_map_explorer_labels_ppo_states_on_the_students_own_map(tmp_path, monkeypatch):
+    from adaptenv.agents import ppo as ppo_module
+    from adaptenv.agents import teachers
+
+    made = []
+    real = teachers.make_teacher
+    monkeypatch.setattr(ppo_module, "make_teacher", lambda *a, **kw: made.append(kw) or real(*a, **kw))
+    torch.manual_seed(0)
+    init = NavNet(NetConfig(hidden=32, feature_dim=32, conv_channels=8, map_channels=MAP_CHANNELS))
+    result = train_ppo(tiny_ppo(tmp_path, output="", run_dir="", bc_coef=0.5, bc_teacher="map-explorer",
+                                final_eval_episodes=0), init_net=init)
+    assert [kw["emap"] is not None for kw in made] == [True]
+    assert all(np.isfinite(r["losses/bc_loss"]) and r["losses/bc_loss"] > 0 for r in result.rows
+               if "losses/bc_loss" in r)
+
+
 def test_anchor_logits_from_shared_features_equal_those_from_observations():
     torch.manual_seed(0)
     net = NavNet(NetConfig(hidden=32, feature_dim=32, conv_channels=8, map_channels=MAP_CHANNELS)).eval()
@@ -251,7 +268,7 @@ def test_tiny_ppo_run_writes_checkpoint_card_and_metrics(tmp_path, bc_teacher):
 def test_finetune_with_a_named_config(tiny_set, algo):
     net = NavNet(NetConfig(hidden=32, feature_dim=32))
     before = {k: v.clone() for k, v in net.state_dict().items()}
-    ppo_settings = {"kl_coef": 0.5, "explore_bonus": 0.001, "precision": "bf16"}
+    ppo_settings = {"kl_coef": 0.5, "explore_bonus": 0.001, "precision": "bf16", "bc_coef": 0.2}
     cfg = FinetuneConfig(algo=algo, frames=2048, num_envs=16, learning_rate=1e-3, final_eval_episodes=3,
                          **(ppo_settings if algo == "ppo" else {}))
     res = finetune(net, tiny_set.worlds, cfg, seed=0)  # PPO: one 16 x 128-step rollout; DAgger: four of 32
@@ -259,6 +276,7 @@ def test_finetune_with_a_named_config(tiny_set, algo):
     assert new is not net and card["frames"] == 2048
     if algo == "ppo":
         assert {k: card["config"][k] for k in ppo_settings} == ppo_settings
+        assert card["config"]["bc_teacher"] == cfg.teacher
         # a second call continues the first one's critic and Adam moments (the loop's later iterations)
         again = finetune(new, tiny_set.worlds, cfg, seed=1, learner=res.learner)
 

@@ -131,17 +131,20 @@ def test_loop_config_refuses_ppo_settings_that_do_not_apply():
         LoopConfig(finetune_algo="sac").check()
     with pytest.raises(ConfigError, match="ppo only"):
         LoopConfig(finetune_kl_coef=0.3).check()
-    with pytest.raises(ConfigError, match="finetune_freeze_encoder apply to ppo only"):
+    with pytest.raises(ConfigError, match="finetune_bc_coef apply to ppo only"):
         LoopConfig(finetune_freeze_encoder=True).check()
+    with pytest.raises(ConfigError, match="finetune_bc_coef apply to ppo only"):
+        LoopConfig(finetune_bc_coef=0.1).check()
     with pytest.raises(ConfigError, match="finetune_precision must be one of fp32, bf16"):
         LoopConfig(finetune_algo="ppo", finetune_precision="fp16").check()
     with pytest.raises(ConfigError, match="level_score"):
         LoopConfig(level_score="novelty").check()
     cfg = finetune_config(LoopConfig(finetune_algo="ppo", finetune_kl_coef=0.3, finetune_explore_bonus=0.002,
                                      finetune_max_steps=600, finetune_freeze_encoder=True,
-                                     finetune_precision="bf16"), end_threshold=0.7)
-    assert (cfg.algo, cfg.kl_coef, cfg.explore_bonus, cfg.max_episode_steps, cfg.freeze_encoder, cfg.precision) == \
-        ("ppo", 0.3, 0.002, 600, True, "bf16")
+                                     finetune_precision="bf16", finetune_bc_coef=0.1,
+                                     finetune_teacher="map-explorer"), end_threshold=0.7)
+    assert (cfg.algo, cfg.kl_coef, cfg.explore_bonus, cfg.max_episode_steps, cfg.freeze_encoder, cfg.precision,
+            cfg.bc_coef, cfg.teacher) == ("ppo", 0.3, 0.002, 600, True, "bf16", 0.1, "map-explorer")
 
 
 @pytest.mark.slow

@@ -213,7 +213,8 @@ class FinetuneConfig:
     end_threshold: float = 0.8
     """End threshold while collecting."""
     teacher: str = "expert"
-    """DAgger: who labels the visited states, 'expert' (shortest path), 'explorer', 'map-explorer' (search) or 'mix'."""
+    """Who labels the visited states (DAgger; PPO with bc_coef): 'expert' (shortest path), 'explorer', 'map-explorer'
+    (search) or 'mix'."""
     calibrate_episodes: int = 0
     """Fresh episodes in the training houses on which the returned card's end threshold is chosen (0: keep end_threshold)."""
     final_eval_episodes: int = 0
@@ -230,6 +231,8 @@ class FinetuneConfig:
     """PPO: reward per newly seen fine map cell (PPOConfig.explore_bonus; 0: off)."""
     freeze_encoder: bool = False
     """PPO: train the memory and heads only, the observation encoder fixed (PPOConfig.freeze_encoder)."""
+    bc_coef: float = 0.0
+    """PPO: weight of a cross-entropy to ``teacher``'s labels of the visited states (PPOConfig.bc_coef; 0: off)."""
 
 
 def field_docs(cls: type) -> dict[str, str]:

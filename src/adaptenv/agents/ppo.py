@@ -307,7 +307,8 @@ def _train_ppo(cfg: PPOConfig, worlds: Sequence[Any] | None, init_net: NavNet | 
 
     sampler = EpisodeSampler(worlds, min_distance=cfg.min_start_distance)
     sim = BatchSim(worlds, max_steps=cfg.max_episode_steps)
-    teacher = make_teacher(cfg.bc_teacher, sim, seed=cfg.seed) if cfg.bc_coef > 0 else None
+    teacher = (make_teacher(cfg.bc_teacher, sim, seed=cfg.seed, emap=observer.emap if observer else None)
+               if cfg.bc_coef > 0 else None)
     obs, _ = sim.reset(*sampler.draw(rng, B))
     first = np.ones(B, dtype=bool)
     obs = observe(observer, obs, first)

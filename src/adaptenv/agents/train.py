@@ -581,9 +581,9 @@ def finetune(net: NavNet, worlds: Sequence[NavWorld], cfg: FinetuneConfig, seed:
     if cfg.algo not in ("dagger", "ppo"):
         raise ConfigError(f"FinetuneConfig.algo must be 'dagger' or 'ppo', got {cfg.algo!r}")
     check_precision(cfg.precision, "FinetuneConfig.precision")
-    if cfg.algo == "dagger" and (cfg.kl_coef or cfg.explore_bonus or cfg.freeze_encoder):
-        raise ConfigError("FinetuneConfig.kl_coef, explore_bonus and freeze_encoder apply to PPO only; leave them unset "
-                          "with algo='dagger'")
+    if cfg.algo == "dagger" and (cfg.kl_coef or cfg.explore_bonus or cfg.freeze_encoder or cfg.bc_coef):
+        raise ConfigError("FinetuneConfig.kl_coef, explore_bonus, freeze_encoder and bc_coef apply to PPO only; leave "
+                          "them unset with algo='dagger'")
     evals = cfg.final_eval_episodes or len(worlds)
     if cfg.algo == "ppo":
         # cycle: ppo imports this module (RunLogger, TrainResult)
@@ -597,7 +597,7 @@ def finetune(net: NavNet, worlds: Sequence[NavWorld], cfg: FinetuneConfig, seed:
                        calibrate_episodes=cfg.calibrate_episodes, eval_every=0, final_eval_episodes=evals,
                        min_start_distance=cfg.min_start_distance, max_episode_steps=cfg.max_episode_steps,
                        kl_coef=cfg.kl_coef, explore_bonus=cfg.explore_bonus, freeze_encoder=cfg.freeze_encoder,
-                       precision=cfg.precision, threads=1, progress=False,
+                       precision=cfg.precision, bc_coef=cfg.bc_coef, bc_teacher=cfg.teacher, threads=1, progress=False,
                        tensorboard=False)
         return train_ppo(pc, worlds=worlds, init_net=net, learner=learner)
     steps = cfg.rollout_steps

@@ -105,6 +105,8 @@ def loop(
                                            "to pi_t (0.3 in docs/agent.md's runs)."),
     finetune_explore_bonus: float = typer.Option(0.0, "--finetune-explore-bonus", min=0.0, help="ppo: reward per "
                                                  "newly seen map cell (0.002 in docs/agent.md's runs)."),
+    finetune_bc_coef: float = typer.Option(0.0, "--finetune-bc-coef", min=0.0, help="ppo: weight of a "
+                                           "cross-entropy to --finetune-teacher's labels of the visited states."),
     finetune_freeze_encoder: bool = typer.Option(False, "--finetune-freeze-encoder", help="ppo: train pi_t's memory "
                                                  "and heads only, the observation encoder fixed (faster updates)."),
     finetune_keep_learner: bool = typer.Option(True, "--finetune-keep-learner/--finetune-fresh-learner",
@@ -179,6 +181,7 @@ def loop(
                      scenes_per_iteration=scenes, edit_steps=edit_steps, finetune_frames=finetune_frames,
                      finetune_lr=finetune_lr, finetune_teacher=finetune_teacher, finetune_algo=finetune_algo,
                      finetune_kl_coef=finetune_kl_coef, finetune_explore_bonus=finetune_explore_bonus,
+                     finetune_bc_coef=finetune_bc_coef,
                      finetune_keep_learner=finetune_keep_learner, finetune_freeze_encoder=finetune_freeze_encoder,
                      score_rollouts=score_rollouts, level_score=level_score, sfl_candidates=sfl_candidates,
                      match_run=match_run,

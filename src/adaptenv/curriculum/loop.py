@@ -128,7 +128,8 @@ class LoopConfig:
     """Adam learning rate of fine-tuning, annealed to zero over each iteration's frames (the gentler of
     the two rates compared in docs/results/ARCHIVE.md)."""
     finetune_teacher: str = "expert"
-    """Who labels fine-tuning's DAgger states: expert (shortest path), explorer or map-explorer (search, docs/agent.md) or mix."""
+    """Who labels fine-tuning's states (DAgger's, or PPO's imitation term finetune_bc_coef): expert (shortest path),
+    explorer or map-explorer (search, docs/agent.md) or mix."""
     finetune_min_start: float = 0.0
     """Fine-tuning episodes start at least this geodesic distance (m) from the target where a house allows
     (0: uniform starts; the long suites use 6 m)."""
@@ -143,6 +144,9 @@ class LoopConfig:
     """ppo: weight of the KL anchor to pi_t (0.3 in the PPO runs of docs/agent.md)."""
     finetune_explore_bonus: float = 0.0
     """ppo: reward per newly seen map cell (0.002 in the PPO runs of docs/agent.md)."""
+    finetune_bc_coef: float = 0.0
+    """ppo: weight of a cross-entropy to finetune_teacher's labels of the states PPO visits (an imitation term;
+    0: off)."""
     finetune_freeze_encoder: bool = False
     """ppo: train pi_t's memory and heads only, its observation encoder fixed at pi_0's weights (faster updates;
     docs/BENCHMARKS.md)."""
@@ -196,9 +200,9 @@ class LoopConfig:
         if self.finetune_algo not in ("dagger", "ppo"):
             raise ConfigError(f"{source}: finetune_algo must be dagger or ppo, got {self.finetune_algo!r}")
         if self.finetune_algo == "dagger" and (self.finetune_kl_coef or self.finetune_explore_bonus
-                                               or self.finetune_freeze_encoder):
-            raise ConfigError(f"{source}: finetune_kl_coef, finetune_explore_bonus and finetune_freeze_encoder apply "
-                              "to ppo only; set finetune_algo to ppo or leave them unset")
+                                               or self.finetune_freeze_encoder or self.finetune_bc_coef):
+            raise ConfigError(f"{source}: finetune_kl_coef, finetune_explore_bonus, finetune_freeze_encoder and "
+                              "finetune_bc_coef apply to ppo only; set finetune_algo to ppo or leave them unset")
         if not 0.0 <= self.finetune_beta <= 1.0 or self.finetune_max_steps < 1:
             raise ConfigError(f"{source}: finetune_beta must lie in [0, 1] and finetune_max_steps be positive, got "
                               f"{self.finetune_beta} and {self.finetune_max_steps}")
@@ -284,7 +288,7 @@ def finetune_config(cfg: LoopConfig, end_threshold: float) -> FinetuneConfig:
     ``finetune_teacher``'s labels, or anchored PPO; episodes start ``finetune_min_start`` or more from the target."""
     return FinetuneConfig(algo=cfg.finetune_algo, kl_coef=cfg.finetune_kl_coef,
                           explore_bonus=cfg.finetune_explore_bonus, freeze_encoder=cfg.finetune_freeze_encoder,
-                          frames=cfg.finetune_frames, num_envs=cfg.finetune_envs, learning_rate=cfg.finetune_lr,
+                          bc_coef=cfg.finetune_bc_coef, frames=cfg.finetune_frames, num_envs=cfg.finetune_envs, learning_rate=cfg.finetune_lr,
                           end_threshold=end_threshold, teacher=cfg.finetune_teacher,
                           min_start_distance=cfg.finetune_min_start, precision=cfg.finetune_precision,
                           beta=cfg.finetune_beta, max_episode_steps=cfg.finetune_max_steps)
