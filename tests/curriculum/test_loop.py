@@ -285,6 +285,16 @@ def test_resume_takes_fields_added_since_the_run_as_defaults_and_refuses_other_c
         run_loop(tiny_config(tiny_policy, "none", iterations=1, relocate_targets=True), tmp_path / "r", resume=True)
 
 
+def test_a_run_matched_in_a_moved_experiment_folder_resumes(tiny_policy, tmp_path):
+    # dr-matched's match_run is OUT/<method>/seed_<seed>: a packed copy elsewhere names the same run
+    run_loop(tiny_config(tiny_policy, "none", iterations=1, match_run="/old/exp/ours/seed_0"), tmp_path / "r")
+    moved = tiny_config(tiny_policy, "none", iterations=1, match_run=str(tmp_path / "copy" / "ours" / "seed_0"))
+    assert len(run_loop(moved, tmp_path / "r", resume=True)) == 2
+    with pytest.raises(ConfigError, match=r"match_run \(was '/old/exp/ours/seed_0'"):
+        run_loop(tiny_config(tiny_policy, "none", iterations=1, match_run="/old/exp/ours/seed_1"), tmp_path / "r",
+                 resume=True)
+
+
 def test_focus_training_saves_the_aimed_target_type_of_each_adapted_scene(tiny_policy, tmp_path):
     from adaptenv.curriculum.records import TASKS, SceneStore
 

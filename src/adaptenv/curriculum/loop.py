@@ -428,6 +428,15 @@ class StageClock:
         self._last = now
 
 
+def _moved_match_run(saved: dict[str, Any], cfg: LoopConfig) -> dict[str, str]:
+    """``match_run`` as now when the saved one names the same run (method and seed folders) in an experiment folder
+    since moved or copied, so a packed copy resumes; otherwise nothing (a real change is then reported)."""
+    old = saved.get("match_run") or ""
+    if old and cfg.match_run and Path(old).parts[-2:] == Path(cfg.match_run).parts[-2:]:
+        return {"match_run": cfg.match_run}
+    return {}
+
+
 def _open_run(cfg: LoopConfig, run_dir: Path, resume: bool, command: str
               ) -> tuple[LoopState, list[IterationRecord], str]:
     """The state, records and command to continue from: a resumed run's, or a fresh run's in an empty folder."""
@@ -438,7 +447,7 @@ def _open_run(cfg: LoopConfig, run_dir: Path, resume: bool, command: str
             raise ConfigError(f"{state_path}: expected {{\"config\": ..., \"state\": ...}} as the loop writes it; "
                               f"{STATE_FIX}")
         old = saved["config"]  # a field added to LoopConfig since the run started counts as its default
-        changed = run_changes({**asdict(LoopConfig()), **old}, asdict(cfg))
+        changed = run_changes({**asdict(LoopConfig()), **old, **_moved_match_run(old, cfg)}, asdict(cfg))
         if changed:
             raise ConfigError(f"{run_dir}: --resume with other settings than the interrupted run: {', '.join(changed)}; "
                               "pass the same options (its run.json lists them) or a new output folder")
