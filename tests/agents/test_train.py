@@ -228,9 +228,9 @@ def test_bench_ppo_times_each_update_alternately_with_the_loops_recipe(monkeypat
     monkeypatch.setattr(ppo, "train_ppo", lambda cfg, worlds: seen.append(cfg))
     figs = run_ppo(as_json=True, iterations=2, repeats=2, houses="preset:tiny")
     # one warm-up each, then the variants in turn, every run with the loop's recipe and evaluation off
-    updates = [(False, "fp32"), (True, "fp32"), (False, "bf16")]  # PPO_VARIANTS: full, frozen_encoder, bf16
-    assert list(PPO_VARIANTS) == ["full", "frozen_encoder", "bf16"]
+    updates = [(False, "fp32"), (True, "fp32"), (False, "bf16"), (True, "bf16")]
+    assert list(PPO_VARIANTS) == ["full", "frozen_encoder", "bf16", "frozen_encoder_bf16"]
     assert [(c.freeze_encoder, c.precision) for c in seen] == updates * 3
     assert all(c.init == LOOP_PPO["init"] and c.kl_coef == LOOP_PPO["kl_coef"] and c.eval_every == 0 for c in seen)
-    assert [c.frames // (c.num_envs * c.rollout_steps) for c in seen] == [1] * 3 + [2] * 6
-    assert {"ppo_end_to_end_frames_per_s_bf16", "bf16_over_full", "frozen_over_full"} <= set(figs)
+    assert [c.frames // (c.num_envs * c.rollout_steps) for c in seen] == [1] * 4 + [2] * 8
+    assert {"ppo_end_to_end_frames_per_s_bf16", "bf16_over_full", "frozen_over_full", "frozen_bf16_over_full"} <= set(figs)

@@ -168,8 +168,9 @@ LOOP_PPO = {"init": "pretrained-ppo", "kl_coef": 0.03, "explore_bonus": 0.002, "
 """The loop's PPO fine-tuning (configs/experiment-lever-ppo4.json's finetune_* settings) on the shipped map-reading agent."""
 
 
-PPO_VARIANTS = {"full": {}, "frozen_encoder": {"freeze_encoder": True}, "bf16": {"precision": "bf16"}}
-"""The PPO updates ``bench train --algo ppo`` times beside each other: fp32 whole network, encoder frozen, bf16."""
+PPO_VARIANTS = {"full": {}, "frozen_encoder": {"freeze_encoder": True}, "bf16": {"precision": "bf16"},
+                "frozen_encoder_bf16": {"freeze_encoder": True, "precision": "bf16"}}
+"""The PPO updates ``bench train --algo ppo`` times beside each other: fp32 whole network, encoder frozen, bf16, both."""
 
 
 def run_ppo(*, as_json: bool = False, iterations: int = 3, repeats: int = 3,
@@ -203,7 +204,8 @@ def run_ppo(*, as_json: bool = False, iterations: int = 3, repeats: int = 3,
     for name, timed in runs.items():
         figures[f"ppo_end_to_end_frames_per_s_{name}"] = statistics.median(w for w, _ in timed)
         figures[f"ppo_end_to_end_frames_per_cpu_s_{name}"] = statistics.median(c for _, c in timed)
-    for name, key in (("frozen_encoder", "frozen_over_full"), ("bf16", "bf16_over_full")):
+    for name, key in (("frozen_encoder", "frozen_over_full"), ("bf16", "bf16_over_full"),
+                      ("frozen_encoder_bf16", "frozen_bf16_over_full")):
         figures[key] = statistics.median(v[0] / f[0] for f, v in zip(runs["full"], runs[name], strict=True))
     figures.update({"ppo_frames_timed": iterations * block, "repeats": repeats, "houses": len(worlds),
                     "recipe": LOOP_PPO, "load_average_1min_before": load_before,
