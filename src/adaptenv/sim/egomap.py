@@ -78,17 +78,25 @@ _BUMP = AGENT_RADIUS + 0.5 * CELL
 
 
 @numba.njit(cache=True, inline="always")
-def _mark(grid, coarse, seen, i, x, z, bits, cell, f):
-    """OR ``bits`` into the cell holding map-frame point (x, z) of agent i (ignored outside the map); count it in
-    ``seen[i]`` when it gets its first FREE or OBSTACLE bit."""
+def _mark_cell(grid, coarse, seen, i, row, col, bits, f):
+    """OR ``bits`` into agent i's cell (row, col) (ignored outside the map); count it in ``seen[i]`` when it gets its
+    first FREE or OBSTACLE bit. A cell that holds ``bits`` already is left alone: its coarse cell holds them too."""
     n = grid.shape[1]
-    col = int(math.floor(x / cell)) + n // 2
-    row = int(math.floor(z / cell)) + n // 2
     if 0 <= row < n and 0 <= col < n:
-        if grid[i, row, col] & SEEN == 0 and bits & SEEN != 0:
+        old = grid[i, row, col]
+        if old & bits == bits:
+            return
+        if old & SEEN == 0 and bits & SEEN != 0:
             seen[i] += 1
-        grid[i, row, col] |= bits
+        grid[i, row, col] = old | bits
         coarse[i, row // f, col // f] |= bits
+
+
+@numba.njit(cache=True, inline="always")
+def _mark(grid, coarse, seen, i, x, z, bits, cell, f):
+    """:func:`_mark_cell` of the cell holding map-frame point (x, z) of agent i."""
+    n = grid.shape[1]
+    _mark_cell(grid, coarse, seen, i, int(math.floor(z / cell)) + n // 2, int(math.floor(x / cell)) + n // 2, bits, f)
 
 
 @numba.njit(cache=True, parallel=True)
@@ -96,6 +104,7 @@ def _update(grid, coarse, seen, pose, first, prev_action, collided, depth, sem, 
             max_range, n_interp, cell, f, bump):
     """Integrate each agent's pose from its last action, then mark its scan (see the module docstring)."""
     b = grid.shape[0]
+    n = grid.shape[1]
     n_rays = offsets.shape[0]
     for i in numba.prange(b):  # agents are independent: each writes only its own rows
         a = prev_action[i]
@@ -132,9 +141,14 @@ def _update(grid, coarse, seen, pose, first, prev_action, collided, depth, sem, 
                 t = math.radians(yaw + off)
                 ux, uz = math.sin(t), math.cos(t)
                 steps = int(dd / (0.5 * cell))
+                last_row, last_col = -1, -1  # samples are half a cell apart: skip the one that repeats a cell
                 for j in range(steps + 1):
                     r = j * 0.5 * cell
-                    _mark(grid, coarse, seen, i, x + r * ux, z + r * uz, FREE, cell, f)
+                    row = int(math.floor((z + r * uz) / cell)) + n // 2
+                    col = int(math.floor((x + r * ux) / cell)) + n // 2
+                    if row != last_row or col != last_col:
+                        _mark_cell(grid, coarse, seen, i, row, col, FREE, f)
+                        last_row, last_col = row, col
                 if dd < max_range - 1e-6:
                     r = dd + 0.25 * cell
                     bits = OBSTACLE | TARGET if cls == target[i] else OBSTACLE
