@@ -453,14 +453,14 @@ def test_seen_counts_match_the_marked_cells():
 def _reference_update(emap: EgoMap, obs: dict[str, np.ndarray], first: np.ndarray) -> None:
     """The module docstring's marking in plain Python: every half-cell sample of every (densified) ray marked,
     nothing skipped."""
-    from adaptenv.sim.egomap import _BUMP, _MOVE, _OFFSETS, _YAW, INTERPOLATE, SIZE
+    from adaptenv.sim.egomap import _BUMP, _MOVE, _OFFSETS, _YAW, COARSE, INTERPOLATE, SIZE
 
     def mark(i, x, z, bits):
         row, col = int(math.floor(z / CELL)) + SIZE // 2, int(math.floor(x / CELL)) + SIZE // 2
         if 0 <= row < SIZE and 0 <= col < SIZE:
             emap.seen[i] += int(emap.grid[i, row, col] & SEEN == 0 and bits & SEEN != 0)
             emap.grid[i, row, col] |= bits
-            emap.coarse[i, row // 4, col // 4] |= bits
+            emap.coarse[i, row // COARSE, col // COARSE] |= bits
 
     for i in range(emap.batch):
         a = int(obs["prev_action"][i])
