@@ -159,14 +159,13 @@ def test_expert_episodes_in_worker_processes_equal_the_in_process_loop(process_e
 
 @pytest.mark.slow
 def test_the_loops_evaluation_jobs_in_worker_processes_equal_the_in_process_loop(process_executor):
-    from adaptenv.bench.executor import heldout_chunk, heldout_items
-    from adaptenv.curriculum.jobs import EVAL_CHUNK
+    from adaptenv.bench.executor import HELDOUT_CHUNK, heldout_chunk, heldout_items
 
-    work = heldout_items(episodes=EVAL_CHUNK + 10)
-    assert [(j.start, j.stop) for j in work] == [(0, EVAL_CHUNK), (EVAL_CHUNK, EVAL_CHUNK + 10)]
+    work = heldout_items(episodes=HELDOUT_CHUNK + 10)
+    assert [(j.start, j.stop) for j in work] == [(0, HELDOUT_CHUNK), (HELDOUT_CHUNK, HELDOUT_CHUNK + 10)]
     local = [heldout_chunk(j) for j in work]
     assert process_executor.map(heldout_chunk, work) == local
-    assert sum(len(c) for c in local) == EVAL_CHUNK + 10 and any(success for c in local for success, *_ in c)
+    assert sum(len(c) for c in local) == HELDOUT_CHUNK + 10 and any(success for c in local for success, *_ in c)
 
 
 # --------------------------------------------------------------------------- Ray (local instance)

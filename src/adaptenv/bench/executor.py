@@ -52,7 +52,10 @@ def expert_level(item: tuple[int, int]) -> tuple[int, int, int, float]:
     return seed, successes, steps, spl
 
 
-#: Held-out episodes of the ``heldout`` workload (4 chunks of ``jobs.EVAL_CHUNK``) and their set.
+#: Episodes per job of the ``heldout`` workload: 250, the loop's job size when its figures were taken, so the workload
+#: keeps 4 jobs for the workers to share.
+HELDOUT_CHUNK = 250
+#: Held-out episodes of the ``heldout`` workload (4 chunks of ``HELDOUT_CHUNK``) and their set.
 HELDOUT_EPISODES = 1000
 HELDOUT_SET = "preset:pretrain-rearranged"
 
@@ -63,7 +66,7 @@ def heldout_items(episodes: int = HELDOUT_EPISODES) -> list[Any]:
     from adaptenv.curriculum.jobs import PolicyWeights, eval_jobs
 
     weights = PolicyWeights.of(resolve_policy("pretrained"))
-    return [job for _, job in eval_jobs(weights, {"heldout": HELDOUT_SET}, episodes, seed=0)]
+    return [job for _, job in eval_jobs(weights, {"heldout": HELDOUT_SET}, episodes, seed=0, chunk=HELDOUT_CHUNK)]
 
 
 def heldout_chunk(job: Any) -> list[tuple[bool, float, int, int]]:
@@ -76,14 +79,8 @@ def heldout_chunk(job: Any) -> list[tuple[bool, float, int, int]]:
 #: workload name -> (item function, items builder taking the item count or None for its default).
 WORKLOADS = {
     "levels": (expert_level, lambda n: items(n or N_ITEMS)),
-    "heldout": (heldout_chunk, lambda n: heldout_items(_eval_chunk() * n if n else HELDOUT_EPISODES)),
+    "heldout": (heldout_chunk, lambda n: heldout_items(HELDOUT_CHUNK * n if n else HELDOUT_EPISODES)),
 }
-
-
-def _eval_chunk() -> int:
-    from adaptenv.curriculum.jobs import EVAL_CHUNK
-
-    return EVAL_CHUNK
 
 
 def identity(x: Any) -> Any:

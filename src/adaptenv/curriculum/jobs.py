@@ -38,11 +38,12 @@ from adaptenv.sim.world import NavWorld, compile_world
 if TYPE_CHECKING:
     from adaptenv.agents.network import NeuralPolicy
 
-#: Episodes per evaluation job: fixed, so results never depend on the worker count.
-EVAL_CHUNK = 250
+#: Episodes per evaluation job: fixed, so results never depend on the worker count. A set of 1,000 (an experiment's
+#: final evaluation) is one job: fewer jobs draining their last slots (tools/time_eval_chunks.py, docs/BENCHMARKS.md).
+EVAL_CHUNK = 1000
 #: Simulator slots of an evaluation job: a slot whose episode ended takes the chunk's next episode, so few slots
 #: idle while the longest episodes finish. An episode's result does not depend on which others share the batch.
-EVAL_BATCH = 50
+EVAL_BATCH = 100
 
 
 @dataclass(frozen=True)
@@ -95,10 +96,11 @@ class EvalJob:
     stop: int
 
 
-def eval_jobs(weights: PolicyWeights, specs: dict[str, str], episodes: int, seed: int) -> list[tuple[str, EvalJob]]:
-    """Every set's episodes cut into :data:`EVAL_CHUNK` pieces, tagged with the set's name."""
-    return [(name, EvalJob(weights, spec, seed, a, min(a + EVAL_CHUNK, episodes)))
-            for name, spec in specs.items() for a in range(0, episodes, EVAL_CHUNK)]
+def eval_jobs(weights: PolicyWeights, specs: dict[str, str], episodes: int, seed: int,
+              chunk: int = EVAL_CHUNK) -> list[tuple[str, EvalJob]]:
+    """Every set's episodes cut into pieces of ``chunk``, tagged with the set's name."""
+    return [(name, EvalJob(weights, spec, seed, a, min(a + chunk, episodes)))
+            for name, spec in specs.items() for a in range(0, episodes, chunk)]
 
 
 def run_eval(job: EvalJob) -> tuple[list[EpisodeResult], dict[int, Recorded]]:
