@@ -181,7 +181,7 @@ def test_runs_are_finally_evaluated_as_they_finish_and_a_packed_copy_resumes(tin
     cfg.methods, cfg.reference = ["none", "dr"], "dr"
     cfg.loop["policy"] = str(tiny_policy)
     out = tmp_path / "exp"
-    run_experiment(cfg, out, final_episodes=6)
+    run_experiment(cfg, out, final_episodes=6, command=f"adaptenv experiment -o {out.resolve()}")
     log = capsys.readouterr().err  # a background experiment's log says when each run's evaluation is written
     assert log.count("final evaluation written: ") == len(cfg.methods) * len(cfg.seeds)
     for m in cfg.methods:
@@ -197,6 +197,9 @@ def test_runs_are_finally_evaluated_as_they_finish_and_a_packed_copy_resumes(tin
     packed = pack_experiment(out, tmp_path / "packed")
     assert len(packed) == len(cfg.methods) * len(cfg.seeds)
     assert not list((tmp_path / "packed").rglob("*.pt")) and not list((tmp_path / "packed").rglob("scenes"))
+    here = str(out.resolve())  # the runs' records name their folder; the packed copy does not
+    assert here in (out / "dr" / f"seed_{cfg.seeds[0]}" / "run.json").read_text()
+    assert not [f for f in (tmp_path / "packed").rglob("*") if f.is_file() and here in f.read_text()]
     # the packed copy has no policy, so resuming works only if every finished run is skipped
     capsys.readouterr()
     run_experiment(cfg, tmp_path / "packed", final_episodes=6)

@@ -25,7 +25,6 @@ from __future__ import annotations
 import csv
 import json
 import math
-import shutil
 import sys
 import time
 from collections.abc import Callable
@@ -592,16 +591,22 @@ PACKED_RUN_FILES = ("run.json", STATE, ITERATIONS, FINAL_EVAL)
 
 def pack_experiment(out: str | Path, dest: str | Path, cfg: ExperimentConfig | None = None) -> list[Path]:
     """Copy an experiment's results without policies or scenes to ``dest`` (small enough to commit): its config,
-    summaries, pi_0's evaluations, and each finished, finally evaluated run's record. ``adaptenv experiment`` on
-    ``dest`` with the same config skips those runs and runs the rest. Returns the runs packed."""
+    summaries, pi_0's evaluations, and each finished, finally evaluated run's record, the folder's absolute path
+    written as ``OUT``. ``adaptenv experiment`` on ``dest`` with the same config skips those runs and runs the rest.
+    Returns the runs packed."""
     out, dest = Path(out), Path(dest)
+    here = str(out.resolve())
+
+    def copy(src: Path, to: Path) -> None:
+        to.write_text(src.read_text(encoding="utf-8").replace(here, "OUT"), encoding="utf-8")
+
     cfg = cfg or ExperimentConfig(**json.loads((out / "experiment.json").read_text(encoding="utf-8")))
     dest.mkdir(parents=True, exist_ok=True)
     top = [p for p in out.iterdir() if p.is_file() and p.suffix in (".json", ".md")]
     top += sorted((out / INITIAL_EVAL).glob("*.json")) + sorted(out.glob("*/per_seed*.csv"))
     for p in top:
         (dest / p.relative_to(out)).parent.mkdir(parents=True, exist_ok=True)
-        shutil.copy2(p, dest / p.relative_to(out))
+        copy(p, dest / p.relative_to(out))
     packed = []
     for m in cfg.methods:
         for s in cfg.seeds:
@@ -612,6 +617,6 @@ def pack_experiment(out: str | Path, dest: str | Path, cfg: ExperimentConfig | N
             to = run_dir(dest, m, s)
             to.mkdir(parents=True, exist_ok=True)
             for name in PACKED_RUN_FILES:
-                shutil.copy2(src / name, to / name)
+                copy(src / name, to / name)
             packed.append(to)
     return packed
