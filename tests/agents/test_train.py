@@ -234,3 +234,14 @@ def test_bench_ppo_times_each_update_alternately_with_the_loops_recipe(monkeypat
     assert all(c.init == LOOP_PPO["init"] and c.kl_coef == LOOP_PPO["kl_coef"] and c.eval_every == 0 for c in seen)
     assert [c.frames // (c.num_envs * c.rollout_steps) for c in seen] == [1] * 4 + [2] * 8
     assert {"ppo_end_to_end_frames_per_s_bf16", "bf16_over_full", "frozen_over_full", "frozen_bf16_over_full"} <= set(figs)
+
+
+def test_run_configs_size_a_fresh_networks_map_encoder():
+    """--map-dim reaches a fresh network of adaptenv train and adaptenv ppo: the map encoder's output size."""
+    from adaptenv.agents.config import PPOConfig
+    from adaptenv.agents.network import NavNet, NetConfig
+
+    for cfg in (TrainConfig(map=True, map_dim=24), PPOConfig(map_dim=24)):
+        net = NavNet(NetConfig.of(cfg))
+        assert net.config.map_dim == 24
+    assert NavNet(NetConfig.of(TrainConfig(map=True, map_dim=24))).map_encoder[-2].out_features == 24

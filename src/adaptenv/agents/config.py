@@ -70,6 +70,8 @@ class TrainConfig:
     """Size of the per-step feature vector fed to the GRU."""
     conv_channels: int = 32
     """Channels of the two ray convolutions."""
+    map_dim: int = 128
+    """Size of the map encoder's output (with map)."""
     map: bool = False
     """Give a fresh network the map memory it builds itself (adaptenv.sim.egomap) as an input beside the scan."""
     eval_every: int = 20
@@ -173,6 +175,8 @@ class PPOConfig:
     """Size of the per-step feature vector (with init '')."""
     conv_channels: int = 32
     """Channels of the two ray convolutions (with init '')."""
+    map_dim: int = 128
+    """Size of the map encoder's output (with init '' and map)."""
     eval_every: int = 10
     """Evaluate the policy every this many iterations, and the warm start before any update, on one fixed set of
     fresh training-house episodes started min_start_distance or farther (0: never)."""

@@ -59,10 +59,12 @@ class NetConfig:
 
     @classmethod
     def of(cls, settings: object) -> NetConfig:
-        """The sizes named by a run config (``hidden``, ``feature_dim``, ``conv_channels``) for fresh weights."""
+        """The sizes named by a run config (``hidden``, ``feature_dim``, ``conv_channels``, ``map_dim``) for fresh
+        weights."""
         return cls(hidden=settings.hidden, feature_dim=settings.feature_dim,  # type: ignore[attr-defined]
                    conv_channels=settings.conv_channels,  # type: ignore[attr-defined]
-                   map_channels=MAP_CHANNELS if getattr(settings, "map", False) else 0)
+                   map_channels=MAP_CHANNELS if getattr(settings, "map", False) else 0,
+                   map_dim=settings.map_dim)  # type: ignore[attr-defined]
 
 
 def obs_to_tensors(obs: dict[str, np.ndarray], device: torch.device | str = "cpu") -> dict[str, torch.Tensor]:
