@@ -3,7 +3,7 @@
 # DAgger, then three anchored-PPO stages), then score it on the validation suites (docs/results/small-pi0/DECLARED.md).
 # Resumable: a finished stage is skipped.
 # Usage, from a clone with the virtual environment of `make install-dev`:
-#   bash docs/results/small-pi0/run.sh OUT NAME HIDDEN FEATURES CONV MAP
+#   bash docs/results/small-pi0/run.sh OUT NAME HIDDEN FEATURES CONV MAP [DAGGER_FRAMES]   # default 2000000
 set -euo pipefail
 root=$(git rev-parse --show-toplevel)
 out=$(realpath -m "$1")/$2
@@ -16,7 +16,7 @@ houses() { [ -d "../houses$1" ] || run houses generate -o "../houses$1" --n 200 
 houses 7000
 houses 7001
 ppo=(--frames 1000000 --explore-bonus 0.002 --max-episode-steps 600 --eval-episodes 200 --threads 1 --no-progress)
-[ -f A.pt ] || run train --houses preset:pretrain-train --frames 2000000 --seed 0 --beta-end 0.5 \
+[ -f A.pt ] || run train --houses preset:pretrain-train --frames "${5:-2000000}" --seed 0 --beta-end 0.5 \
   --max-episode-steps 600 --map --teacher map-explorer --precision bf16 --threads 1 --no-progress \
   --hidden "$1" --feature-dim "$2" --conv-channels "$3" --map-dim "$4" -o A.pt --run-dir A
 [ -f a.pt ] || run ppo --houses preset:pretrain-train --init A.pt -o a.pt --run-dir a --seed 0 --kl-coef 0.3 \
