@@ -24,13 +24,12 @@ from pathlib import Path
 import torch
 
 from adaptenv.agents.checkpoint import save_checkpoint
-from adaptenv.agents.config import PPOConfig
 from adaptenv.agents.evaluate import run_episodes, sample_episodes
 from adaptenv.agents.houses import load_house_set
 from adaptenv.agents.network import NavNet, NeuralPolicy
 from adaptenv.agents.ppo import train_ppo
 from adaptenv.agents.registry import resolve_policy
-from adaptenv.bench.train import LOOP_PPO
+from adaptenv.bench.train import loop_ppo_config
 from adaptenv.curriculum.jobs import EVAL_BATCH, heldout_set
 
 SMALLER = {"a third (hidden 128, features 64, map 64, conv 16)": dict(hidden=128, feature_dim=64, map_dim=64,
@@ -44,9 +43,7 @@ SMALLER = {"a third (hidden 128, features 64, map 64, conv 16)": dict(hidden=128
 
 def ppo_rate(init: Path, worlds: list, iterations: int = 3) -> float:
     """Frames per CPU-second of ``iterations`` PPO iterations of the loop's recipe from the checkpoint ``init``."""
-    cfg = PPOConfig(frames=iterations * PPOConfig().num_envs * PPOConfig().rollout_steps, output="", run_dir="",
-                    eval_every=0, final_eval_episodes=0, calibrate_episodes=0, progress=False, tensorboard=False,
-                    value_warmup_iters=0, freeze_encoder=True, precision="bf16", **{**LOOP_PPO, "init": str(init)})
+    cfg = loop_ppo_config(iterations, freeze_encoder=True, precision="bf16", init=str(init))
     start = time.process_time()
     train_ppo(cfg, worlds=worlds)
     return cfg.frames / (time.process_time() - start)

@@ -31,8 +31,12 @@ import os
 import statistics
 import time
 from collections.abc import Callable
+from typing import TYPE_CHECKING
 
 import numpy as np
+
+if TYPE_CHECKING:
+    from adaptenv.agents.config import PPOConfig
 
 LABEL_TARGET = 20_000
 GRAD_TARGET = 10_000
@@ -173,25 +177,31 @@ PPO_VARIANTS = {"full": {}, "frozen_encoder": {"freeze_encoder": True}, "bf16": 
 """The PPO updates ``bench train --algo ppo`` times beside each other: fp32 whole network, encoder frozen, bf16, both."""
 
 
+def loop_ppo_config(iterations: int, **overrides: object) -> PPOConfig:
+    """The loop's PPO recipe (LOOP_PPO, with ``overrides``) for ``iterations`` rollouts, evaluation and outputs off."""
+    from adaptenv.agents.config import PPOConfig
+
+    block = PPOConfig().num_envs * PPOConfig().rollout_steps
+    return PPOConfig(frames=iterations * block, output="", run_dir="", eval_every=0, final_eval_episodes=0,
+                     calibrate_episodes=0, progress=False, tensorboard=False, value_warmup_iters=0,
+                     **{**LOOP_PPO, **overrides})
+
+
 def run_ppo(*, as_json: bool = False, iterations: int = 3, repeats: int = 3,
             houses: str = "preset:pretrain-train") -> dict:
     """PPO end to end as the loop fine-tunes (LOOP_PPO, evaluation off) with each of PPO_VARIANTS' updates, timed
     alternately (median of ``repeats`` each): frames/s and each variant's ratio to the full fp32 update."""
-    from adaptenv.agents.config import PPOConfig
     from adaptenv.agents.houses import load_house_set
     from adaptenv.agents.ppo import train_ppo
     from adaptenv.bench import emit
 
     worlds = load_house_set(houses).worlds
-    block = PPOConfig().num_envs * PPOConfig().rollout_steps
 
     def one(n: int, variant: dict) -> tuple[float, float]:
-        cfg = PPOConfig(frames=n * block, output="", run_dir="", eval_every=0, final_eval_episodes=0,
-                        calibrate_episodes=0, progress=False, tensorboard=False, value_warmup_iters=0,
-                        **LOOP_PPO, **variant)
+        cfg = loop_ppo_config(n, **variant)
         w, c = time.perf_counter(), time.process_time()
         train_ppo(cfg, worlds=worlds)
-        return n * block / (time.perf_counter() - w), n * block / (time.process_time() - c)
+        return cfg.frames / (time.perf_counter() - w), cfg.frames / (time.process_time() - c)
 
     load_before = os.getloadavg()[0]
     for variant in PPO_VARIANTS.values():
@@ -207,7 +217,7 @@ def run_ppo(*, as_json: bool = False, iterations: int = 3, repeats: int = 3,
     for name, key in (("frozen_encoder", "frozen_over_full"), ("bf16", "bf16_over_full"),
                       ("frozen_encoder_bf16", "frozen_bf16_over_full")):
         figures[key] = statistics.median(v[0] / f[0] for f, v in zip(runs["full"], runs[name], strict=True))
-    figures.update({"ppo_frames_timed": iterations * block, "repeats": repeats, "houses": len(worlds),
+    figures.update({"ppo_frames_timed": loop_ppo_config(iterations).frames, "repeats": repeats, "houses": len(worlds),
                     "recipe": LOOP_PPO, "load_average_1min_before": load_before,
                     "load_average_1min_after": os.getloadavg()[0]})
     emit("PPO throughput, the loop's recipe", figures, as_json,
