@@ -33,6 +33,8 @@ PINNED = {
     ("long-unseen", "2"): "55a8acc6450bd72c",
     ("closed", "1"): "faac883b18b12e55",
     ("val-closed", "1"): "3b1fc845fb73554d",
+    ("rearranged", "1"): "817c1c10a8b18a40",
+    ("val-rearranged", "1"): "48339e38bbef4ac5",
 }
 
 

@@ -32,7 +32,8 @@ def _rollouts(successes: list[bool], experts: list[bool] | None = None, explorer
 
 
 def test_every_method_is_registered_by_its_name():
-    assert set(M.METHODS) == {"none", "random", "dr", "dr-matched", "sfl", "oracle", "plr", "accel", "ours", "ours-noselect",
+    assert set(M.METHODS) == {"none", "random", "dr", "dr-matched", "sfl", "oracle", "rearrange", "plr", "accel", "ours",
+                              "ours-noselect",
                               "ours-randomscene", "ours-nof", "ours-dr", "ours-llm"}
     assert all(cls.name == name for name, cls in M.METHODS.items())
     assert M.METHODS["ours"].generator == "failure-modes" and M.METHODS["ours-nof"].generator == "regret-only"
@@ -188,7 +189,7 @@ def test_random_generate_jobs_carry_no_weights_and_make_the_same_child(tiny_poli
 
 
 class _Store:
-    """Keeps what ``fresh_houses`` stores, by name."""
+    """Keeps what a method stores, by name."""
 
     def __init__(self) -> None:
         self.houses: dict = {}
@@ -196,6 +197,9 @@ class _Store:
     def put(self, name, house):
         self.houses[name] = house
         return name
+
+    def house(self, name):
+        return self.houses[name]
 
 
 def test_oracle_draws_fresh_houses_from_the_heldout_suites_generators():
@@ -214,3 +218,25 @@ def test_oracle_draws_fresh_houses_from_the_heldout_suites_generators():
     assert 7 <= len(large.rooms) <= 10  # suite-large's room range
     dr = M.fresh_houses(it, 1)[0]
     assert dr == "dr0002" and len(it.store.houses[dr].rooms) <= 6  # plain DR keeps the default 2-6 rooms
+
+
+def test_rearrange_rearranges_the_training_homes_with_seeds_no_suite_uses():
+    from adaptenv.curriculum.loop import LoopState
+    from adaptenv.scene.procedural import generate_preset, preset_spec, rearrange_house
+
+    homes = generate_preset("tiny")
+    store = _Store()
+    for name, house in homes:
+        store.put(name, house)
+    state = LoopState(pool=[name for name, _ in homes])
+    it = M.Iteration(t=2, cfg=LoopConfig(seed=0, scenes_per_iteration=2), state=state, store=store, buffer=None,
+                     buffer_cfg=None, weights=None, executor=None, run_dir=None)
+    names = M.METHODS["rearrange"]().scenes_to_roll_out(it)
+    assert names == ["tiny_0002~ra0000", "tiny_0000~ra0001"], "round robin over the pool, as the other methods"
+    assert it.state.generated == 2
+    for n, (name, (home, house)) in enumerate(zip(names, (homes[2], homes[0]), strict=True)):
+        moved = store.houses[name]
+        seed = it.seed(M.Stream.REARRANGE, n) % 2**31
+        assert moved.to_dict() == rearrange_house(house, seed, preset_spec("pretrain-rearranged").config()).to_dict()
+        assert [r.id for r in moved.rooms] == [r.id for r in house.rooms], f"{home}: the same rooms"
+        assert moved.to_dict() != house.to_dict(), f"{home}: its furniture moved"

@@ -80,6 +80,8 @@ SUITES: dict[str, SuiteSpec] = {
                                  "rearranged pretraining houses, starts >= 6 m (Figure 1: rearranged)"),
     "long-unseen": SuiteSpec("preset:pretrain-unseen", LONG, "2",
                              "unseen houses of the pretraining distribution, starts >= 6 m (Figure 1: unseen)"),
+    "rearranged": SuiteSpec("preset:suite-rearranged", LONG, "1",
+                            "the 24 pretraining homes, each rearranged 10 times with new seeds, starts >= 6 m"),
     "large": SuiteSpec("preset:suite-large", EpisodeFloor(min_geodesic=4.0), "2",
                        "7-10 room houses, starts >= 4 m from the target"),
     "far": SuiteSpec("preset:suite-large", EpisodeFloor(min_geodesic=10.0), "2",
@@ -90,8 +92,10 @@ SUITES: dict[str, SuiteSpec] = {
                        "5-8 room houses joined only by doors (a tree of rooms), starts >= 6 m"),
     "closed": SuiteSpec("preset:suite-closed", EpisodeFloor(min_geodesic=8.0), "1",
                         "6-9 room houses with 40% of interior doors shut, starts >= 8 m from the target"),
-    # Validation twins of long-unseen, far, clutter and closed: settings are chosen here, never on the suites above.
+    # Validation twins of long-unseen, rearranged, far, clutter and closed: settings are chosen here, never on the suites above.
     "val-long": SuiteSpec("preset:validation", LONG, "1", "validation twin of long-unseen: new houses, starts >= 6 m"),
+    "val-rearranged": SuiteSpec("preset:validation-rearranged", LONG, "1",
+                                "validation twin of rearranged: 10 other rearrangements of each home, starts >= 6 m"),
     "val-far": SuiteSpec("preset:validation-large", EpisodeFloor(min_geodesic=10.0), "1",
                          "validation twin of far: 7-10 room houses, starts >= 10 m"),
     "val-clutter": SuiteSpec("preset:validation-clutter", EpisodeFloor(min_geodesic=4.0), "1",

@@ -39,7 +39,7 @@ from adaptenv.curriculum.jobs import (
 )
 from adaptenv.curriculum.records import GalleryItem, SceneStore, read_iterations
 from adaptenv.errors import ConfigError
-from adaptenv.scene.procedural import generate_house, preset_spec
+from adaptenv.scene.procedural import generate_house, preset_spec, rearrange_house
 
 if TYPE_CHECKING:
     from adaptenv.curriculum.loop import LoopConfig, LoopState
@@ -64,6 +64,8 @@ class Stream(IntEnum):
     """Fine-tuning (episode draws, minibatches)."""
     ORACLE_HOUSES = 8
     """``oracle``: seeds of its fresh houses (from the held-out suites' generator settings)."""
+    REARRANGE = 9
+    """``rearrange``: which training home is rearranged, and the rearrangement's seed."""
     GENERATE = 100
     """Scene generation; job k of the iteration uses ``[seed, t, GENERATE + k]``."""
 
@@ -245,6 +247,24 @@ class Oracle(DomainRandomization):
 
     def scenes_to_roll_out(self, it: Iteration) -> list[str]:
         return fresh_houses(it, it.cfg.scenes_per_iteration, oracle=True)
+
+
+class Rearrange(DomainRandomization):
+    """``rearrange``: the rearranged-homes lever test's ceiling. Every iteration the training homes rearranged anew
+    by ``rearrange_house`` (the generator of the ``rearranged`` suites, with new seeds), never the suites' houses."""
+
+    name = "rearrange"
+
+    def scenes_to_roll_out(self, it: Iteration) -> list[str]:
+        pool, out = it.state.pool, []
+        for k in range(it.cfg.scenes_per_iteration):
+            n = it.state.generated
+            home = pool[((it.t - 1) * it.cfg.scenes_per_iteration + k) % len(pool)]
+            house = rearrange_house(it.store.house(home), it.seed(Stream.REARRANGE, n) % 2**31,
+                                    preset_spec("pretrain-rearranged").config())
+            out.append(it.store.put(f"{home.split('~')[0]}~ra{n:04d}", house))
+            it.state.generated += 1
+        return out
 
 
 class RandomEdits(EditingMethod):
@@ -492,5 +512,5 @@ def fresh_houses(it: Iteration, k: int, *, oracle: bool = False) -> list[str]:
 
 #: Every method by name; add a method with one class and one line here.
 METHODS: dict[str, type[Method]] = {m.name: m for m in (NoNewScenes, RandomEdits, DomainRandomization, DRMatched,
-                                                        SFL, Oracle, PLR, ACCEL, Ours, OursNoSelect,
+                                                        SFL, Oracle, Rearrange, PLR, ACCEL, Ours, OursNoSelect,
                                                         OursRandomScene, OursNoF, OursDR, OursLLM)}

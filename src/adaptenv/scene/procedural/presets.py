@@ -25,6 +25,8 @@ class PresetSpec:
     """Inclusive range of room counts."""
     rearrange_of: str | None = None
     """When set, the houses are ``rearrange_house`` of this preset's houses instead of new ones."""
+    copies: int = 1
+    """Rearranged presets: rearrangements of each base house (house ``c * n_base + i`` is copy c of house i)."""
     split: str = "train"
     """ProcTHOR asset split the furniture comes from."""
     description: str = ""
@@ -45,6 +47,11 @@ PRESETS: dict[str, PresetSpec] = {
     "pretrain-train": PresetSpec(24, 1000, description="houses the agent is pre-trained on"),
     "pretrain-rearranged": PresetSpec(24, 2000, rearrange_of="pretrain-train",
                                       description="the pretrain-train houses with their furniture rearranged"),
+    # Several rearrangements of every pretrain-train house (new seeds): the rearranged-homes suites' houses.
+    "suite-rearranged": PresetSpec(24, 6001, rearrange_of="pretrain-train", copies=10,
+        description="ten rearrangements of each pretrain-train house, for the held-out suite rearranged"),
+    "validation-rearranged": PresetSpec(24, 6101, rearrange_of="pretrain-train", copies=10,
+        description="ten other rearrangements of each pretrain-train house (validation twin of suite-rearranged)"),
     "pretrain-unseen": PresetSpec(50, 3000, description="new houses from the same distribution, never trained on"),
     "tiny": PresetSpec(3, 7, room_range=(1, 3), description="three small houses for tests and CI"),
     # Held-out suite houses (agents/suites.py): root seeds no training preset or generator uses.
@@ -84,12 +91,12 @@ def generate_preset(name: str, catalog: AssetCatalog | None = None,
     catalog = catalog or load_catalog()
     if spec.rearrange_of is not None:
         base = generate_preset(spec.rearrange_of, catalog)
-        seeds = child_seeds(spec.seed, len(base))
+        seeds = child_seeds(spec.seed, len(base) * spec.copies)
         out = []
-        for i, ((_, house), s) in enumerate(zip(base, seeds, strict=True)):
-            out.append((f"{name}_{i:04d}", rearrange_house(house, s, spec.config(), catalog)))
+        for i, s in enumerate(seeds):
+            out.append((f"{name}_{i:04d}", rearrange_house(base[i % len(base)][1], s, spec.config(), catalog)))
             if on_house is not None:
-                on_house(i, len(base))
+                on_house(i, len(seeds))
         return out
     cfg = spec.config()
     out = []

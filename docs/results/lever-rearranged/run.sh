@@ -1,0 +1,15 @@
+#!/bin/bash
+# The test of DECLARED.md, resumable: finished runs are skipped. pi_0 is pretrained-ppo as shipped at the commit
+# DECLARED.md names, taken from git into OUT; the experiment runs with this clone's source.
+# Usage, from a clone with the virtual environment of `make install-dev`: bash docs/results/lever-rearranged/run.sh [OUT]
+set -euo pipefail
+root=$(git rev-parse --show-toplevel)
+out=$(realpath -m "${1:-runs/lever-rearranged}")
+mkdir -p "$out"
+cd "$out"
+[ -f pi0.pt ] || git -C "$root" show c6896a8:src/adaptenv/agents/data/pretrained-ppo.pt > pi0.pt
+echo "5aafbd850d91b4d2dadca0aabc1baf97de15aed46a5cae00e0bc908f2376f7fe  pi0.pt" | sha256sum --check --quiet
+export NUMBA_NUM_THREADS=1
+export MALLOC_TOP_PAD_=268435456 MALLOC_MMAP_THRESHOLD_=33554432 MALLOC_TRIM_THRESHOLD_=2147483647
+PYTHONPATH="$root/src" "$root/.venv/bin/adaptenv" experiment --config "$root/configs/experiment-lever-rearranged.json" \
+  -o "$out" --final-episodes 1000 --executor process --workers 2
