@@ -25,7 +25,7 @@ from adaptenv.scene.procedural.generate import generate_house
 
 def main(n: int, generator: str = "failure-modes") -> None:
     torch.set_num_threads(1)
-    weights = PolicyWeights.of(load_pretrained())
+    weights = PolicyWeights.of(load_pretrained("pretrained-scan"))
     jobs = [GenerateJob(generator, generate_house(100 + k), f"dr{k:04d}", 5, (0, 1, 100 + k), weights=weights,
                         diagnose_episodes=4) for k in range(n)]
     times, digests, edits = [], [], []

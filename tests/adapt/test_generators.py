@@ -213,7 +213,7 @@ def test_builtin_rollout_checks_score_each_scene_as_one_run_at_a_time():
     from adaptenv.agents.rollout import checking_episodes, mean_spl, run_policy
 
     house, world, ep, traj, analysis = procedural_scene(0, 4, [0, 7])  # one where plausible moves verify
-    policy = load_pretrained()  # stochastic motions, seeded per episode
+    policy = load_pretrained("pretrained-scan")  # stochastic motions, seeded per episode
     ctx = GenerationContext(episode=ep, trajectory=traj, policy=policy, render=False, rollout_episodes=3)
     res = BuiltinGenerator(max_candidates=8).generate(house, analysis, steps=2, context=ctx,
                                                       rng=np.random.default_rng(3))

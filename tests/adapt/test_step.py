@@ -108,7 +108,7 @@ def test_checking_episodes_keep_start_and_target():
 def test_a_jobs_env_steps_count_every_step_pi_t_takes_for_g(house):
     """The loop's budget counts G's rollout checks of candidate edits, and the diagnosis episodes when there are some."""
     world = compile_world(house, "h")
-    weights = PolicyWeights.of(load_pretrained())
+    weights = PolicyWeights.of(load_pretrained("pretrained-scan"))
     episode = draw_episode(world, np.random.default_rng([0, 1]))
     [(res, traj)] = run_recorded(world, [episode], weights.policy())
     made = run_generate(GenerateJob("builtin", house, "h", 1, (0,), weights=weights,
@@ -128,14 +128,14 @@ def test_loop_generate_job_and_adapt_cli_make_the_same_house_and_log(house, tmp_
     """The closed loop's `ours` runs exactly `adaptenv adapt`: same pi_t, episode and seed give the same child."""
     path = save_house(house, tmp_path / "h.json")
     out = tmp_path / "adapt"
-    result = CliRunner().invoke(app, ["adapt", str(path), "--policy", "pretrained", "--steps", "3", "--seed", "0",
+    result = CliRunner().invoke(app, ["adapt", str(path), "--policy", "pretrained-scan", "--steps", "3", "--seed", "0",
                                       "-o", str(out), "--json"])
     assert result.exit_code == 0, result.output
     cli_edits = json.loads((out / "edits.json").read_text())
 
     world = compile_world(house, "h")
     episode = draw_episode(world, np.random.default_rng([0, 1]))  # the CLI's episode draw for --seed 0
-    weights = PolicyWeights.of(load_pretrained())
+    weights = PolicyWeights.of(load_pretrained("pretrained-scan"))
     [(res, traj)] = run_recorded(world, [episode], weights.policy())
     made = run_generate(GenerateJob("builtin", house, "h", 3, (0,), weights=weights,
                                     rollout=Rollout([episode], [res], [traj], [True])))

@@ -64,7 +64,7 @@ def test_cli_evaluate_compares_sets_and_rejects_unknown_policies(tmp_path):
     assert cmp["drops"]["preset:tiny"]["success"]["drop"] == 0.0
     res = runner.invoke(app, ["evaluate", "--policy", "nonsense", "--houses", "preset:tiny", "-o", str(tmp_path)])
     assert res.exit_code != 0 and isinstance(res.exception, ConfigError)
-    assert "pretrained, pretrained-map, pretrained-ppo, expert, explorer, map-explorer, random" in str(res.exception)
+    assert "pretrained, pretrained-map, pretrained-scan, expert, explorer, map-explorer, random" in str(res.exception)
 
 
 def test_cli_train_help_lists_every_config_field():
@@ -80,7 +80,7 @@ def test_cli_train_starts_from_pretrained_and_says_when_no_final_evaluation_ran(
 
     out = tmp_path / "p.pt"
     res = CliRunner().invoke(app, [
-        "train", "--init", "pretrained", "--houses", "preset:tiny", "--frames", "64", "--num-envs", "4",
+        "train", "--init", "pretrained-scan", "--houses", "preset:tiny", "--frames", "64", "--num-envs", "4",
         "--rollout-steps", "16", "--chunk-len", "8", "--batch-chunks", "2", "--updates-per-iter", "1",
         "--buffer-frames", "64", "--calibrate-episodes", "0", "--eval-every", "0", "--final-eval-episodes", "0",
         "--hidden", "32", "--feature-dim", "32", "--no-tensorboard", "--no-progress", "--no-overlap",
@@ -88,7 +88,7 @@ def test_cli_train_starts_from_pretrained_and_says_when_no_final_evaluation_ran(
     assert res.exit_code == 0, res.output
     assert "no final evaluation was run" in res.output and "nan" not in res.output
     # warm-started: the network is the shipped one's shape, not the fresh --hidden 32 one
-    assert load_checkpoint(out).net.config == load_checkpoint(pretrained_path()).net.config
+    assert load_checkpoint(out).net.config == load_checkpoint(pretrained_path("pretrained-scan")).net.config
     assert load_checkpoint(out).net.config.hidden != 32
 
 

@@ -164,15 +164,15 @@ def test_choose_actions_ends_only_when_confident():
     assert choose_actions(logits, np.array([0.9, 0.9, 0.9]), 0.45).tolist() == [END, END, 3]
 
 
-def test_shipped_pretrained_checkpoint_loads_with_its_card():
+def test_shipped_scan_only_checkpoint_loads_with_its_card():
     import json
 
     from adaptenv.agents.registry import pretrained_path
 
-    policy = resolve_policy("pretrained")
-    card = json.loads(pretrained_path().with_suffix(".json").read_text())
+    policy = resolve_policy("pretrained-scan")
+    card = json.loads(pretrained_path("pretrained-scan").with_suffix(".json").read_text())
     # the threshold the policy acts with is the one its card says was calibrated
-    assert policy.name == "pretrained" and policy.end_threshold == card["end_threshold_calibration"]["threshold"]
+    assert policy.name == "pretrained-scan" and policy.net.config.map_channels == 0 and policy.end_threshold == card["end_threshold_calibration"]["threshold"]
     assert card["houses"] == "preset:pretrain-train" and card["final_train_success"] >= 0.8
     assert card["command"].startswith("adaptenv train") and "selection" in card
     actions = rollout_actions(policy)
@@ -211,3 +211,18 @@ def test_shipped_ppo_checkpoint_loads_with_its_card_and_selection():
     assert '": "/' not in json.dumps(card) and " /" not in card["command"], "no absolute paths in the card"
     assert isinstance(policy.initial_state(2), MapState)
     assert init_checkpoint("pretrained-ppo") == pretrained_path("pretrained-ppo")
+
+
+def test_the_default_policy_is_the_strongest_shipped_agent_and_runs_record_its_weights():
+    import hashlib
+
+    from adaptenv.agents.registry import init_checkpoint, pretrained_path, weights_record
+
+    assert pretrained_path("pretrained") == pretrained_path("pretrained-ppo"), "pretrained: the PPO map agent"
+    assert init_checkpoint("pretrained") == pretrained_path("pretrained-ppo")
+    assert resolve_policy("pretrained").net.config.map_channels > 0
+    record = weights_record("pretrained")
+    digest = hashlib.sha256(pretrained_path("pretrained-ppo").read_bytes()).hexdigest()
+    assert record == {"name": "pretrained", "file": "pretrained-ppo.pt", "sha256": digest}
+    assert weights_record("pretrained-scan")["sha256"] != digest
+    assert weights_record("expert") is None and weights_record("no/such.pt") is None

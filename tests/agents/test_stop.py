@@ -33,7 +33,7 @@ def reference_success(net, worlds, episodes, threshold: float, seed: int) -> np.
 
 
 def test_never_stop_rollouts_match_running_each_threshold(tiny_set):
-    net = load_pretrained().net
+    net = load_pretrained("pretrained-scan").net
     worlds = tiny_set.worlds
     episodes = sample_episodes(worlds, 12, seed=3)
     success, spl = stop_outcomes(net, worlds, episodes, grid=GRID, seed=5, max_steps=MAX_STEPS)
@@ -45,7 +45,7 @@ def test_never_stop_rollouts_match_running_each_threshold(tiny_set):
 
 
 def test_calibration_picks_the_best_threshold_and_records_the_table(tiny_set):
-    cal = calibrate_end_threshold(load_pretrained().net, tiny_set.worlds, episodes=8, seed=1, grid=GRID,
+    cal = calibrate_end_threshold(load_pretrained("pretrained-scan").net, tiny_set.worlds, episodes=8, seed=1, grid=GRID,
                                   max_steps=MAX_STEPS)
     assert cal.grid == list(GRID) and len(cal.success) == 3 and cal.episodes == 8
     best = max(range(3), key=lambda k: (cal.success[k], cal.spl[k]))

@@ -12,6 +12,7 @@ from scipy import stats
 
 from adaptenv.curriculum.experiment import (
     ExperimentConfig,
+    LeverRule,
     final_evaluation,
     holm,
     pack_experiment,
@@ -90,6 +91,34 @@ def test_primary_compares_with_the_better_baseline_per_set_and_holm_over_sets_on
         ExperimentConfig(methods=["ours", "dr"], primary=["dr", "sfl"]).check()
     with pytest.raises(ConfigError, match="primary"):
         ExperimentConfig(methods=["ours", "dr"], primary=["ours"]).check()
+
+
+def test_lever_rule_reads_the_declared_set_and_threshold_in_one_line(tmp_path):
+    from adaptenv.curriculum.experiment import lever_reading
+    from adaptenv.curriculum.verdict import lever_lines
+
+    rule = LeverRule(arm="rearrange", control="none", heldout="rearranged", threshold=5.0)
+    gains = [0.06, 0.05, 0.07, 0.04, 0.065]
+    table = {"rearrange": {s: {"success:rearranged": 0.80 + g, "success:far": 0.5} for s, g in enumerate(gains)},
+             "none": {s: {"success:rearranged": 0.80, "success:far": 0.9} for s in range(5)}}
+    reading = lever_reading(table, rule)
+    assert reading["seeds"] == 5 and reading["effect"]["diff"] == pytest.approx(np.mean(gains))
+    assert reading["exists"] is True, "a 5.7-point mean gain on the declared set meets a 5-point threshold"
+    (line,) = lever_lines({"lever": reading})
+    assert line.startswith("Lever: rearrange - none held-out success on rearranged = +5.7 points, 95% interval [")
+    assert line.endswith("over 5 paired seeds; threshold +5.0: a lever exists.")
+    higher = lever_reading(table, LeverRule(arm="rearrange", heldout="rearranged", threshold=6.0))
+    assert higher["exists"] is False and lever_lines({"lever": higher})[0].endswith("no lever.")
+    one_seed = lever_reading({m: {0: seeds[0]} for m, seeds in table.items()}, rule)
+    assert one_seed["exists"] is None and "undecided" in lever_lines({"lever": one_seed})[0]
+    assert lever_lines({}) == [], "no rule declared: no line"
+    bad = tmp_path / "lever.json"
+    for lever, field in (({"arm": "oracle", "heldout": "far"}, "lever.arm"),
+                         ({"arm": "dr", "heldout": "kitchen"}, "lever.heldout")):
+        bad.write_text(json.dumps({"methods": ["none", "dr"], "reference": "dr", "lever": lever,
+                                   "loop": {"heldout": {"far": "suite:far"}}}))
+        with pytest.raises(ConfigError, match=f"lever.json: {field}"):
+            ExperimentConfig.load(bad)
 
 
 def test_small_experiment_writes_every_artifact(tiny_policy, tmp_path, capsys):

@@ -72,3 +72,17 @@ def test_a_clear_difference_is_beyond_noise_and_opens_summary_and_report(tmp_pat
     page = build_report(tmp_path).read_text()
     assert page.index('<p class="verdict">') < page.index('id="overview"')
     assert "ours is better than dr beyond noise" in page
+
+
+def test_budget_line_states_each_methods_steps_and_whether_they_match():
+    from adaptenv.curriculum.verdict import budget_line
+
+    def summary(ours: float, dr: float) -> dict:
+        return {"reference": "ours", "methods": {"ours": {"env_steps:all": {"mean": ours}},
+                                                 "dr": {"env_steps:all": {"mean": dr}}}}
+
+    line = budget_line(summary(135_988, 21_335))
+    assert line.startswith("Environment steps: ours 135,988, dr 21,335; ours used 6.4x dr's")
+    assert "unequal budgets" in line
+    assert "matched budgets" in budget_line(summary(100_000, 98_000))
+    assert budget_line({"reference": "ours", "methods": {"ours": {"env_steps:all": {"mean": 1.0}}}}) is None

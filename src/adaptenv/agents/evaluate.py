@@ -33,7 +33,7 @@ from PIL import Image, ImageDraw
 
 from adaptenv.agents.houses import HouseSet, compile_houses
 from adaptenv.agents.policy import ExpertPolicy, Policy, PolicyContext, bind_policy, policy_name
-from adaptenv.agents.registry import resolve_policy
+from adaptenv.agents.registry import resolve_policy, weights_record
 from adaptenv.agents.suites import EpisodeFloor, sample_floored
 from adaptenv.render.topdown import render_house
 from adaptenv.sim import task
@@ -377,8 +377,8 @@ def write_report(report: EvalReport, house_set: HouseSet, out: Path, *, command:
     """Write summary.json, episodes.csv, houses.csv, failures.png and failed trajectories to ``out``."""
     out.mkdir(parents=True, exist_ok=True)
     paths = {"summary": out / "summary.json", "episodes": out / "episodes.csv", "houses": out / "houses.csv"}
-    doc = {"policy": report.policy, "houses": report.houses, "seed": report.seed, "command": command,
-           **report.summary}
+    doc = {"policy": report.policy, "weights": weights_record(report.policy), "houses": report.houses,
+           "seed": report.seed, "command": command, **report.summary}
     paths["summary"].write_text(json.dumps(doc, indent=1, default=float) + "\n", encoding="utf-8")
     rows = [asdict(r) for r in report.results]
     _write_csv(paths["episodes"], rows)

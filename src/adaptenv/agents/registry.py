@@ -2,9 +2,10 @@
 
 Accepted specs (every command taking ``--policy`` uses :func:`resolve_policy`):
 
-- ``pretrained``: the checkpoint shipped in the package (``adaptenv/agents/data/pretrained.pt``).
-- ``pretrained-map``: the map-reading checkpoint taught by the map explorer; ``pretrained-ppo``: it
-  after anchored PPO (docs/agent.md has their cards).
+- ``pretrained``: the strongest checkpoint shipped in the package, the map-reading agent after
+  anchored PPO (``adaptenv/agents/data/pretrained-ppo.pt``; ``pretrained-ppo`` names the same file).
+- ``pretrained-map``: the map-reading checkpoint taught by the map explorer, before PPO;
+  ``pretrained-scan``: the scan-only agent, which cannot search (docs/agent.md has their cards).
 - ``expert``: the shortest-path expert (privileged).
 - ``explorer``: frontier exploration on the agent's own map, then the shortest path to a sighted
   target (knows its pose, not the target's location; :mod:`adaptenv.agents.explorer`).
@@ -18,6 +19,7 @@ Accepted specs (every command taking ``--policy`` uses :func:`resolve_policy`):
 
 from __future__ import annotations
 
+import hashlib
 import importlib
 import importlib.util
 import sys
@@ -29,18 +31,31 @@ from adaptenv.agents.map_explorer import MapExplorerPolicy
 from adaptenv.agents.policy import ExpertPolicy, Policy, RandomPolicy
 from adaptenv.errors import ConfigError
 
-SHIPPED = ("pretrained", "pretrained-map", "pretrained-ppo")
-"""Checkpoints shipped in the package: the scan-only pi_0, the map-reading one, and it after anchored PPO (docs/agent.md)."""
+SHIPPED_FILES = {"pretrained": "pretrained-ppo", "pretrained-ppo": "pretrained-ppo", "pretrained-map": "pretrained-map",
+                 "pretrained-scan": "pretrained-scan"}
+"""Shipped checkpoint names -> their file stem in ``adaptenv/agents/data``: ``pretrained`` is the strongest
+(the map-reading agent after anchored PPO), then it before PPO, then the scan-only agent (docs/agent.md)."""
+SHIPPED = tuple(SHIPPED_FILES)
 BUILTINS = (*SHIPPED, "expert", "explorer", "map-explorer", "random")
-_HELP = ("expected pretrained, pretrained-map, pretrained-ppo, expert, explorer, map-explorer, random, a checkpoint path (.pt) or "
-         "module:attribute (e.g. examples/my_policy.py:policy)")
-POLICY_HELP = ("Policy: pretrained, pretrained-map, pretrained-ppo, expert, explorer, map-explorer, random, a checkpoint path (.pt), "
-               "or module:attribute.")
+_HELP = ("expected pretrained, pretrained-map, pretrained-scan, expert, explorer, map-explorer, random, a checkpoint "
+         "path (.pt) or module:attribute (e.g. examples/my_policy.py:policy)")
+POLICY_HELP = ("Policy: pretrained (the strongest shipped agent), pretrained-map, pretrained-scan, expert, explorer, "
+               "map-explorer, random, a checkpoint path (.pt), or module:attribute.")
 
 
 def pretrained_path(name: str = "pretrained") -> Path:
     """Where the shipped checkpoint ``name`` (one of SHIPPED) lives inside the installed package."""
-    return Path(str(resources.files("adaptenv.agents") / "data" / f"{name}.pt"))
+    return Path(str(resources.files("adaptenv.agents") / "data" / f"{SHIPPED_FILES[name]}.pt"))
+
+
+def weights_record(spec: str) -> dict[str, str] | None:
+    """Which weights a ``--policy`` spec runs: name, file and sha256 (None for a policy without a checkpoint)."""
+    spec = spec.strip()
+    path = pretrained_path(spec) if spec in SHIPPED else Path(spec)
+    if not (spec in SHIPPED or path.suffix in (".pt", ".pth")) or not path.is_file():
+        return None
+    digest = hashlib.sha256(path.read_bytes()).hexdigest()
+    return {"name": spec, "file": path.name, "sha256": digest}
 
 
 def load_pretrained(name: str = "pretrained", *, greedy: bool = False, seed: int = 0) -> Policy:

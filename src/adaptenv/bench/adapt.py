@@ -30,7 +30,7 @@ NOTES = ["targets: success drop >= 30 points; expert success after = 100%; reali
          "before = 100% success by construction (only houses the policy solves are adapted)"]
 
 
-def run(*, houses: int = 50, steps: int = 5, policy: str = "pretrained", seed: int = 0, rooms: int = 5,
+def run(*, houses: int = 50, steps: int = 5, policy: str = "pretrained-scan", seed: int = 0, rooms: int = 5,
         tries: int = 10, max_houses: int | None = None) -> dict[str, Any]:
     """Adapt ``houses`` solved houses and return the figures (see the module docstring)."""
     from adaptenv.adapt.analysis import BuiltinAnalyzer

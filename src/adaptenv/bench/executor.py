@@ -65,7 +65,7 @@ def heldout_items(episodes: int = HELDOUT_EPISODES) -> list[Any]:
     from adaptenv.agents.registry import resolve_policy
     from adaptenv.curriculum.jobs import PolicyWeights, eval_jobs
 
-    weights = PolicyWeights.of(resolve_policy("pretrained"))
+    weights = PolicyWeights.of(resolve_policy("pretrained-scan"))
     return [job for _, job in eval_jobs(weights, {"heldout": HELDOUT_SET}, episodes, seed=0, chunk=HELDOUT_CHUNK)]
 
 

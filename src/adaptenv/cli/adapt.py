@@ -142,8 +142,9 @@ def analyze(
 def adapt(
     house: Path = ADAPT_HOUSE_ARGUMENT,
     out: Path = OUT_OPTION,
-    policy: str = typer.Option("expert", "--policy", help="pretrained, expert, explorer, map-explorer, random, a checkpoint (.pt), "
-                               "or module:attribute."),
+    policy: str = typer.Option("expert", "--policy", help="pretrained (the strongest shipped agent), "
+                               "pretrained-map, pretrained-scan, expert, explorer, map-explorer, random, a checkpoint "
+                               "(.pt), or module:attribute."),
     steps: int = typer.Option(5, "--steps", min=1, max=50, help="Single-object edits to make."),
     generator: str = typer.Option("builtin", "--generator", help="builtin (offline), failure-modes (offline, aims at "
                                   "F's failure families), llm, or random."),

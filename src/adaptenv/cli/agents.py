@@ -135,7 +135,9 @@ def _ppo_command():
 
 def evaluate(
     policy: str = typer.Option("pretrained", "--policy", "-p",
-                               help="Policy: pretrained, expert, explorer, map-explorer, random, a checkpoint path (.pt), or module:attribute."),
+                               help="Policy: pretrained (the strongest shipped agent), pretrained-map, "
+                               "pretrained-scan, expert, explorer, map-explorer, random, a checkpoint path (.pt), or "
+                               "module:attribute."),
     houses: list[str] = _HOUSES_OPTION,
     episodes: int = typer.Option(200, "--episodes", "-n", min=1, help="Episodes per house set."),
     seed: int = typer.Option(0, "--seed", "-s", help="Seed of the episodes (same seed, same results)."),

@@ -87,7 +87,7 @@ def check_resumable(out: Path) -> None:
 
 
 def loop(
-    policy: str = typer.Option("pretrained", "--policy", help="Starting policy: pretrained or a checkpoint path."),
+    policy: str = typer.Option("pretrained", "--policy", help="Starting policy: pretrained (the strongest shipped agent), pretrained-map, pretrained-scan or a checkpoint path."),
     houses: str = typer.Option("preset:pretrain-train", "--houses", help="Training scenes: a folder of house "
                                 "JSON files, a house file, a dataset FILE.jsonl[.gz][:START:STOP] or preset:NAME."),
     iterations: int = typer.Option(3, "--iterations", "-T", min=1, help="Loop iterations."),

@@ -11,7 +11,7 @@ from pathlib import Path
 import typer
 
 DEMO_METHODS = ("dr", "ours")
-"""The demo compares the closed loop (ours) with domain randomization on the same houses, seed and budget."""
+"""The demo compares the closed loop (ours) with domain randomization on the same houses, seed and fine-tuning frames."""
 HELDOUT_EPISODES_PER_HOUSE = 25
 """Held-out episodes per house of each set: evaluation is cheap, and more paired episodes narrow the verdict's
 interval."""
@@ -49,7 +49,7 @@ def demo(
     houses: int = typer.Option(4, "--houses", min=1, max=50, help="Procedural training houses to generate."),
     iterations: int = typer.Option(2, "--iterations", min=1, max=20, help="Closed-loop iterations."),
     seed: int = typer.Option(0, "--seed", help="Root seed: the same seed gives the same outputs."),
-    policy: str = typer.Option("pretrained", "--policy", help="Starting policy: pretrained or a checkpoint path."),
+    policy: str = typer.Option("pretrained", "--policy", help="Starting policy: pretrained (the strongest shipped agent), pretrained-map, pretrained-scan or a checkpoint path."),
 ) -> None:
     """Generate houses, run the closed loop and domain randomization on them, write the report and its verdict."""
     prepare_out(out)  # before any work: a folder the demo did not write is refused, not emptied
@@ -58,6 +58,7 @@ def demo(
     from adaptenv.curriculum.experiment import ExperimentConfig, run_experiment, verdict_lines
     from adaptenv.curriculum.experiment import run_dir as experiment_run_dir
     from adaptenv.curriculum.records import read_iterations
+    from adaptenv.curriculum.verdict import budget_line
     from adaptenv.progress import ProgressBar
     from adaptenv.report import build_report
     from adaptenv.scene.house import save_house
@@ -76,9 +77,9 @@ def demo(
             save_house(house, heldout_new / f"house_{i:02d}.json")
             bar.advance()
 
-    console.print(f"[bold]2/4[/] closed loop ({iterations} iterations) against domain randomization (dr) under the "
-                  "same budget: roll out the agent, analyze each trajectory (F), edit the scenes (G), fine-tune, "
-                  "evaluate on held-out houses")
+    console.print(f"[bold]2/4[/] closed loop ({iterations} iterations) against domain randomization (dr), with the "
+                  "same fine-tuning frames per iteration: roll out the agent, analyze each trajectory (F), edit the "
+                  "scenes (G), fine-tune, evaluate on held-out houses")
     loop = {"policy": policy, "houses": str(train), "heldout": {"rearranged": str(heldout_re), "unseen": str(heldout_new)},
             "iterations": iterations, "scenes_per_iteration": houses, "edit_steps": 5, "finetune_frames": 8192,
             "finetune_envs": 64, "heldout_episodes": HELDOUT_EPISODES_PER_HOUSE * houses, "gallery": houses}
@@ -97,6 +98,8 @@ def demo(
                   "(the same for both methods).")
     for line in verdict_lines(summary) or ["Verdict: none (no held-out episodes evaluated by both methods)."]:
         console.print(line, style="bold", markup=False)
+    if budget := budget_line(summary):
+        console.print(budget, markup=False)
 
     console.print("[bold]4/4[/] writing the report")
     index = build_report(run_dir)

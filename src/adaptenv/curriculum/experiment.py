@@ -57,7 +57,7 @@ from adaptenv.curriculum.records import (
     iteration_dir,
     read_iterations,
 )
-from adaptenv.curriculum.verdict import verdict_lines
+from adaptenv.curriculum.verdict import lever_lines, verdict_lines
 from adaptenv.errors import AdaptenvError, ConfigError, RunsFailed
 
 METRICS = ("success", "spl", "collisions")
@@ -66,6 +66,22 @@ METRICS = ("success", "spl", "collisions")
 TESTED = (*METRICS, "success_gain")
 #: The fix an experiment config's type errors suggest.
 CONFIG_FIX = "write it as in configs/experiment-small.json (docs/curriculum.md lists the loop fields)"
+
+
+@dataclass
+class LeverRule:
+    """A lever test's declared reading: ``arm`` minus ``control`` held-out success on set ``heldout``, over seeds."""
+
+    arm: str
+    """The training distribution tested (e.g. the test's own generator, a ceiling: ``rearrange``, ``oracle``)."""
+    control: str = "none"
+    """What it is compared with (``none``: fine-tuning on the training houses as they are)."""
+    heldout: str = ""
+    """Held-out set name (a key of ``loop.heldout``) the rule reads."""
+    threshold: float = 5.0
+    """Points of success the mean difference must reach for a lever to exist."""
+
+    __pydantic_config__ = STRICT
 
 
 @dataclass
@@ -83,8 +99,14 @@ class ExperimentConfig:
     primary: list[str] = field(default_factory=list)
     """The declared primary comparison: the reference against the better of these baselines on each held-out set
     (by mean success over seeds), Holm over the sets only (e.g. ["dr", "sfl"]); empty: none declared."""
+    lever: LeverRule | None = None
+    """A lever test's rule: the summary opens with one line saying whether the lever exists, with its interval."""
 
     __pydantic_config__ = STRICT
+
+    def __post_init__(self) -> None:
+        if isinstance(self.lever, dict):  # read back from experiment.json
+            self.lever = LeverRule(**self.lever)
 
     @classmethod
     def load(cls, path: str | Path) -> ExperimentConfig:
@@ -109,6 +131,14 @@ class ExperimentConfig:
             if b not in self.methods or b == self.reference:
                 raise ConfigError(f"{source}: primary[{i}] {b!r} must be one of the methods other than the "
                                   f"reference {self.reference!r}")
+        if self.lever is not None:
+            for where, m in (("lever.arm", self.lever.arm), ("lever.control", self.lever.control)):
+                if m not in self.methods:
+                    raise ConfigError(f"{source}: {where} {m!r} is not one of the methods; add it to methods")
+            sets = self.loop_config(self.methods[0], self.seeds[0] if self.seeds else 0).heldout
+            if self.lever.heldout not in sets:
+                raise ConfigError(f"{source}: lever.heldout {self.lever.heldout!r} is not a held-out set; use one of "
+                                  + ", ".join(sets))
         for name, values in (("methods", self.methods), ("seeds", self.seeds)):
             if not values:
                 raise ConfigError(f"{source}: {name} is empty; list at least one")
@@ -313,6 +343,8 @@ def write_summary(out: Path, cfg: ExperimentConfig, table: dict[str, dict[int, d
         summary["holm"].setdefault(m, {})[key] = p
     if cfg.primary:
         summary["primary"] = primary_comparison(table, cfg.reference, cfg.primary)
+    if cfg.lever is not None:
+        summary["lever"] = lever_reading(table, cfg.lever)
     if episode_effects is not None:
         summary["episode_effects"] = episode_effects
     summary["skipped_houses"] = {k: v.model_dump() for k, v in skipped_in_runs(out, cfg).items()}
@@ -337,6 +369,17 @@ def primary_comparison(table: dict[str, dict[int, dict[str, float]]], reference:
     for key, p_adj in holm({k: r["p"] for k, r in rows.items()}).items():
         rows[key]["p_holm"] = p_adj
     return {"reference": reference, "baselines": list(baselines), "sets": rows}
+
+
+def lever_reading(table: dict[str, dict[int, dict[str, float]]], rule: LeverRule) -> dict[str, Any]:
+    """The lever rule read from method -> seed -> figures: the paired effect over common seeds and whether its mean
+    reaches the threshold (None with fewer than two common seeds)."""
+    key = f"success:{rule.heldout}"
+    arm, control = table.get(rule.arm, {}), table.get(rule.control, {})
+    common = sorted(s for s in set(arm) & set(control) if key in arm[s] and key in control[s])
+    effect = paired_effect([arm[s][key] for s in common], [control[s][key] for s in common])
+    exists = None if effect is None else bool(100 * effect["diff"] >= rule.threshold)
+    return {**asdict(rule), "seeds": len(common), "effect": effect, "exists": exists}
 
 
 def _episode_successes(folder: Path) -> dict[tuple[str, int], float]:
@@ -473,7 +516,7 @@ def summary_markdown(summary: dict[str, Any]) -> str:
     keys = sorted({k for v in summary["methods"].values() for k in v if k.split(":")[0] in TESTED})
     ref = summary["reference"]
     head = "| method | " + " | ".join(keys) + " | env steps | updates |"
-    verdicts = verdict_lines(summary)
+    verdicts = lever_lines(summary) + verdict_lines(summary)
     lines = [*verdicts, *([""] if verdicts else []), *primary_markdown(summary.get("primary")), head,
              "|" + "---|" * (len(keys) + 3)]
     for m, figs in summary["methods"].items():

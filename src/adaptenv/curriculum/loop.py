@@ -49,7 +49,7 @@ from adaptenv.agents.config import FinetuneConfig
 from adaptenv.agents.evaluate import EpisodeResult, EvalReport, mean_se, summarize, write_report
 from adaptenv.agents.houses import load_house_set
 from adaptenv.agents.network import NeuralPolicy, torch_threads
-from adaptenv.agents.registry import resolve_policy
+from adaptenv.agents.registry import resolve_policy, weights_record
 from adaptenv.agents.teachers import TEACHERS
 from adaptenv.agents.train import check_precision, finetune
 from adaptenv.configfile import STRICT, parse_config, read_json
@@ -307,6 +307,16 @@ def run_loop(cfg: LoopConfig, run_dir: str | Path, *, resume: bool = False, exec
         return _run_loop(cfg, run_dir, resume, executor, progress, command)
 
 
+def _pi0_weights(cfg: LoopConfig, run_dir: Path, *, fresh: bool) -> dict[str, str] | None:
+    """pi_0's name, file and sha256: read from ``cfg.policy`` when the run starts, kept from run.json on resume."""
+    if not fresh and (run_dir / "run.json").is_file():
+        try:
+            return RunInfo.model_validate_json((run_dir / "run.json").read_text(encoding="utf-8")).weights
+        except ValueError:
+            pass
+    return weights_record(cfg.policy)
+
+
 def _run_loop(cfg: LoopConfig, run_dir: str | Path, resume: bool, executor: Executor | None,
               progress: Callable[[str], None] | None, command: str) -> list[IterationRecord]:
     cfg.check()
@@ -314,8 +324,9 @@ def _run_loop(cfg: LoopConfig, run_dir: str | Path, resume: bool, executor: Exec
     say = progress or (lambda text: None)
     state, records, command = _open_run(cfg, run_dir, resume, command)
     skipped = skipped_houses([cfg.houses, *cfg.heldout.values()])
-    atomic_write_text(run_dir / "run.json", RunInfo(method=cfg.method, seed=cfg.seed, config=asdict(cfg),
-                                                    command=command, skipped_houses=skipped).model_dump_json(indent=1))
+    weights = _pi0_weights(cfg, run_dir, fresh=state.iteration == 0 and not records)
+    atomic_write_text(run_dir / "run.json", RunInfo(method=cfg.method, seed=cfg.seed, config=asdict(cfg), command=command,
+                                                    skipped_houses=skipped, weights=weights).model_dump_json(indent=1))
     store = SceneStore(run_dir / "scenes")
     ex = executor if executor is not None else InProcessExecutor()
     method = METHODS[cfg.method]()

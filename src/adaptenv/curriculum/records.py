@@ -126,6 +126,8 @@ class RunInfo(BaseModel):
     command: str = ""
     skipped_houses: dict[str, SkippedHouses] = Field(default_factory=dict)
     """Per house-set spec (training houses and held-out sets), the unusable houses left out of it."""
+    weights: dict[str, str] | None = None
+    """pi_0's weights: the ``--policy`` name, its file and sha256 (None for a run written before they were kept)."""
 
 
 def atomic_write_text(path: Path, text: str) -> Path:

@@ -26,3 +26,35 @@ def verdict_lines(summary: dict[str, Any]) -> list[str]:
                      f"[{100 * e['low']:+.1f}, {100 * e['high']:+.1f}], paired over the {e['episodes']} held-out "
                      f"episodes both were evaluated on; {say}.")
     return lines
+
+
+def lever_lines(summary: dict[str, Any]) -> list[str]:
+    """The lever test's one line (none when the experiment declares no lever rule): the arm minus the control on
+    the held-out set, its 95% interval over seeds, and whether the mean reaches the declared threshold."""
+    lever = summary.get("lever")
+    if not lever:
+        return []
+    head = f"Lever: {lever['arm']} - {lever['control']} held-out success on {lever['heldout']}"
+    e = lever["effect"]
+    if e is None:
+        return [f"{head}: undecided, {lever['seeds']} seed(s) finished for both; the paired interval needs two."]
+    say = "a lever exists" if lever["exists"] else "no lever"
+    return [f"{head} = {100 * e['diff']:+.1f} points, 95% interval [{100 * e['low']:+.1f}, {100 * e['high']:+.1f}] "
+            f"over {lever['seeds']} paired seeds; threshold {lever['threshold']:+.1f}: {say}."]
+
+
+def budget_line(summary: dict[str, Any]) -> str | None:
+    """One line stating each method's environment steps, and by how much they differ from the reference's
+    (None without figures); a verdict between methods of unequal steps is not a matched-budget comparison."""
+    steps = {m: figs["env_steps:all"]["mean"] for m, figs in summary.get("methods", {}).items()
+             if "env_steps:all" in figs}
+    ref = summary.get("reference")
+    if ref not in steps or len(steps) < 2:
+        return None
+    parts = ", ".join(f"{m} {v:,.0f}" for m, v in steps.items())
+    ratios = [steps[ref] / v for m, v in steps.items() if m != ref and v > 0]
+    if all(abs(r - 1.0) <= 0.05 for r in ratios):
+        return f"Environment steps: {parts}; within 5% of each other, so the verdict compares matched budgets."
+    spread = ", ".join(f"{steps[ref] / v:.1f}x {m}'s" for m, v in steps.items() if m != ref and v > 0)
+    return (f"Environment steps: {parts}; {ref} used {spread}, so the verdict compares unequal budgets "
+            "(the same fine-tuning frames, not the same environment steps).")

@@ -31,7 +31,7 @@ from adaptenv.curriculum.records import (
     IterationRecord,
     SetMetrics,
 )
-from adaptenv.curriculum.verdict import verdict_lines
+from adaptenv.curriculum.verdict import budget_line, lever_lines, verdict_lines
 from adaptenv.errors import AdaptenvError
 from adaptenv.render.compare import BeforeAfter, render_before_after
 from adaptenv.render.topdown import render_house
@@ -738,10 +738,11 @@ def runs_table(exp: ExperimentData, links: dict[Path, str]) -> str:
 
 
 def verdict_html(exp: ExperimentData) -> str:
-    """The page's opening lines: summary.json's verdict of the reference against each method (empty without one)."""
+    """The page's opening lines: summary.json's lever line and verdict of the reference against each method."""
     summary = exp.summary if isinstance(exp.summary, dict) else {}
     try:
-        lines = verdict_lines(summary) if summary.get("reference") else []
+        lines = lever_lines(summary) + verdict_lines(summary) if summary.get("reference") else []
+        lines += [b] if lines and (b := budget_line(summary)) else []
     except (KeyError, TypeError):  # a summary.json written by something else
         lines = []
     return "".join(f'<p class="verdict"><strong>{esc(line)}</strong></p>' for line in lines)
