@@ -19,7 +19,7 @@ from adaptenv.cli import app, main
 from adaptenv.cli._outputs import MANIFEST
 
 sys.path.insert(0, str(Path(__file__).parent))
-from test_cli_safety import TINY_TRAIN  # noqa: E402  (the cheapest `adaptenv train`: one 64-frame block)
+from test_cli_safety import LOOP, TINY_TRAIN, WorkStarted, refuse_work  # noqa: E402  (the cheapest train and loop)
 
 HOUSE = Path(__file__).parent / "data" / "procthor-10k-train-1.json"
 CONFIG = Path(__file__).parents[1] / "configs" / "experiment-small.json"
@@ -196,13 +196,15 @@ def test_train_replaces_its_own_run_whole_and_resumes_its_own_run(tmp_path, monk
     ["evaluate", "--houses", "preset:tiny", "-n", "1", "-o", "{out}"],
     ["adapt", HOUSE, "--steps", "1", "-o", "{out}"],
     ["demo", "-o", "{out}"],
-], ids=["report", "experiment", "evaluate", "adapt", "demo"])
+    [*LOOP, "-o", "{out}"],
+    [*LOOP, "-o", "{out}", "--resume"],
+], ids=["report", "experiment", "evaluate", "adapt", "demo", "loop", "loop-resume"])
 def test_a_folder_you_made_is_not_written_into(tmp_path, monkeypatch, capsys, command):
     out = tmp_path / "mine"
     mine(out / "index.html", "<html>my page</html>")
     (tmp_path / "run").mkdir()
     args = [str(a).format(out=out, input=tmp_path / "run") for a in command]
-    fix = "--force" if command[0] not in ("experiment", "demo") else "new or empty folder"
+    fix = "--force" if command[0] not in ("experiment", "demo", "loop") else "new or empty folder"
     refused(monkeypatch, capsys, tmp_path, *args, words=(f"-o {out}", "not written by adaptenv", fix))
 
 
@@ -239,3 +241,12 @@ def test_report_and_experiment_keep_to_their_own_folders(tmp_path, monkeypatch, 
             words=(f"-o {tmp_path / 'exp'}", "input"))
     os.remove(tmp_path / "exp" / MANIFEST)  # a folder from before manifests: its experiment.json says whose
     ok("experiment", "--config", CONFIG, "-o", tmp_path / "exp")
+
+
+def test_loop_resumes_its_own_folder(tmp_path, monkeypatch):
+    import adaptenv.curriculum.loop as loop_module
+
+    monkeypatch.setattr(loop_module, "run_loop", refuse_work)
+    mine(tmp_path / "run" / "run.json", "{}")  # a run cut short (written before manifests)
+    res = CliRunner().invoke(app, [*LOOP, "-o", str(tmp_path / "run"), "--resume"])
+    assert isinstance(res.exception, WorkStarted), res.output

@@ -122,13 +122,13 @@ def record_file(path: Path, command: str) -> None:
 
 
 def _files(folder: Path) -> dict[str, tuple[int, int]]:
-    """Every file under ``folder`` but the manifest (relative path -> (size, mtime)); links count as files."""
+    """Every file under ``folder`` but manifests (relative path -> (size, mtime)); links count as files."""
     found = {}
     for root, dirs, names in os.walk(folder):
         for name in names + [d for d in dirs if os.path.islink(os.path.join(root, d))]:
             p = Path(root, name)
             rel = p.relative_to(folder).as_posix()
-            if rel != MANIFEST and not rel.startswith(f"{MANIFEST}.tmp-"):
+            if name != MANIFEST and not name.startswith(f"{MANIFEST}.tmp-"):
                 st = p.lstat()
                 found[rel] = (st.st_size, st.st_mtime_ns)
     return found
@@ -180,7 +180,8 @@ def _prune_empty(top: Path, folders: set[str]) -> None:
     """Remove the now-empty sub-folders of ``top`` that held removed files (deepest first; ``top`` stays)."""
     for rel in sorted(folders, key=lambda r: -len(Path(r).parts)):
         p = top / rel
-        while p != top and p.is_dir() and not any(p.iterdir()):
+        while p != top and p.is_dir() and all(q.name == MANIFEST for q in p.iterdir()):
+            (p / MANIFEST).unlink(missing_ok=True)
             p.rmdir()
             p = p.parent
 
@@ -206,21 +207,21 @@ def output_folder(path: Path, flag: str, command: str, *, force: bool = False,
         return OutputFolder(path, command, own=False, remove=[], keep=keep)
     doc = read_manifest(path)
     own = doc["folder"] == command or (legacy is not None and doc["folder"] is None and legacy(path))
+    force_fix = f", or {force_flag} to write into it anyway (files of the same name are replaced)" if force_flag else ""
+    if not own and not force:
+        raise ConfigError(f"{flag} {path}: the folder is not empty and was not written by adaptenv {command}, so "
+                          f"nothing in it is replaced; pass a new or empty folder{force_fix}")
+    if keep:
+        return OutputFolder(path, command, own=own, remove=[], keep=True)
     mine = [rel for rel in present if _is_own(path / rel, doc["files"].get(rel), command)]
     if doc["folder"] is None and own:  # written before manifests: the names the command writes are its own
         mine = [rel for rel in present if owned is not None and rel.split("/")[0] in owned]
     theirs = [rel for rel in present if rel not in mine
               and (owned is None or rel.split("/")[0] in owned)]
-    force_fix = f", or {force_flag} to write into it anyway (files of the same name are replaced)" if force_flag else ""
-    if not own and not force:
-        raise ConfigError(f"{flag} {path}: the folder is not empty and was not written by adaptenv {command}, so "
-                          f"nothing in it is replaced; pass a new or empty folder{force_fix}")
-    if own and theirs and not force and not keep:
+    if own and theirs and not force:
         raise ConfigError(f"{flag} {path}: {theirs[0]} in it was not written by adaptenv {command} (or was changed "
                           f"since), so the earlier output there is not replaced; move it away, pass a new or empty "
                           f"folder{force_fix}")
-    if keep:
-        return OutputFolder(path, command, own=own, remove=[], keep=True)
     remove = sorted(mine) + (sorted(theirs) if force and owned is not None else [])
     if owned is not None:  # whole sub-folders the command writes go too (their emptied folders included)
         remove = sorted({r.split("/")[0] if r.split("/")[0] in owned else r for r in remove})

@@ -12,7 +12,7 @@ from pathlib import Path
 
 import typer
 
-from adaptenv.cli._common import interrupted, writable_folder
+from adaptenv.cli._common import interrupted
 from adaptenv.cli._outputs import output_folder
 from adaptenv.cli.adapt import (
     API_OPTION,
@@ -169,8 +169,10 @@ def loop(
 
     from adaptenv.curriculum.executor import ExecutorOptions
     from adaptenv.curriculum.loop import LoopConfig, run_loop
+    from adaptenv.curriculum.records import RUN_INFO, STATE
 
-    writable_folder(out, "-o")
+    folder = output_folder(out, "-o", "loop", inputs=[houses, policy, match_run or None], keep=True, force_flag=None,
+                           legacy=lambda p: (p / STATE).is_file() or (p / RUN_INFO).is_file())
     if resume:
         check_resumable(out)
     console = Console()
@@ -193,7 +195,7 @@ def loop(
     check_house_sets([cfg.houses, *cfg.heldout.values()], strict, console.print)
     command = shlex.join(["adaptenv", *sys.argv[1:]])
     try:
-        with ExecutorOptions(executor, workers, address).make() as ex:
+        with folder, ExecutorOptions(executor, workers, address).make() as ex:
             records = run_loop(cfg, out, resume=resume, executor=ex, progress=lambda text: console.print(f"[dim]{text}[/]"),
                                command=command)
     except KeyboardInterrupt:
