@@ -82,6 +82,8 @@ def test_houses_generate_replaces_its_own_houses_but_not_a_house_you_edited(tmp_
     assert house.name in line and "changed since" in line
     ok("houses", "generate", "--preset", "tiny", "-o", out, "--force")
     assert (out / MANIFEST).is_file()
+    ok("houses", "generate", "--n", "1", "--rooms", "1", "-o", out)  # fewer houses: none of the earlier set is left
+    assert sorted(p.name for p in out.iterdir()) == [MANIFEST, "house_0000.json"]
 
 
 def test_houses_export_does_not_replace_an_edited_house(tmp_path, monkeypatch, capsys):
