@@ -64,12 +64,13 @@ def test_demo_replaces_only_its_own_outputs_in_its_own_folder(tmp_path):
     from adaptenv.cli.demo import MARKER, prepare_out
 
     out = tmp_path / "demo"
-    prepare_out(out)  # a new folder: made and marked
+    with prepare_out(out):  # a new folder: what the demo writes there is marked as its own
+        (out / "run" / "iter_0000").mkdir(parents=True)
+        (out / "run" / "iter_0000" / "policy.pt").write_bytes(b"weights")
     assert (out / MARKER).is_file()
-    (out / "run" / "iter_0000").mkdir(parents=True)
     (out / "mine.txt").write_text("keep me")
-    prepare_out(out)
-    assert not (out / "run").exists() and (out / "mine.txt").read_text() == "keep me"
+    with prepare_out(out):
+        assert not (out / "run").exists() and (out / "mine.txt").read_text() == "keep me"
 
 
 # -- adaptenv train --resume --------------------------------------------------------------------

@@ -290,11 +290,12 @@ def test_cli_generate_writes_houses(tmp_path):
     from typer.testing import CliRunner
 
     from adaptenv.cli import app
+    from adaptenv.cli._outputs import MANIFEST
 
     result = CliRunner().invoke(app, ["houses", "generate", "--n", "2", "--seed", "4", "--rooms", "2", "-o", str(tmp_path)])
     assert result.exit_code == 0, result.output
     files = sorted(p.name for p in tmp_path.iterdir())
-    assert files == ["house_0000.json", "house_0001.json"]
+    assert files == [MANIFEST, "house_0000.json", "house_0001.json"]  # the manifest: adaptenv wrote the houses
     house = parse_house(json.loads((tmp_path / "house_0000.json").read_text()))
     assert len(house.rooms) == 2
     assert "target types" in result.output

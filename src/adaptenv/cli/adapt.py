@@ -16,7 +16,8 @@ from typing import TYPE_CHECKING
 import numpy as np
 import typer
 
-from adaptenv.cli._common import JSON_OPTION, writable_folder
+from adaptenv.cli._common import JSON_OPTION
+from adaptenv.cli._outputs import FORCE_OPTION, output_folder
 from adaptenv.errors import AdaptenvError, ConfigError
 
 if TYPE_CHECKING:
@@ -174,6 +175,7 @@ def adapt(
                                            "HOUSE (adaptenv rollout -o, adaptenv trajectory from-ai2thor) for F to "
                                            "analyze instead of rolling out --policy, which still checks G's edits "
                                            "and runs the episode again in the edited house."),
+    force: bool = FORCE_OPTION,
 ) -> None:
     """One closed-loop step: roll out the policy, analyze (F), edit the house (G), validate, write OUT.
 
@@ -196,7 +198,7 @@ def adapt(
                           f"failure-modes or drop --door-edits (got --generator {generator})")
     if analyzer not in ("builtin", "llm"):
         raise ConfigError(f"--analyzer {analyzer!r}: unknown analyzer; use builtin or llm")
-    writable_folder(out, "-o")
+    folder = output_folder(out, "-o", "adapt", force=force, inputs=[house, trajectory, policy])
     many = _is_house_set(house)
     if trajectory is not None and (many or diagnose):
         raise ConfigError("--trajectory: give one house file and no --diagnose (the trajectory is the episode F "
@@ -228,25 +230,26 @@ def adapt(
     f = LLMAnalyzer(backend) if analyzer == "llm" else BuiltinAnalyzer()
     pol = resolve_policy(policy, seed=seed)
     summaries = []
-    for name, h in zip(names, houses, strict=True):
-        folder = out / name if many else out
-        try:
-            s = _adapt_one(h, name, folder, pol, f, gen, steps=steps, seed=seed, target=target, diagnose=diagnose,
-                           before=before)
-        except AdaptenvError as exc:
-            if not many or strict:
-                raise
-            log.warning("skipping house %s: %s", name, exc)
-            skipped.append(SkippedHouse(name, str(exc)))
-            continue
-        summaries.append(s)
-        if as_json and not many:
-            typer.echo(json.dumps(s, indent=1, default=str))
-        elif not as_json:
-            _print_adapt_summary(console, s, h, folder)
-    if many:
-        _finish_folder(house, out, summaries, skipped, as_json)
-    elif not summaries[0]["valid"]:
+    with folder:
+        for name, h in zip(names, houses, strict=True):
+            where = out / name if many else out
+            try:
+                s = _adapt_one(h, name, where, pol, f, gen, steps=steps, seed=seed, target=target,
+                               diagnose=diagnose, before=before)
+            except AdaptenvError as exc:
+                if not many or strict:
+                    raise
+                log.warning("skipping house %s: %s", name, exc)
+                skipped.append(SkippedHouse(name, str(exc)))
+                continue
+            summaries.append(s)
+            if as_json and not many:
+                typer.echo(json.dumps(s, indent=1, default=str))
+            elif not as_json:
+                _print_adapt_summary(console, s, h, where)
+        if many:
+            _finish_folder(house, out, summaries, skipped, as_json)
+    if not many and not summaries[0]["valid"]:
         raise typer.Exit(1)
 
 

@@ -14,7 +14,8 @@ from typing import TYPE_CHECKING
 
 import typer
 
-from adaptenv.cli._common import JSON_OPTION, interrupted, writable_file, writable_folder
+from adaptenv.cli._common import JSON_OPTION, interrupted
+from adaptenv.cli._outputs import FORCE_OPTION, OutputFolder, output_file, output_folder, recording
 
 if TYPE_CHECKING:
     from adaptenv.agents.config import PPOConfig, TrainConfig
@@ -67,12 +68,47 @@ def check_frames(cfg: TrainConfig | PPOConfig, command: str) -> None:
                    f"{total:,} frames (the card records them)")
 
 
-def check_outputs(cfg: TrainConfig | PPOConfig, run_dir: Path | None) -> None:
-    """Check before any work that the checkpoint (--output) and the run folder (--run-dir) can be written."""
+RUN_DIR_OWNS = ("config.json", "metrics.csv", "state.pt", "tb")
+"""What ``train`` and ``ppo`` write into their run folder (--run-dir)."""
+
+
+def check_outputs(cfg: TrainConfig | PPOConfig, run_dir: Path | None, command: str,
+                  force: bool = False) -> tuple[list[Path], OutputFolder | None]:
+    """Check before any work that the checkpoint (--output), its card and the run folder (--run-dir) may be
+    written (the output rule of :mod:`adaptenv.cli._outputs`); returns the files and the folder to write."""
+    from adaptenv.errors import ConfigError
+
+    resume = bool(getattr(cfg, "resume", False))
+    inputs = [cfg.init or None, cfg.houses]
+    files = []
     if cfg.output:
-        writable_file(Path(cfg.output), "--output")
-    if run_dir is not None:
-        writable_folder(run_dir, "--run-dir")
+        out = Path(cfg.output)
+        card = out.with_suffix(".json")
+        if out.suffix.lower() == ".json":
+            raise ConfigError(f"--output {out}: the training card is written beside the checkpoint as {card.name}, "
+                              "which would overwrite the checkpoint; name the checkpoint .pt (e.g. -o "
+                              f"{out.with_suffix('.pt')})")
+        continued = resume and run_dir is not None and _recorded_output(run_dir) == str(cfg.output)
+        output_file(out, "--output", command, force=force or continued, inputs=inputs)
+        output_file(card, "--output", command, force=force or continued, inputs=inputs,
+                    name=f"--output {out}: its card {card}")
+        files = [out, card]
+    if run_dir is None:
+        return files, None
+    if resume:  # the run's own folder, continued: train checks its state.pt before writing anything
+        return files, OutputFolder(run_dir, command, own=True, remove=[], keep=True)
+    return files, output_folder(run_dir, "--run-dir", command, force=force, inputs=inputs, owns=RUN_DIR_OWNS,
+                                legacy=lambda p: (p / "state.pt").is_file())
+
+
+def _recorded_output(run_dir: Path) -> str | None:
+    """The checkpoint path an earlier run in ``run_dir`` wrote (its config.json's output), if any."""
+    import json
+
+    try:
+        return json.loads((run_dir / "config.json").read_text(encoding="utf-8")).get("output")
+    except (OSError, ValueError, AttributeError):
+        return None
 
 
 def _train_command():
@@ -88,12 +124,14 @@ def _train_command():
         from adaptenv.agents.train import TrainConfig, default_run_dir
         from adaptenv.agents.train import train as run_training
 
+        force = kwargs.pop("force")
         cfg = TrainConfig(**kwargs)
         check_frames(cfg, "adaptenv train")
-        check_outputs(cfg, default_run_dir(cfg))
+        files, folder = check_outputs(cfg, default_run_dir(cfg), "train", force)
         command = train_command_line(cfg)
         try:
-            result = run_training(cfg, command=command)
+            with recording(files, folder, "train"):
+                result = run_training(cfg, command=command)
         except KeyboardInterrupt:
             run_dir = default_run_dir(cfg)
             saved = run_dir is not None and (run_dir / "state.pt").is_file()
@@ -105,7 +143,8 @@ def _train_command():
             f"{card['wall_time_s']:.0f} s; {final_eval_text(card)}"
             + (f"; wrote [bold]{cfg.output}[/]" if cfg.output else ""))
 
-    train.__signature__ = inspect.Signature(params)  # type: ignore[attr-defined]
+    force = inspect.Parameter("force", inspect.Parameter.KEYWORD_ONLY, annotation=bool, default=FORCE_OPTION)
+    train.__signature__ = inspect.Signature([*params, force])  # type: ignore[attr-defined]
     return train
 
 
@@ -119,17 +158,20 @@ def _ppo_command():
 
         from adaptenv.agents.ppo import default_ppo_run_dir, train_ppo
 
+        force = kwargs.pop("force")
         cfg = PPOConfig(**kwargs)
         check_frames(cfg, "adaptenv ppo")
-        check_outputs(cfg, default_ppo_run_dir(cfg))
-        result = train_ppo(cfg, command=config_command_line("ppo", cfg))
+        files, folder = check_outputs(cfg, default_ppo_run_dir(cfg), "ppo", force)
+        with recording(files, folder, "ppo"):
+            result = train_ppo(cfg, command=config_command_line("ppo", cfg))
         card = result.card
         Console().print(
             f"PPO on {card['n_houses']} houses ({card['houses']}): {card['frames']:,} frames in "
             f"{card['wall_time_s']:.0f} s; end threshold {card['end_threshold']}; {final_eval_text(card)}"
             + (f"; wrote [bold]{cfg.output}[/]" if cfg.output else ""))
 
-    ppo.__signature__ = inspect.Signature(_config_params(PPOConfig))  # type: ignore[attr-defined]
+    force = inspect.Parameter("force", inspect.Parameter.KEYWORD_ONLY, annotation=bool, default=FORCE_OPTION)
+    ppo.__signature__ = inspect.Signature([*_config_params(PPOConfig), force])  # type: ignore[attr-defined]
     return ppo
 
 
@@ -154,6 +196,7 @@ def evaluate(
                                 "skipping it with a warning."),
     wipe_every: int = typer.Option(0, "--wipe-every", min=0, help="Wipe the policy's memory (recurrent state and "
                                    "map) at steps K, 2K, ... of each episode (0: never; see adaptenv memory-check)."),
+    force: bool = FORCE_OPTION,
 ) -> None:
     """Evaluate a policy: success, SPL, SEL, collisions, length (mean +- s.e.), per-house CSV, failure maps."""
     import json
@@ -170,7 +213,7 @@ def evaluate(
     from adaptenv.agents.suites import EpisodeFloor
     from adaptenv.progress import ProgressBar
 
-    writable_folder(out, "-o")
+    folder = output_folder(out, "-o", "evaluate", force=force, inputs=[policy, *houses])
     configure_torch()
     console = Console()
     command = shlex.join(["adaptenv", "evaluate", "--policy", policy, *[a for h in houses for a in ("--houses", h)],
@@ -189,51 +232,52 @@ def evaluate(
         require_wipeable(resolved, "--wipe-every")
         wrap = partial(WipeMemory, every=wipe_every)
     summaries = []
-    for spec in houses:
-        house_set = load_house_set(spec, strict=strict)
-        with ProgressBar(f"{policy} on {spec}", episodes) as bar:
-            report = run_eval(policy if workers > 1 else resolved, house_set, episodes=episodes, seed=seed,
-                              batch=batch, workers=workers, floor=floor, progress=bar.update, wrap=wrap)
-        report.policy = policy
-        if wipe_every:
-            report.summary["wipe_every"] = wipe_every
-        sub = out / _slug(spec) if len(houses) > 1 else out
-        report.summary["failure_modes"] = failure_modes(report, house_set)
-        paths = write_report(report, house_set, sub, command=command)
-        summaries.append((spec, report.summary, paths))
-    table = Table(title=f"{policy}: {episodes} episodes per set, seed {seed}")
-    for col in ("houses", "success [95% CI]", "SPL [95% CI]", "SEL", "collisions", "length"):
-        table.add_column(col, justify="left" if col == "houses" else "right")
-    for spec, s, _ in summaries:
-        table.add_row(spec, f"{s['success']:.3f} [{s['success_ci95'][0]:.3f}, {s['success_ci95'][1]:.3f}]",
-                      f"{s['spl']:.3f} [{s['spl_ci95'][0]:.3f}, {s['spl_ci95'][1]:.3f}]",
-                      f"{s['sel']:.3f} +- {s['sel_se']:.3f}", f"{s['collisions']:.1f} +- {s['collisions_se']:.1f}",
-                      f"{s['steps']:.0f} +- {s['steps_se']:.0f}")
-    console.print(table)
-    for spec, s, _ in summaries:
-        if s["skipped_houses"]:
-            console.print(f"skipped {len(s['skipped_houses'])} house(s) of {spec} that cannot be used "
-                          f"({', '.join(list(s['skipped_houses'])[:5])}{', ...' if len(s['skipped_houses']) > 5 else ''}); "
-                          "see summary.json for the reasons", highlight=False)
-    for spec, s, _ in summaries:
-        if s["failure_modes"]:
-            console.print(f"failures on {spec} (built-in analysis F): "
-                          + ", ".join(f"{mode} {n}" for mode, n in s["failure_modes"].items()))
-    if len(summaries) > 1:
-        base_spec, base, _ = summaries[0]
-        drops = {}
-        for spec, s, _ in summaries[1:]:
-            d_s, d_p = drop(base, s, "success"), drop(base, s, "spl")
-            drops[spec] = {"success": d_s, "spl": d_p}
-            console.print(f"drop {base_spec} -> {spec}: success {d_s['drop']:+.3f} "
-                          f"[{d_s['ci95'][0]:+.3f}, {d_s['ci95'][1]:+.3f}], SPL {d_p['drop']:+.3f} "
-                          f"[{d_p['ci95'][0]:+.3f}, {d_p['ci95'][1]:+.3f}]")
-        out.mkdir(parents=True, exist_ok=True)
-        (out / "comparison.json").write_text(json.dumps(
-            {"policy": policy, "episodes": episodes, "seed": seed, "command": command,
-             "sets": {spec: s for spec, s, _ in summaries}, "drop_from": base_spec, "drops": drops},
-            indent=1, default=float) + "\n", encoding="utf-8")
-    console.print(f"wrote results to [bold]{out}[/]")
+    with folder:
+        for spec in houses:
+            house_set = load_house_set(spec, strict=strict)
+            with ProgressBar(f"{policy} on {spec}", episodes) as bar:
+                report = run_eval(policy if workers > 1 else resolved, house_set, episodes=episodes, seed=seed,
+                                  batch=batch, workers=workers, floor=floor, progress=bar.update, wrap=wrap)
+            report.policy = policy
+            if wipe_every:
+                report.summary["wipe_every"] = wipe_every
+            sub = out / _slug(spec) if len(houses) > 1 else out
+            report.summary["failure_modes"] = failure_modes(report, house_set)
+            paths = write_report(report, house_set, sub, command=command)
+            summaries.append((spec, report.summary, paths))
+        table = Table(title=f"{policy}: {episodes} episodes per set, seed {seed}")
+        for col in ("houses", "success [95% CI]", "SPL [95% CI]", "SEL", "collisions", "length"):
+            table.add_column(col, justify="left" if col == "houses" else "right")
+        for spec, s, _ in summaries:
+            table.add_row(spec, f"{s['success']:.3f} [{s['success_ci95'][0]:.3f}, {s['success_ci95'][1]:.3f}]",
+                          f"{s['spl']:.3f} [{s['spl_ci95'][0]:.3f}, {s['spl_ci95'][1]:.3f}]",
+                          f"{s['sel']:.3f} +- {s['sel_se']:.3f}", f"{s['collisions']:.1f} +- {s['collisions_se']:.1f}",
+                          f"{s['steps']:.0f} +- {s['steps_se']:.0f}")
+        console.print(table)
+        for spec, s, _ in summaries:
+            if s["skipped_houses"]:
+                console.print(f"skipped {len(s['skipped_houses'])} house(s) of {spec} that cannot be used "
+                              f"({', '.join(list(s['skipped_houses'])[:5])}{', ...' if len(s['skipped_houses']) > 5 else ''}); "
+                              "see summary.json for the reasons", highlight=False)
+        for spec, s, _ in summaries:
+            if s["failure_modes"]:
+                console.print(f"failures on {spec} (built-in analysis F): "
+                              + ", ".join(f"{mode} {n}" for mode, n in s["failure_modes"].items()))
+        if len(summaries) > 1:
+            base_spec, base, _ = summaries[0]
+            drops = {}
+            for spec, s, _ in summaries[1:]:
+                d_s, d_p = drop(base, s, "success"), drop(base, s, "spl")
+                drops[spec] = {"success": d_s, "spl": d_p}
+                console.print(f"drop {base_spec} -> {spec}: success {d_s['drop']:+.3f} "
+                              f"[{d_s['ci95'][0]:+.3f}, {d_s['ci95'][1]:+.3f}], SPL {d_p['drop']:+.3f} "
+                              f"[{d_p['ci95'][0]:+.3f}, {d_p['ci95'][1]:+.3f}]")
+            out.mkdir(parents=True, exist_ok=True)
+            (out / "comparison.json").write_text(json.dumps(
+                {"policy": policy, "episodes": episodes, "seed": seed, "command": command,
+                 "sets": {spec: s for spec, s, _ in summaries}, "drop_from": base_spec, "drops": drops},
+                indent=1, default=float) + "\n", encoding="utf-8")
+        console.print(f"wrote results to [bold]{out}[/]")
 
 
 def failure_modes(report, house_set) -> dict[str, int]:

@@ -10,6 +10,7 @@ from pathlib import Path
 
 import typer
 
+from adaptenv.cli._outputs import FORCE_OPTION, output_file, record_file
 from adaptenv.errors import ConfigError
 
 assets_app = typer.Typer(help="Asset tables for --assets: build one from objathor's annotations.",
@@ -25,6 +26,7 @@ def from_objathor(
     unmapped: str = typer.Option("keep", "--unmapped", help="keep (type assets that name no catalog type "
                                  "RoomDecor, with a note) or skip them."),
     as_json: bool = typer.Option(False, "--json", help="Print the counts as one JSON object."),
+    force: bool = FORCE_OPTION,
 ) -> None:
     """Build the --assets table of Objaverse-asset houses (SPOC's ProcTHOR-Objaverse) from objathor's annotations.
 
@@ -37,7 +39,9 @@ def from_objathor(
 
     if unmapped not in ("keep", "skip"):
         raise ConfigError(f"--unmapped {unmapped!r}: use keep or skip")
+    output_file(out, "-o", "assets from-objathor", force=force, inputs=[annotations])
     table = objathor_table(annotations, out, unmapped=unmapped)
+    record_file(out, "assets from-objathor")
     counts = {"written": len(table.assets), "mapped_by": table.mapped_by, "unmapped": len(table.unmapped),
               "unmapped_kept_as": FALLBACK_TYPE if unmapped == "keep" else None, "skipped_no_size": len(table.no_size),
               "table": str(out)}

@@ -12,7 +12,8 @@ from pathlib import Path
 
 import typer
 
-from adaptenv.cli._common import interrupted, writable_folder
+from adaptenv.cli._common import interrupted
+from adaptenv.cli._outputs import output_folder
 from adaptenv.cli.adapt import (
     API_OPTION,
     CACHE_OPTION,
@@ -168,8 +169,10 @@ def loop(
 
     from adaptenv.curriculum.executor import ExecutorOptions
     from adaptenv.curriculum.loop import LoopConfig, run_loop
+    from adaptenv.curriculum.records import RUN_INFO, STATE
 
-    writable_folder(out, "-o")
+    folder = output_folder(out, "-o", "loop", inputs=[houses, policy, match_run or None], keep=True, force_flag=None,
+                           legacy=lambda p: (p / STATE).is_file() or (p / RUN_INFO).is_file())
     if resume:
         check_resumable(out)
     console = Console()
@@ -192,7 +195,7 @@ def loop(
     check_house_sets([cfg.houses, *cfg.heldout.values()], strict, console.print)
     command = shlex.join(["adaptenv", *sys.argv[1:]])
     try:
-        with ExecutorOptions(executor, workers, address).make() as ex:
+        with folder, ExecutorOptions(executor, workers, address).make() as ex:
             records = run_loop(cfg, out, resume=resume, executor=ex, progress=lambda text: console.print(f"[dim]{text}[/]"),
                                command=command)
     except KeyboardInterrupt:
@@ -234,7 +237,9 @@ def experiment(
 
     console = Console()
     cfg = ExperimentConfig.load(config)
-    out = writable_folder(out or Path("runs") / config.stem, "-o")
+    out = out or Path("runs") / config.stem
+    folder = output_folder(out, "-o", "experiment", inputs=[config], keep=True, force_flag=None,
+                           legacy=lambda p: (p / "experiment.json").is_file())
     ref = cfg.loop_config(cfg.reference, cfg.seeds[0])
     check_house_sets([ref.houses, *ref.heldout.values()], strict, console.print)
     # one run per task: runs are long, and in order a stopped experiment leaves whole seeds
@@ -245,18 +250,19 @@ def experiment(
 
     failed: RunsFailed | None = None
     try:
-        try:
-            run_experiment(cfg, out, executor=ex, command=" ".join(["adaptenv"] + sys.argv[1:]), progress=say,
-                           final_episodes=final_episodes)
-        except RunsFailed as exc:  # the other runs finished: show them, then say which failed
-            failed = exc
-        console.print((out / "summary.md").read_text(encoding="utf-8"))
-        if final_episodes and failed is None:
-            from adaptenv.curriculum.experiment import final_evaluation
+        with folder:
+            try:
+                run_experiment(cfg, out, executor=ex, command=" ".join(["adaptenv"] + sys.argv[1:]), progress=say,
+                               final_episodes=final_episodes)
+            except RunsFailed as exc:  # the other runs finished: show them, then say which failed
+                failed = exc
+            console.print((out / "summary.md").read_text(encoding="utf-8"))
+            if final_episodes and failed is None:
+                from adaptenv.curriculum.experiment import final_evaluation
 
-            final_evaluation(out, cfg, final_episodes, executor=ex, progress=say)
-            console.print(f"[bold]final evaluation on {final_episodes} episodes per set[/]")
-            console.print((out / "summary_final.md").read_text(encoding="utf-8"))
+                final_evaluation(out, cfg, final_episodes, executor=ex, progress=say)
+                console.print(f"[bold]final evaluation on {final_episodes} episodes per set[/]")
+                console.print((out / "summary_final.md").read_text(encoding="utf-8"))
     except KeyboardInterrupt:
         interrupted(f"the finished runs and iterations are kept in {out}; run the same command again to continue")
     finally:

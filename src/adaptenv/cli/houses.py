@@ -16,7 +16,8 @@ from typing import Annotated
 import typer
 from typer.core import TyperCommand
 
-from adaptenv.cli._common import JSON_OPTION, existing_file, writable_file, writable_folder
+from adaptenv.cli._common import JSON_OPTION, existing_file
+from adaptenv.cli._outputs import FORCE_OPTION, output_file, output_folder, record_file
 from adaptenv.errors import ConfigError
 
 houses_app = typer.Typer(help="ProcTHOR-format houses: generate new ones, rearrange existing ones, split datasets "
@@ -102,6 +103,7 @@ def generate(
     rooms: Annotated[str | None, typer.Option("--rooms", help=_ROOMS_HELP)] = None,
     preset: Annotated[str | None, typer.Option("--preset", help="A named house set (listed by --help).")] = None,
     split: Annotated[str, typer.Option("--split", help="ProcTHOR asset split the furniture comes from.")] = "train",
+    force: bool = FORCE_OPTION,
 ) -> None:
     """Generate procedural ProcTHOR-format houses (loadable in AI2-THOR >= 5.0)."""
     from adaptenv.progress import ProgressBar
@@ -115,7 +117,7 @@ def generate(
         raise ConfigError(f"--seed: expected a non-negative integer, got {seed}")
     if out.exists() and not out.is_dir():
         raise ConfigError(f"{out}: exists and is not a folder; pass a folder to -o")
-    writable_folder(out, "-o")
+    folder = output_folder(out, "-o", "houses generate", force=force)
     if preset is not None and preset not in PRESETS:
         raise ConfigError(f"--preset: unknown preset {preset!r}; use one of {', '.join(PRESETS)}")
     cfg = _config_for(rooms, split) if preset is None else None  # check the options before any output
@@ -129,10 +131,11 @@ def generate(
             for i, s in enumerate(child_seeds(seed, n)):
                 named.append((f"house_{i:04d}", generate_house(s, cfg)))
                 bar.advance()
-    out.mkdir(parents=True, exist_ok=True)
-    for name, house in named:
-        save_house(house, out / f"{name}.json")
-        rows.append(_summary_row(name, house))
+    with folder:
+        out.mkdir(parents=True, exist_ok=True)
+        for name, house in named:
+            save_house(house, out / f"{name}.json")
+            rows.append(_summary_row(name, house))
     _print_summary(rows, out)
 
 
@@ -141,6 +144,7 @@ def rearrange(
     house_path: Annotated[Path, typer.Argument(metavar="HOUSE.json", help="The house to rearrange.")],
     out: Annotated[Path, typer.Option("-o", "--out", help="Where to write the rearranged house (a .json file).")],
     seed: Annotated[int, typer.Option("--seed", help="Seed of the new arrangement.")] = 0,
+    force: bool = FORCE_OPTION,
 ) -> None:
     """Place a house's movable furniture anew (same rooms, doors, fixtures and target types)."""
     from rich.console import Console
@@ -152,10 +156,11 @@ def rearrange(
         raise ConfigError(f"--seed: expected a non-negative integer, got {seed}")
     if out.suffix.lower() != ".json":
         raise ConfigError(f"{out}: the output must be a .json file; pass e.g. -o rearranged.json")
-    writable_file(out, "-o")
+    output_file(out, "-o", "houses rearrange", force=force, inputs=[house_path])
     house = load_house(existing_file(house_path, "house file"))
     new = rearrange_house(house, seed)
     save_house(new, out)
+    record_file(out, "houses rearrange")
     old = {o.id: o.position for o in house.objects}
     moved = sum(1 for o in new.objects if o.id in old and old[o.id] != o.position)
     Console().print(f"wrote [bold]{out}[/]: {len(new.objects)} objects, {moved} moved")
@@ -168,6 +173,7 @@ def export(
                                            "Python: FILE.jsonl.gz:0:100 is lines 0 to 99.", show_default=False)],
     out: Annotated[Path, typer.Option("-o", "--out", help="Folder to write house-000042.json, ... to (named by "
                                       "line index).")],
+    force: bool = FORCE_OPTION,
 ) -> None:
     """Split a house dataset (ProcTHOR-10K, SPOC: one house JSON per line) into a folder of house files."""
     from rich.console import Console
@@ -182,9 +188,10 @@ def export(
     if out.exists() and not out.is_dir():
         raise ConfigError(f"{out}: exists and is not a folder; pass a folder to -o")
     names = []
-    for index, doc in dataset_documents(ds):
-        names.append(house_name(index))
-        save_house(parse_house(doc, line_label(ds.path, index)), out / f"{names[-1]}.json")
+    with output_folder(out, "-o", "houses export", force=force, inputs=[ds.path]):
+        for index, doc in dataset_documents(ds):
+            names.append(house_name(index))
+            save_house(parse_house(doc, line_label(ds.path, index)), out / f"{names[-1]}.json")
     Console().print(f"wrote {len(names)} house files to [bold]{out}[/] ({names[0]}.json to {names[-1]}.json)",
                     highlight=False)
 

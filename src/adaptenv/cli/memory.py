@@ -12,6 +12,8 @@ from typing import Any
 
 import typer
 
+from adaptenv.cli._outputs import FORCE_OPTION
+
 
 def memory_check(
     policy: str = typer.Option("pretrained", "--policy", "-p", help="Policy: pretrained, a checkpoint path (.pt), "
@@ -26,6 +28,7 @@ def memory_check(
     workers: int = typer.Option(1, "--workers", "-w", min=1, help="Worker processes (episodes are split among them)."),
     batch: int = typer.Option(64, "--batch", min=1, help="Episodes simulated at once per process."),
     out: Path | None = typer.Option(None, "-o", "--out", help="Also write OUT/memory_check.json."),
+    force: bool = FORCE_OPTION,
 ) -> None:
     """Wipe the policy's memory every K steps of each episode: success, SPL and the paired drop from never.
 
@@ -39,11 +42,13 @@ def memory_check(
     from adaptenv.agents.memory import wipe_intervals
     from adaptenv.agents.network import configure_torch
     from adaptenv.cli._common import writable_folder
+    from adaptenv.cli._outputs import output_file, record_file
     from adaptenv.progress import ProgressBar
 
     ks = wipe_intervals(every, "--every")
     if out is not None:
         writable_folder(out, "-o")
+        output_file(out / "memory_check.json", "-o", "memory-check", force=force, inputs=[policy, houses])
     configure_torch()
     command = shlex.join(["adaptenv", "memory-check", "--policy", policy, "--houses", houses, "-n", str(episodes),
                           "--seed", str(seed), *[a for k in ks[1:] for a in ("--every", str(k))],
@@ -56,6 +61,7 @@ def memory_check(
     if out is not None:
         out.mkdir(parents=True, exist_ok=True)
         (out / "memory_check.json").write_text(json.dumps(result, indent=1, default=float) + "\n", encoding="utf-8")
+        record_file(out / "memory_check.json", "memory-check")
         console.print(f"wrote [bold]{out / 'memory_check.json'}[/]")
 
 

@@ -10,7 +10,8 @@ from pathlib import Path
 
 import typer
 
-from adaptenv.cli._common import JSON_OPTION, writable_file
+from adaptenv.cli._common import JSON_OPTION
+from adaptenv.cli._outputs import FORCE_OPTION, output_file, record_file
 
 HOUSE_ARGUMENT = typer.Argument(..., metavar="HOUSE.json", help="House JSON file (ProcTHOR format).",
                                 show_default=False)
@@ -35,6 +36,7 @@ def render(
     no_labels: bool = NO_LABELS_OPTION,
     title: str | None = TITLE_OPTION,
     highlight: list[str] = HIGHLIGHT_OPTION,
+    force: bool = FORCE_OPTION,
 ) -> None:
     """Render a house top-down (rooms, walls, doors, furniture with ids), optionally with an episode."""
     from rich.console import Console
@@ -45,7 +47,7 @@ def render(
     from adaptenv.sim.trajectory import Trajectory
     from adaptenv.sim.world import compile_world
 
-    writable_file(out, "-o")
+    output_file(out, "-o", "render", force=force, inputs=[house, trajectory])
     h = load_house(house)
     traj = Trajectory.load(trajectory) if trajectory is not None else None
     if traj is not None:
@@ -56,6 +58,7 @@ def render(
         colours[oid] = colour or "deepskyblue"
     path = render_to_file(h, out, trajectory=traj, grid=grid, size=size, labels=not no_labels, title=title,
                           highlight=colours or None)
+    record_file(path, "render")
     Console().print(f"wrote [bold]{path}[/]")
 
 

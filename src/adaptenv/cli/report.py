@@ -10,6 +10,8 @@ from pathlib import Path
 
 import typer
 
+from adaptenv.cli._outputs import FORCE_OPTION, output_folder
+
 FOLDER_ARGUMENT = typer.Argument(..., metavar="RUN_OR_EXPERIMENT_DIR", show_default=False,
                                  help="A run folder (run.json, iterations.jsonl) or an experiment folder "
                                       "(<method>/seed_<s>/ run folders).")
@@ -17,13 +19,16 @@ OUT_OPTION = typer.Option(None, "-o", "--out", metavar="OUT_DIR",
                           help="Folder to write the report into (default: <folder>/report).")
 
 
-def report(folder: Path = FOLDER_ARGUMENT, out: Path | None = OUT_OPTION) -> None:
+def report(folder: Path = FOLDER_ARGUMENT, out: Path | None = OUT_OPTION, force: bool = FORCE_OPTION) -> None:
     """Write an HTML report (curves, results table, before/after gallery) and print index.html's path."""
-    from adaptenv.cli._common import writable_folder
     from adaptenv.report import build_report
+    from adaptenv.report.html import OWNS, is_report_folder
 
-    writable_folder(out if out is not None else folder / "report", "-o")
-    print(build_report(folder, out))
+    target = out if out is not None else folder / "report"
+    with output_folder(target, "-o", "report", force=force, inputs=[folder], owns=OWNS,
+                       legacy=is_report_folder):
+        index = build_report(folder, out)
+    print(index)
 
 
 def register(app: typer.Typer, bench: typer.Typer) -> None:

@@ -10,7 +10,8 @@ from pathlib import Path
 
 import typer
 
-from adaptenv.cli._common import JSON_OPTION, existing_file, writable_file
+from adaptenv.cli._common import JSON_OPTION, existing_file
+from adaptenv.cli._outputs import FORCE_OPTION, output_file, record_file
 
 POLICIES = ("expert", "random")
 _HOUSE = typer.Argument(..., help="A ProcTHOR house JSON file.")
@@ -39,6 +40,7 @@ def rollout(
     max_steps: int | None = typer.Option(None, "--max-steps", min=1, help="Step limit (default: spec.MAX_STEPS = 600)."),
     out: Path = _OUT,
     render: Path | None = _RENDER,
+    force: bool = FORCE_OPTION,
 ) -> None:
     """Run one episode, print its metrics and write the trajectory (optionally a top-down image)."""
     from rich.console import Console
@@ -51,9 +53,9 @@ def rollout(
     from adaptenv.sim.world import compile_world
 
     existing_file(house, "house file")
-    writable_file(out, "-o")
+    output_file(out, "-o", "rollout", force=force, inputs=[house])
     if render is not None:
-        writable_file(render, "--render")
+        output_file(render, "--render", "rollout", force=force, inputs=[house, out])
     house_model = load_house(house)
     world = compile_world(house_model, name=str(house))
     pol = resolve_policy(policy, seed)
@@ -62,6 +64,7 @@ def rollout(
     traj = run_episode(world, episode, pol, max_steps=max_steps or MAX_STEPS, policy_name=policy,
                        expert_length=expert_length)
     traj.save(out)
+    record_file(out, "rollout")
     table = Table(title=f"{policy} looking for {traj.target_type} in {house.name}")
     table.add_column("metric")
     table.add_column("value", justify="right")
@@ -77,6 +80,7 @@ def rollout(
 
         render.parent.mkdir(parents=True, exist_ok=True)
         render_house(house_model, trajectory=traj).save(render)
+        record_file(render, "rollout")
         console.print(f"wrote the top-down image to [bold]{render}[/]")
 
 

@@ -11,6 +11,7 @@ from pathlib import Path
 import typer
 
 from adaptenv.cli._common import existing_file
+from adaptenv.cli._outputs import FORCE_OPTION, output_file, record_file
 
 trajectory_app = typer.Typer(help="Trajectories from other simulators: convert an AI2-THOR episode log.",
                              no_args_is_help=True, rich_markup_mode=None)  # plain help, like adaptenv.cli.HELP_STYLE
@@ -27,6 +28,7 @@ def from_ai2thor(
     target: str | None = typer.Option(None, "--target", metavar="TYPE", help="Target type (e.g. Bed, or bed.n.01); "
                                       "default: the log header's target_type."),
     as_json: bool = typer.Option(False, "--json", help="Print the metrics and dropped actions as JSON."),
+    force: bool = FORCE_OPTION,
 ) -> None:
     """Convert an episode your agent ran in AI2-THOR into an adaptenv trajectory.
 
@@ -40,10 +42,12 @@ def from_ai2thor(
     from adaptenv.sim.ai2thor import convert_ai2thor_log
     from adaptenv.sim.world import compile_world
 
+    output_file(out, "-o", "trajectory from-ai2thor", force=force, inputs=[log, house])
     world = compile_world(load_house(existing_file(house, "house file")), house.stem)
     conv = convert_ai2thor_log(existing_file(log, "AI2-THOR log"), world, target_type=target)
     traj = conv.trajectory
     traj.save(out)
+    record_file(out, "trajectory from-ai2thor")
     m = traj.metrics
     if as_json:
         typer.echo(json.dumps({"trajectory": str(out), "target_type": traj.target_type, "steps": len(traj.steps),

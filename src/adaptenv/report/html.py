@@ -58,6 +58,8 @@ from adaptenv.sim.trajectory import Trajectory
 GENERATOR = "adaptenv report"
 INDEX = "index.html"
 _OWNED = ("img", "plots", "runs", "data")
+OWNS = (INDEX, *_OWNED)
+"""Every top-level name a report writes into its folder."""
 """Sub-folders a report owns; cleared before a report is rewritten in place."""
 CSS_FILE = Path(__file__).parent / "static" / "report.css"
 GALLERY_SIZE = 640
@@ -795,6 +797,12 @@ def write_experiment_report(exp: ExperimentData, out: Path) -> Path:
 
 # --------------------------------------------------------------------------- entry point
 
+def is_report_folder(out: Path) -> bool:
+    """Whether ``out`` holds a report adaptenv wrote (its index.html names the generator)."""
+    index = out / INDEX
+    return index.is_file() and f'content="{GENERATOR}"' in index.read_text(encoding="utf-8", errors="replace")[:2000]
+
+
 def _prepare_out(out: Path, source: Path) -> None:
     """Create the output folder; clear the sub-folders of an earlier report there (never anything else)."""
     if out.resolve() == source.resolve():
@@ -802,8 +810,7 @@ def _prepare_out(out: Path, source: Path) -> None:
                             "pass another -o folder (default: <folder>/report)")
     if out.exists() and not out.is_dir():
         raise AdaptenvError(f"{out}: exists and is not a folder; pass a folder to -o")
-    index = out / INDEX
-    if index.is_file() and f'content="{GENERATOR}"' in index.read_text(encoding="utf-8", errors="replace")[:2000]:
+    if is_report_folder(out):
         for name in _OWNED:
             if (out / name).is_dir():
                 shutil.rmtree(out / name)
