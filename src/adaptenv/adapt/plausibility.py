@@ -35,8 +35,9 @@ object against the house before editing (only what the move made worse counts):
 - ``blocks_window``: a tall object stands in front of a window, or covers more of it than before:
   its footprint, within :data:`WINDOW_DEPTH` m of the window, covers more than :data:`WINDOW_EPS` m
   more of the window's width, and its top reaches above the window's middle (the sill plus
-  :data:`WINDOW_COVER` of the window's height; ProcTHOR windows have sills at 0.5-0.85 m and middles
-  near 1.3 m, so a sofa or a dresser stands under a window, a fridge or a bookshelf in front of it).
+  :data:`WINDOW_COVER` of the window's height; ProcTHOR-10K windows have sills at 0.5-0.85 m and
+  middles near 1.3 m, procedural ones middles at 1.2-1.6 m, so a sofa or a dresser stands under a
+  window, a fridge or a bookshelf in front of it).
 
 :func:`audit` compares an adapted house with its original; :class:`PlausibilityReference` and
 :func:`check_move` are the per-edit form every generator's
