@@ -3,6 +3,7 @@ the scene, the new rule flags it, and the validator refuses the move that would 
 
 from __future__ import annotations
 
+import numpy as np
 import pytest
 
 from adaptenv.adapt.edits import Edit, apply_edit
@@ -58,6 +59,16 @@ def test_dresser_slid_past_the_end_of_its_wall(l_room):
     assert _rules(l_room, _moved(l_room, "Dresser|0", 3.0, 2.81)) == {"wall_overhang"}  # 0.6 m past its end
     assert _refused_by(l_room, "Dresser|0", -1.5, 0.0, None, (1.0, 1.0)) == {"wall_overhang"}
     assert _refused_by(l_room, "Dresser|0", -0.8, 0.0, None, (1.0, 1.0)) == set()
+
+
+def test_builtin_g_slides_wall_furniture_only_as_far_as_its_wall(l_room):
+    from adaptenv.adapt.generators.builtin import along_wall
+
+    v = EditValidator(l_room, start=(1.0, 1.0))
+    d, rotation = along_wall(v, "Dresser|0", np.array([-1.5, 0.0]), 90.0, np.random.default_rng(0))
+    assert np.allclose(d, [-0.75, 0.0]) and rotation is None  # 1.5 m would run 0.6 m past the wall's end
+    assert np.allclose(along_wall(v, "Dresser|0", np.array([-0.6, 0.3]), None, np.random.default_rng(0))[0],
+                       [-0.6, 0.0])  # within the wall: the whole slide
 
 
 @pytest.fixture(scope="module")

@@ -783,6 +783,10 @@ class EditValidator:
             return True
         return False
 
+    def footprint_at(self, i: int, center: np.ndarray, yaw: float) -> Footprint:
+        """Floor object i (``ctx`` index) at a pose, as the edited house would have it (nothing is moved)."""
+        return self._footprint(i, center, yaw)
+
     def _footprint(self, i: int, center: np.ndarray, yaw: float) -> Footprint:
         """Object i's footprint at a pose, exactly as ``SceneGeometry.from_house`` of the edited house has it."""
         fp = self.geometry.footprints[self._slot[self.ctx.ids[i]]]
