@@ -20,7 +20,24 @@ object against the house before editing (only what the move made worse counts):
   floor: more than :data:`OPEN_FLOOR` m from every wall and every other floor object;
 - ``facing_broken``: a seat that faced the television (stand) of its room, the television that
   faced it, or a chair that faced its table (heading within 45 degrees of the direction to the
-  partner's centre) now turns more than 60 degrees away.
+  partner's centre) now turns more than 60 degrees away;
+- ``wall_overhang``: an edge of the object that runs along a wall (parallel within
+  :data:`~adaptenv.scene.graph.AGAINST_WALL_ANGLE` degrees, within
+  :data:`~adaptenv.scene.graph.AGAINST_WALL_DISTANCE` m) runs past the wall's end (into a doorway, an
+  open connection or past a corner) by more than :data:`OVERHANG` m, and further than before;
+- ``in_opening``: the object reaches further into an open connection between two rooms (a wall
+  ProcTHOR marks ``empty``: no wall, no door) than before: the opening's length by
+  :data:`OPENING_CLEARANCE` m on each side;
+- ``group_left_behind``: the anchor of an asset group (a dining table or desk with its chairs, an
+  armchair with its lamp, a sofa with its armchair) moved, and a member no longer stands where it
+  stood relative to it: its centre, in the anchor's frame, is more than :data:`GROUP_SHIFT` m from
+  where it was (a group moves together or not at all; a box anchor turned by 180 degrees counts as unturned);
+- ``blocks_window``: a tall object stands in front of a window, or covers more of it than before:
+  its footprint, within :data:`WINDOW_DEPTH` m of the window, covers more than :data:`WINDOW_EPS` m
+  more of the window's width, and its top reaches above the window's middle (the sill plus
+  :data:`WINDOW_COVER` of the window's height; ProcTHOR-10K windows have sills at 0.5-0.85 m and
+  middles near 1.3 m, procedural ones middles at 1.2-1.6 m, so a sofa or a dresser stands under a
+  window, a fridge or a bookshelf in front of it).
 
 :func:`audit` compares an adapted house with its original; :class:`PlausibilityReference` and
 :func:`check_move` are the per-edit form every generator's
@@ -40,20 +57,22 @@ from importlib import resources
 import numpy as np
 import shapely
 
-from adaptenv.adapt.doorways import ApproachZone, approach_zones
+from adaptenv.adapt.doorways import APPROACH_DEPTH, ApproachZone, approach_zones, covered_width
 from adaptenv.adapt.realism import FREE_STANDING
 from adaptenv.errors import AdaptenvError
 from adaptenv.scene.assets import AssetCatalog, load_catalog
-from adaptenv.scene.geometry import Footprint, SceneGeometry, heading
+from adaptenv.scene.geometry import Footprint, SceneGeometry, heading, yaw_axes
 from adaptenv.scene.graph import (
     AGAINST_WALL_ANGLE,
     AGAINST_WALL_DISTANCE,
+    MIN_WALL_OVERLAP,
     NEXT_TO_DISTANCE,
     backs_onto,
 )
 from adaptenv.scene.house import House
 
-RULES = ("edge_off_wall", "door_approach", "group_split", "open_floor", "facing_broken")
+RULES = ("edge_off_wall", "door_approach", "group_split", "open_floor", "facing_broken", "wall_overhang",
+         "in_opening", "group_left_behind", "blocks_window")
 #: Depth (m) of a doorway's clearance zone on each side. ProcTHOR keeps the door's swing (its width, about
 #: 0.65-1.0 m) plus 0.35 m free on the side a door opens to; edits do not know that side, so both get 1 m.
 DOOR_CLEARANCE = 1.0
@@ -75,6 +94,18 @@ FACING: dict[str, frozenset[str]] = {
     "TVStand": frozenset({"Sofa", "ArmChair"}),
     "Chair": frozenset({"DiningTable", "Desk"}),
 }
+#: An edge along a wall may run past the wall's end by this much (m) before it overhangs.
+OVERHANG = 0.1
+#: Depth (m) of an open connection's clearance on each side (ProcTHOR keeps 0.35 m free; a margin added).
+OPENING_CLEARANCE = APPROACH_DEPTH
+#: How far (m) a group member's centre may end from where it stood relative to its moved anchor.
+GROUP_SHIFT = 0.3
+#: Depth (m) in front of a window where a tall object blocks it.
+WINDOW_DEPTH = 0.6
+#: A tall object reaches above the sill by this share of the window's height (0.5: above the window's middle).
+WINDOW_COVER = 0.5
+#: Width (m) by which a tall object may cover more of a window than before (touching the frame, rounding).
+WINDOW_EPS = 0.1
 
 
 @dataclass(frozen=True)
@@ -140,6 +171,97 @@ class _Walls:
     def distance(self, fp: Footprint) -> float:
         return float(shapely.distance(fp.polygon, self.union)) if len(self.lines) else math.inf
 
+    def overhang(self, fp: Footprint) -> float:
+        """How far (m) an edge of the footprint that runs along a wall runs past that wall's end (0 when none does).
+
+        An edge runs along a wall when a blocking segment parallel to it (within AGAINST_WALL_ANGLE) lies within
+        AGAINST_WALL_DISTANCE and covers at least MIN_WALL_OVERLAP of it, projected onto the edge; the overhang is
+        the part of the edge no such segment covers.
+        """
+        if not len(self.lines):
+            return 0.0
+        pts = fp.outline
+        d = self.p1 - self.p0
+        length = np.maximum(np.linalg.norm(d, axis=1), 1e-12)
+        us = d / length[:, None]
+        max_sin = math.sin(math.radians(AGAINST_WALL_ANGLE))
+        worst = 0.0
+        for a, b in zip(pts, np.roll(pts, -1, axis=0), strict=True):
+            le = float(np.linalg.norm(b - a))
+            if le < 1e-6:
+                continue
+            ue = (b - a) / le
+            parallel = np.abs(us[:, 0] * ue[1] - us[:, 1] * ue[0]) <= max_sin
+            if not parallel.any():
+                continue
+            k = np.flatnonzero(parallel)
+            k = k[shapely.distance(shapely.LineString([a, b]), self.lines[k]) <= AGAINST_WALL_DISTANCE]
+            if not len(k):
+                continue
+            t0, t1 = (self.p0[k] - a) @ ue, (self.p1[k] - a) @ ue
+            spans = sorted(zip(np.clip(np.minimum(t0, t1), 0.0, le), np.clip(np.maximum(t0, t1), 0.0, le),
+                               strict=True))
+            covered, end = 0.0, 0.0
+            for lo, hi in spans:
+                if hi > end:
+                    covered += hi - max(lo, end)
+                    end = hi
+            if covered >= MIN_WALL_OVERLAP:
+                worst = max(worst, le - covered)
+        return worst
+
+
+@dataclass(frozen=True)
+class WindowZone:
+    """A window's floor zone (its width by WINDOW_DEPTH m on each side) and the height a tall object reaches."""
+
+    zone: ApproachZone
+    tall_from: float
+    """Objects whose top is above this height (m) block the window."""
+
+
+def window_zones(house: House, geometry: SceneGeometry) -> list[WindowZone]:
+    """The zone in front of every window of the house, with the height above which an object blocks it."""
+    holes = {w.id: [v.y for v in w.holePolygon] for w in house.windows}
+    out = []
+    for w in geometry.windows:
+        ys = holes.get(w.id)
+        p0, p1 = np.array(w.p0, dtype=float), np.array(w.p1, dtype=float)
+        width = float(np.linalg.norm(p1 - p0))
+        if not ys or width < 1e-6:
+            continue
+        sill, top = min(ys), max(ys)
+        zone = shapely.LineString([w.p0, w.p1]).buffer(WINDOW_DEPTH, cap_style="flat")
+        out.append(WindowZone(ApproachZone(w.id, p0, (p1 - p0) / width, width, zone), sill + WINDOW_COVER * (top - sill)))
+    return out
+
+
+def opening_zones(geometry: SceneGeometry) -> list[ApproachZone]:
+    """The clearance of every open connection between two rooms (an ``empty`` wall), OPENING_CLEARANCE m per side."""
+    out = []
+    for w in geometry.walls:
+        p0, p1 = np.array(w.p0, dtype=float), np.array(w.p1, dtype=float)
+        width = float(np.linalg.norm(p1 - p0))
+        if not w.empty or len(set(w.rooms)) < 2 or width < 1e-6:
+            continue
+        zone = shapely.LineString([w.p0, w.p1]).buffer(OPENING_CLEARANCE, cap_style="flat")
+        out.append(ApproachZone(w.wall_ids[0], p0, (p1 - p0) / width, width, zone))
+    return out
+
+
+def _offset(anchor: tuple[tuple[float, float], float], member: tuple[float, float], turn: float = 0.0) -> np.ndarray:
+    """The member's centre in the anchor's frame (anchor = (centre, yaw); ``turn`` added to the anchor's yaw)."""
+    ux, uz = yaw_axes(anchor[1] + turn)
+    v = np.array(member) - np.array(anchor[0])
+    return np.array([float(v @ ux), float(v @ uz)])
+
+
+def _window_cover(w: WindowZone, fp: Footprint) -> float:
+    """Width (m) of the window a tall footprint covers within the window's zone (0 for a low one)."""
+    if fp.height <= w.tall_from or not w.zone.zone.intersects(fp.polygon):
+        return 0.0
+    return covered_width(w.zone, [fp.polygon])
+
 
 def _on_open_floor(fp: Footprint, walls: _Walls, others: list[Footprint]) -> bool:
     if walls.distance(fp) <= OPEN_FLOOR:
@@ -173,6 +295,14 @@ class PlausibilityReference:
     zone_area: dict[tuple[str, str], float]
     """(door id, object id) -> area (m^2) of the object inside the door's zone, where positive."""
     walls: _Walls = field(repr=False)
+    overhang: dict[str, float] = field(default_factory=dict)
+    """Object id -> :meth:`_Walls.overhang` where it stood, where positive."""
+    openings: tuple[ApproachZone, ...] = ()
+    opening_area: dict[tuple[str, str], float] = field(default_factory=dict)
+    """(open wall id, object id) -> area (m^2) of the object inside the opening's zone, where positive."""
+    windows: tuple[WindowZone, ...] = ()
+    window_cover: dict[tuple[str, str], float] = field(default_factory=dict)
+    """(window id, object id) -> width (m) of the window the object covered, where positive."""
 
     @classmethod
     def of(cls, house: House, catalog: AssetCatalog | None = None,
@@ -199,9 +329,18 @@ class PlausibilityReference:
         zones = tuple(approach_zones(geometry, DOOR_CLEARANCE))
         areas = {(z.door_id, f.object_id): z.zone.intersection(f.polygon).area for z in zones for f in floor
                  if z.zone.intersects(f.polygon)}
+        openings = tuple(opening_zones(geometry))
+        opening_area = {(z.door_id, f.object_id): z.zone.intersection(f.polygon).area for z in openings
+                        for f in floor if z.zone.intersects(f.polygon)}
+        windows = tuple(window_zones(house, geometry))
+        cover = {(w.zone.door_id, f.object_id): _window_cover(w, f) for w in windows for f in floor}
+        overhang = {f.object_id: walls.overhang(f) for f in floor}
         return cls({f.object_id: (f.center, f.yaw) for f in floor}, {f.object_id: f.object_type for f in floor},
                    anchored, small, tuple(groups), tuple(facing), zones,
-                   {k: v for k, v in areas.items() if v > 0.0}, walls)
+                   {k: v for k, v in areas.items() if v > 0.0}, walls,
+                   {k: v for k, v in overhang.items() if v > 0.0}, openings,
+                   {k: v for k, v in opening_area.items() if v > 0.0}, windows,
+                   {k: v for k, v in cover.items() if v > 0.0})
 
     def moved(self, fp: Footprint) -> bool:
         """Whether a footprint stands elsewhere (or turned) compared with the original house."""
@@ -241,11 +380,48 @@ def check_move(ref: PlausibilityReference, fp: Footprint, current: Mapping[str, 
         if oid in (a, b) and a in now and b in now and _faces(now[a], now[b]) < FACING_AFTER:
             out.append(Violation("facing_broken", oid, f"{a} no longer faces {b}",
                                  (b if oid == a else a,)))
+    out += _person_rules(ref, fp, now)
     floor = [f for f in now.values() if f.role == "floor"]
     for k in sorted({oid} | {s for s in ref.small if s in now and s != oid and ref.moved(now[s])}):
         if k in ref.small and _on_open_floor(now[k], ref.walls, floor):
             out.append(Violation("open_floor", k, f"{k} ({now[k].object_type}) stands alone on open floor; its "
                                  "type stands by a wall or by furniture, never in the middle of a room"))
+    return out
+
+
+def _person_rules(ref: PlausibilityReference, fp: Footprint, now: Mapping[str, Footprint]) -> list[Violation]:
+    """What a person sees at once: an overhang past a wall's end, furniture in an open connection, a group left
+    behind by its anchor, a tall object in front of a window."""
+    oid = fp.object_id
+    out: list[Violation] = []
+    over = ref.walls.overhang(fp)
+    if over > OVERHANG and over > ref.overhang.get(oid, 0.0) + 0.05:
+        out.append(Violation("wall_overhang", oid, f"{oid} ({fp.object_type}) runs {over:.2f} m past the end of the "
+                             "wall it stands along; keep it along the wall"))
+    for z in ref.openings:
+        if not z.zone.intersects(fp.polygon):
+            continue
+        grew = z.zone.intersection(fp.polygon).area - ref.opening_area.get((z.door_id, oid), 0.0)
+        if grew > ZONE_EPS:
+            out.append(Violation("in_opening", oid, f"{oid} ({fp.object_type}) moves {grew:.2f} m^2 further into the "
+                                 f"open connection {z.door_id} between two rooms ({OPENING_CLEARANCE:g} m each side)",
+                                 (z.door_id,)))
+    for a, m, name, _ in ref.groups:
+        if oid not in (a, m) or a not in now or m not in now or not ref.moved(now[a]):
+            continue
+        was = _offset(ref.poses[a], ref.poses[m][0])
+        turns = (0.0, 180.0) if now[a].shape is None else (0.0,)
+        shift = min(float(np.linalg.norm(_offset((now[a].center, now[a].yaw), now[m].center, t) - was)) for t in turns)
+        if shift > GROUP_SHIFT:
+            out.append(Violation("group_left_behind", oid, f"{m} ({ref.types.get(m, '?')}) stands {shift:.2f} m from "
+                                 f"where it stood beside {a} ({ref.types.get(a, '?')}), its {name} group anchor, which "
+                                 "moved; a group moves together", (m if oid == a else a,)))
+    for w in ref.windows:
+        cover = _window_cover(w, fp)
+        if cover > ref.window_cover.get((w.zone.door_id, oid), 0.0) + WINDOW_EPS:
+            out.append(Violation("blocks_window", oid, f"{oid} ({fp.object_type}, {fp.height:.2f} m tall) stands in "
+                                 f"front of window {w.zone.door_id}, covering {cover:.2f} of its {w.zone.width:.2f} m",
+                                 (w.zone.door_id,)))
     return out
 
 

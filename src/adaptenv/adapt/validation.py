@@ -25,8 +25,9 @@ against each other) may overlap.
 (only the moved object's inflated footprint is re-drawn) and one connected-component labelling
 per candidate, and the plausibility rules of :mod:`adaptenv.adapt.plausibility` on the moved object
 (``implausible``: an edge-only object off its wall, furniture in a door's clearance, a group split, a
-small object alone on open floor, a seat turned from its television; the rule's name starts the
-message). Objects of the episode's target types do not move (``target_moved``) unless
+small object alone on open floor, a seat turned from its television, an object running past the end of
+its wall, furniture in an open connection, a group left behind by its table, tall furniture in front of a
+window; the rule's name starts the message). Objects of the episode's target types do not move (``target_moved``) unless
 ``move_targets``. Target types its cached success regions cannot prove reachable are decided exactly on
 incrementally kept label and occluder grids (:class:`LabelRaster`, no world compiled; the slow
 :func:`reference_target_problems` is the plain version tests compare with). Its public interface is
@@ -781,6 +782,10 @@ class EditValidator:
             self._witness[room_id] = int(idx[0])
             return True
         return False
+
+    def footprint_at(self, i: int, center: np.ndarray, yaw: float) -> Footprint:
+        """Floor object i (``ctx`` index) at a pose, as the edited house would have it (nothing is moved)."""
+        return self._footprint(i, center, yaw)
 
     def _footprint(self, i: int, center: np.ndarray, yaw: float) -> Footprint:
         """Object i's footprint at a pose, exactly as ``SceneGeometry.from_house`` of the edited house has it."""

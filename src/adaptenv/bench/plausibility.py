@@ -19,7 +19,8 @@ from typing import Any
 import numpy as np
 
 NOTES = ["target: zero violations for the built-in and failure-mode G; random perturbation shown for comparison",
-         "door_approach: door width x 1 m on each side; group_split: ProcTHOR asset groups (docs/adapt.md)"]
+         "door_approach: door width x 1 m on each side; group_split: ProcTHOR asset groups; the other rules: "
+         "docs/adapt.md"]
 GENERATORS = ("builtin", "failure-modes", "random")
 
 

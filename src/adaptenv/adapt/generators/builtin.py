@@ -56,6 +56,7 @@ from adaptenv.adapt.objectives import (
     realism_score,
     route_points,
 )
+from adaptenv.adapt.plausibility import OVERHANG
 from adaptenv.adapt.realism import RealismReference
 from adaptenv.adapt.validation import EditValidator, Proposal
 from adaptenv.adapt.verification import Check, check_objective, revise_until_verified
@@ -111,7 +112,19 @@ def along_wall(v: EditValidator, oid: str, d: np.ndarray, rotation: float | None
     h = heading(float(v.ctx.yaws[v.ctx.index[oid]]))
     t = np.array([h[1], -h[0]])
     along = float(np.dot(d, t)) if np.any(d) else float(rng.choice([-1.0, 1.0]) * rng.uniform(0.4, 1.2))
-    return t * along, None
+    return t * _within_wall(v, oid, t, along), None
+
+
+def _within_wall(v: EditValidator, oid: str, t: np.ndarray, along: float) -> float:
+    """The longest of ``along`` and its three quarters, half and quarter (m along ``t``) that keeps the object from
+    running past the end of its wall (the plausibility rule ``wall_overhang``); ``along`` when none does."""
+    ref, i = v.plausible, v.ctx.index[oid]
+    limit = max(OVERHANG, ref.overhang.get(oid, 0.0) + 0.05)
+    c, yaw = v.ctx.centers[i], float(v.ctx.yaws[i])
+    for f in (1.0, 0.75, 0.5, 0.25):
+        if ref.walls.overhang(v.footprint_at(i, c + t * along * f, yaw)) <= limit:
+            return along * f
+    return along
 
 
 def to_wall(v: EditValidator, oid: str, aim: np.ndarray) -> tuple[np.ndarray, float] | None:

@@ -108,7 +108,10 @@ Rules:
   ...) keeps its back to a wall (edge_off_wall); nothing moves into the 1 m in front of a doorway
   (door_approach); chairs stay at their table, a floor lamp at its armchair, a sofa at its TV
   (group_split); small objects stay by a wall or furniture (open_floor); seats keep facing the TV
-  and chairs their table (facing_broken).
+  and chairs their table (facing_broken); nothing runs past the end of the wall it stands along
+  (wall_overhang) or into an open connection between two rooms (in_opening); a table, desk or
+  armchair does not move away from its chairs or lamp (group_left_behind); tall furniture does not
+  stand in front of a window (blocks_window).
 
 Movable objects (id: type at grid x, y, rotation):
 {objects}{doors}"""

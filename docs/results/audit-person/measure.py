@@ -1,0 +1,109 @@
+"""Adapt houses with G and audit the results: success before and after, violations per rule.
+
+Two steps, so that the adaptation can run on any revision and the audit with the current rules:
+
+    python measure.py adapt OUT TAG     # adapt every house with the built-in and failure-mode G; writes OUT/TAG/
+    python measure.py audit OUT TAG...  # audit OUT/TAG/ with the rules of the code on PYTHONPATH; prints a table
+
+Houses: the first ``HOUSES`` houses of ``preset:validation`` (procedural) and the real-format ProcTHOR house of
+tests/data on ``REAL_SEEDS`` episode seeds. Per house: an episode the policy solves (10 draws at most), then
+``STEPS`` edits by each G (candidates checked with the policy), then the policy again on the same episode.
+"""
+
+from __future__ import annotations
+
+import json
+import sys
+from collections import Counter
+from pathlib import Path
+
+import numpy as np
+
+HOUSES, REAL_SEEDS, STEPS, SEED, POLICY = 20, 3, 3, 0, "pretrained"
+GENERATORS = ("builtin", "failure-modes")
+REAL = Path(__file__).resolve().parents[3] / "tests" / "data" / "procthor-10k-train-1.json"
+
+
+def jobs():
+    """(job name, house) for every house adapted."""
+    from adaptenv.agents.houses import load_house_set
+    from adaptenv.scene.house import load_house
+
+    hs = load_house_set("preset:validation")
+    for k, house in enumerate(list(hs.houses)[:HOUSES]):
+        yield f"validation-{k:02d}", house
+    real = load_house(REAL, validate=False)
+    for s in range(REAL_SEEDS):
+        yield f"real-seed{s}", real
+
+
+def adapt(out: Path, tag: str) -> None:
+    from adaptenv.adapt.analysis import BuiltinAnalyzer
+    from adaptenv.adapt.generators import make_generator
+    from adaptenv.adapt.step import adapt_scene
+    from adaptenv.agents.registry import resolve_policy
+    from adaptenv.agents.rollout import find_solved_episode
+    from adaptenv.scene.house import save_house
+    from adaptenv.sim.world import compile_world
+
+    folder = out / tag
+    folder.mkdir(parents=True, exist_ok=True)
+    agent, analyzer = resolve_policy(POLICY, seed=SEED), BuiltinAnalyzer()
+    with open(folder / "rows.jsonl", "w") as rows:
+        for n, (name, house) in enumerate(jobs()):
+            world = compile_world(house, name)
+            found = find_solved_episode(world, agent, np.random.default_rng([SEED, n]), tries=10)
+            if found is None:
+                rows.write(json.dumps({"job": name, "solved": False}) + "\n")
+                continue
+            episode, before = found
+            save_house(house, folder / f"{name}-original.json")
+            for gen in GENERATORS:
+                res = adapt_scene(house, episode, policy=agent, analyzer=analyzer, generator=make_generator(gen),
+                                  steps=STEPS, rng=np.random.default_rng([SEED, n, 1]), before=before, name=name)
+                save_house(res.house, folder / f"{name}-{gen}.json")
+                rows.write(json.dumps({"job": name, "solved": True, "generator": gen, "target": episode.target_type,
+                                       "success_before": bool(before.metrics.success),
+                                       "success_after": bool(res.after.metrics.success),
+                                       "spl_before": float(before.metrics.spl), "spl_after": float(res.after.metrics.spl),
+                                       "edits": int(res.edits_applied)}) + "\n")
+                rows.flush()
+            print(name, flush=True)
+
+
+def audit(out: Path, tags: list[str]) -> None:
+    from adaptenv.adapt.plausibility import RULES
+    from adaptenv.adapt.plausibility import audit as run_audit
+    from adaptenv.scene.house import load_house
+
+    print("| revision | G | houses | edits | success before | success after | drop (points) | SPL after | "
+          "violations (new audit) |")
+    print("|---|---|---|---|---|---|---|---|---|")
+    for tag in tags:
+        folder = out / tag
+        rows = [json.loads(line) for line in open(folder / "rows.jsonl")]
+        for gen in GENERATORS:
+            mine = [r for r in rows if r.get("generator") == gen]
+            counts: Counter[str] = Counter()
+            for r in mine:
+                original = load_house(folder / f"{r['job']}-original.json", validate=False)
+                adapted = load_house(folder / f"{r['job']}-{gen}.json", validate=False)
+                report = run_audit(original, adapted)
+                counts.update(v.rule for v in report.violations)
+                for v in report.violations:
+                    print(f"  {tag} {gen} {r['job']}: {v}", file=sys.stderr)
+            before = np.mean([r["success_before"] for r in mine])
+            after = np.mean([r["success_after"] for r in mine])
+            spl = np.mean([r["spl_after"] for r in mine])
+            bad = ", ".join(f"{k} {counts[k]}" for k in RULES if counts[k]) or "0"
+            print(f"| {tag} | {gen} | {len(mine)} | {sum(r['edits'] for r in mine)} | {before:.3f} | {after:.3f} | "
+                  f"{100 * (before - after):.1f} | {spl:.3f} | {bad} |")
+
+
+if __name__ == "__main__":
+    if len(sys.argv) >= 4 and sys.argv[1] == "adapt":
+        adapt(Path(sys.argv[2]), sys.argv[3])
+    elif len(sys.argv) >= 4 and sys.argv[1] == "audit":
+        audit(Path(sys.argv[2]), sys.argv[3:])
+    else:
+        sys.exit(__doc__)
