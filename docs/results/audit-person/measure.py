@@ -19,7 +19,7 @@ from pathlib import Path
 
 import numpy as np
 
-HOUSES, REAL_SEEDS, STEPS, SEED, POLICY = 20, 3, 3, 0, "pretrained-scan"  # "pretrained" at the measured commits
+HOUSES, REAL_SEEDS, STEPS, SEED, POLICY = 20, 3, 3, 0, "pretrained"  # the scan-only agent at the measured commits (pretrained-scan since)
 GENERATORS = ("builtin", "failure-modes")
 REAL = Path(__file__).resolve().parents[3] / "tests" / "data" / "procthor-10k-train-1.json"
 
