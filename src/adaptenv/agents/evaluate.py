@@ -234,11 +234,11 @@ def trajectory_of(world: NavWorld, result: EpisodeResult, rec: Recorded, policy:
                       final_pose=Pose(x=last[0], z=last[1], yaw=last[2]), policy=policy, seed=result.seed)
 
 
-def failure_grid(report: EvalReport, house_set: HouseSet, *, draw: Callable[..., Image.Image], limit: int = 12,
+def failure_grid(report: EvalReport, house_set: HouseSet, *, render: Callable[..., Image.Image], limit: int = 12,
                  tile: int = 360, columns: int = 4) -> Image.Image | None:
     """A PIL image tiling top-down renders of the first ``limit`` failed episodes (None if none failed).
 
-    ``draw(house, trajectory=...)`` renders one episode, e.g. :func:`adaptenv.render.topdown.render_house`
+    ``render(house, trajectory=...)`` draws one episode, e.g. :func:`adaptenv.render.topdown.render_house`
     (passed in: rendering is a layer above the agents).
     """
     failed = [r for r in report.results if not r.success and r.index in report.recordings][:limit]
@@ -250,7 +250,7 @@ def failure_grid(report: EvalReport, house_set: HouseSet, *, draw: Callable[...,
     draw = ImageDraw.Draw(grid)
     for j, r in enumerate(failed):
         traj = trajectory_of(house_set.worlds[r.env], r, report.recordings[r.index], report.policy)
-        img = draw(house_set.houses[r.env], trajectory=traj).convert("RGB")
+        img = render(house_set.houses[r.env], trajectory=traj).convert("RGB")
         img.thumbnail((tile, tile))
         x, y = (j % columns) * tile, (j // columns) * (tile + caption)
         grid.paste(img, (x + (tile - img.width) // 2, y + caption))
@@ -259,8 +259,8 @@ def failure_grid(report: EvalReport, house_set: HouseSet, *, draw: Callable[...,
 
 
 def write_report(report: EvalReport, house_set: HouseSet, out: Path, *, command: str = "",
-                 draw: Callable[..., Image.Image] | None = None) -> dict[str, Path]:
-    """Write summary.json, episodes.csv, houses.csv, failed trajectories and, given ``draw`` (see
+                 render: Callable[..., Image.Image] | None = None) -> dict[str, Path]:
+    """Write summary.json, episodes.csv, houses.csv, failed trajectories and, given ``render`` (see
     :func:`failure_grid`; the CLI and the loop pass ``render_house``), failures.png to ``out``."""
     out.mkdir(parents=True, exist_ok=True)
     paths = {"summary": out / "summary.json", "episodes": out / "episodes.csv", "houses": out / "houses.csv"}
@@ -270,7 +270,7 @@ def write_report(report: EvalReport, house_set: HouseSet, out: Path, *, command:
     rows = [asdict(r) for r in report.results]
     _write_csv(paths["episodes"], rows)
     _write_csv(paths["houses"], per_house(report.results))
-    grid = failure_grid(report, house_set, draw=draw) if draw is not None else None
+    grid = failure_grid(report, house_set, render=render) if render is not None else None
     if grid is not None:
         paths["failures"] = out / "failures.png"
         grid.save(paths["failures"])

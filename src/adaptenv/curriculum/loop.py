@@ -280,7 +280,7 @@ def evaluate_sets(weights: PolicyWeights, specs: dict[str, str], episodes: int, 
             recordings = {k: v for (n, _), (_, recs) in zip(tagged, chunks, strict=True) if n == name
                           for k, v in recs.items()}
             report = EvalReport(label, spec, seed, summarize(results), results, recordings)
-            write_report(report, heldout_set(spec), out_dir / name, draw=render_house)
+            write_report(report, heldout_set(spec), out_dir / name, render=render_house)
     return metrics
 
 
