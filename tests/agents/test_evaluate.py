@@ -21,6 +21,7 @@ from adaptenv.agents.evaluate import (
 from adaptenv.agents.network import NavNet, NetConfig, NeuralPolicy
 from adaptenv.agents.policy import ExpertPolicy, RandomPolicy
 from adaptenv.agents.registry import resolve_policy
+from adaptenv.render.topdown import render_house
 
 EXAMPLE = Path(__file__).resolve().parents[2] / "examples" / "my_policy.py"
 
@@ -63,7 +64,7 @@ def test_user_policy_runs_through_the_harness(tiny_set, tmp_path):
     assert report.policy == "reactive-example"
     assert report.summary["episodes"] == 6
     assert report.summary["expert_success"] == 1.0
-    paths = write_report(report, tiny_set, tmp_path / "out")
+    paths = write_report(report, tiny_set, tmp_path / "out", render=render_house)
     summary = json.loads(paths["summary"].read_text())
     assert summary["episodes"] == 6
     assert paths["episodes"].read_text().count("\n") == 7
@@ -71,6 +72,11 @@ def test_user_policy_runs_through_the_harness(tiny_set, tmp_path):
     if report.summary["successes"] < 6:  # failures are drawn and saved
         assert paths["failures"].is_file()
         assert any((tmp_path / "out" / "failed").glob("episode_*.json"))
+    # without a renderer the failed trajectories are still saved, only the picture is left out
+    bare = write_report(report, tiny_set, tmp_path / "bare")
+    assert "failures" not in bare and not (tmp_path / "bare" / "failures.png").exists()
+    assert (sorted(p.name for p in (tmp_path / "bare").glob("failed/*.json"))
+            == sorted(p.name for p in (tmp_path / "out").glob("failed/*.json")))
 
 
 def test_failed_episode_recordings_replay_the_poses(tiny_set):

@@ -36,8 +36,8 @@ from adaptenv.adapt.analysis import (
 )
 from adaptenv.agents.evaluate import run_episodes
 from adaptenv.agents.policy import ExpertPolicy, Policy
+from adaptenv.agents.regret import success_regret
 from adaptenv.agents.rollout import run_policy
-from adaptenv.curriculum.buffer import success_regret
 from adaptenv.sim.geodesic import optimal_path_length
 from adaptenv.sim.task import Episode, sample_episode
 from adaptenv.sim.trajectory import Trajectory

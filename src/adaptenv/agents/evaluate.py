@@ -24,7 +24,7 @@ import math
 import multiprocessing as mp
 from collections.abc import Callable, Sequence
 from concurrent.futures import ProcessPoolExecutor
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
 
@@ -32,47 +32,16 @@ import numpy as np
 from PIL import Image, ImageDraw
 
 from adaptenv.agents.houses import HouseSet, compile_houses
-from adaptenv.agents.policy import ExpertPolicy, Policy, PolicyContext, bind_policy, policy_name
+from adaptenv.agents.policy import ExpertPolicy, Policy, policy_name
 from adaptenv.agents.registry import resolve_policy, weights_record
+from adaptenv.agents.runner import EpisodeResult, Recorded, run_episodes
 from adaptenv.agents.suites import EpisodeFloor, sample_floored
-from adaptenv.render.topdown import render_house
 from adaptenv.sim import task
 from adaptenv.sim.spec import ACTIONS, MAX_STEPS
 from adaptenv.sim.trajectory import Pose, Step, Trajectory
-from adaptenv.sim.vector import BatchSim
 from adaptenv.sim.world import NavWorld
 
 Z95 = 1.959963984540054
-
-
-@dataclass
-class EpisodeResult:
-    """Outcome of one evaluated episode (one CSV row)."""
-
-    index: int
-    house: str
-    env: int
-    target_type: str
-    seed: int
-    success: bool
-    spl: float
-    sel: float
-    steps: int
-    collisions: int
-    path_length: float
-    optimal: float
-    final_geodesic: float
-    expert_steps: int | None = None
-
-
-@dataclass
-class Recorded:
-    """Poses and actions of one episode, kept when the runner is asked to record it."""
-
-    start: tuple[float, float, float]
-    poses: list[tuple[float, float, float]] = field(default_factory=list)
-    actions: list[int] = field(default_factory=list)
-    moved: list[bool] = field(default_factory=list)
 
 
 def sample_episodes(worlds: Sequence[NavWorld], n: int, seed: int, *, use_house_start: bool = False, start: int = 0,
@@ -93,94 +62,6 @@ def sample_episodes(worlds: Sequence[NavWorld], n: int, seed: int, *, use_house_
         ep = task.sample_episode(worlds[e], ep_seed, use_house_start=use_house_start)
         out.append((e, ep))
     return out
-
-
-def _sync(ctx: PolicyContext, sim: BatchSim) -> None:
-    """Point the policy context at the simulator's current arrays (they are replaced on reset)."""
-    ctx.worlds = sim.worlds
-    ctx.env_idx = sim.env
-    ctx.target_types = sim.target_types
-    ctx.x, ctx.z, ctx.yaw = sim.x, sim.z, sim.yaw
-
-
-def run_episodes(worlds: Sequence[NavWorld], episodes: Sequence[tuple[int, task.Episode]], policy: Policy, *,
-                 batch: int = 64, max_steps: int = MAX_STEPS,
-                 record: Callable[[EpisodeResult], bool] | None = None,
-                 progress: Callable[[int], None] | None = None) -> tuple[list[EpisodeResult], dict[int, Recorded]]:
-    """Run every episode with ``policy`` in a BatchSim of ``batch`` slots.
-
-    Returns results in episode order and the recordings of the episodes for which ``record``
-    returned True (all poses are tracked while running; only those are kept). ``progress`` is
-    called with the number of episodes finished at each completion.
-    """
-    n = len(episodes)
-    if n == 0:
-        return [], {}
-    b = min(batch, n)
-    sim = BatchSim(worlds, max_steps=max_steps)
-    first = [episodes[i] for i in range(b)]
-    obs, _ = sim.reset([ep for _, ep in first], [e for e, _ in first])
-    ctx = PolicyContext.empty(sim.worlds, b)
-    slot_episode = np.arange(b)
-    ctx.seeds[:] = [int(getattr(ep, "seed", i) or 0) for i, (_, ep) in enumerate(first)]
-    _sync(ctx, sim)
-    bind_policy(policy, ctx)
-    state = policy.initial_state(b)
-    done = np.ones(b, dtype=bool)
-    live = np.ones(b, dtype=bool)
-    # trajectories of the running episodes: pose before each step (and the final pose), action, moved
-    poses = np.zeros((max_steps + 1, b, 3))
-    acts = np.zeros((max_steps, b), dtype=np.int64)
-    moves = np.zeros((max_steps, b), dtype=bool)
-    taken = np.zeros(b, dtype=np.int64)
-    slots = np.arange(b)
-    results: dict[int, EpisodeResult] = {}
-    recordings: dict[int, Recorded] = {}
-    next_episode = b
-    while live.any():
-        _sync(ctx, sim)
-        actions, state = policy.act(obs, state, done)
-        actions = np.asarray(actions, dtype=np.int64)
-        rows = slots[live]
-        poses[taken[rows], rows] = np.stack([sim.x[rows], sim.z[rows], sim.yaw[rows]], axis=1)
-        obs, _, terminated, truncated, info = sim.step(actions)
-        acts[taken[rows], rows] = actions[rows]
-        moves[taken[rows], rows] = sim.moved[rows]
-        taken[rows] += 1
-        finished = np.flatnonzero(live & (terminated | truncated))
-        done = np.zeros(b, dtype=bool)
-        refill, refill_eps = [], []
-        for i in finished.tolist():
-            k = int(slot_episode[i])
-            e, ep = episodes[k]
-            res = EpisodeResult(
-                index=k, house=str(worlds[e].name), env=e, target_type=ep.target_type,
-                seed=int(getattr(ep, "seed", k) or 0), success=bool(info["success"][i]),
-                spl=float(np.nan_to_num(info["spl"][i])), sel=float("nan"), steps=int(info["steps"][i]),
-                collisions=int(info["collisions"][i]), path_length=float(info["path_length"][i]),
-                optimal=float(sim.start_geodesic[i]), final_geodesic=float(info["geodesic"][i]))
-            results[k] = res
-            if record is not None and record(res):
-                t = int(taken[i])
-                poses[t, i] = (sim.x[i], sim.z[i], sim.yaw[i])
-                recordings[k] = Recorded(tuple(poses[0, i].tolist()), [tuple(p) for p in poses[: t + 1, i].tolist()],
-                                         acts[:t, i].tolist(), moves[:t, i].tolist())
-            if next_episode < n:
-                slot_episode[i] = next_episode
-                refill.append(i)
-                refill_eps.append(episodes[next_episode])
-                next_episode += 1
-            else:
-                live[i] = False
-        if refill:
-            idx = np.asarray(refill)
-            obs = sim.reset_at(idx, [ep for _, ep in refill_eps], [e for e, _ in refill_eps])
-            ctx.seeds[idx] = [int(getattr(ep, "seed", 0) or 0) for _, ep in refill_eps]
-            taken[idx] = 0
-            done[idx] = True
-        if progress is not None and finished.size:
-            progress(len(results))
-    return [results[k] for k in range(n)], recordings
 
 
 def add_sel(results: list[EpisodeResult], expert: list[EpisodeResult]) -> None:
@@ -353,9 +234,13 @@ def trajectory_of(world: NavWorld, result: EpisodeResult, rec: Recorded, policy:
                       final_pose=Pose(x=last[0], z=last[1], yaw=last[2]), policy=policy, seed=result.seed)
 
 
-def failure_grid(report: EvalReport, house_set: HouseSet, *, limit: int = 12, tile: int = 360,
-                 columns: int = 4) -> Image.Image | None:
-    """A PIL image tiling top-down renders of the first ``limit`` failed episodes (None if none failed)."""
+def failure_grid(report: EvalReport, house_set: HouseSet, *, render: Callable[..., Image.Image], limit: int = 12,
+                 tile: int = 360, columns: int = 4) -> Image.Image | None:
+    """A PIL image tiling top-down renders of the first ``limit`` failed episodes (None if none failed).
+
+    ``render(house, trajectory=...)`` draws one episode, e.g. :func:`adaptenv.render.topdown.render_house`
+    (passed in: rendering is a layer above the agents).
+    """
     failed = [r for r in report.results if not r.success and r.index in report.recordings][:limit]
     if not failed:
         return None
@@ -365,7 +250,7 @@ def failure_grid(report: EvalReport, house_set: HouseSet, *, limit: int = 12, ti
     draw = ImageDraw.Draw(grid)
     for j, r in enumerate(failed):
         traj = trajectory_of(house_set.worlds[r.env], r, report.recordings[r.index], report.policy)
-        img = render_house(house_set.houses[r.env], trajectory=traj).convert("RGB")
+        img = render(house_set.houses[r.env], trajectory=traj).convert("RGB")
         img.thumbnail((tile, tile))
         x, y = (j % columns) * tile, (j // columns) * (tile + caption)
         grid.paste(img, (x + (tile - img.width) // 2, y + caption))
@@ -373,8 +258,10 @@ def failure_grid(report: EvalReport, house_set: HouseSet, *, limit: int = 12, ti
     return grid
 
 
-def write_report(report: EvalReport, house_set: HouseSet, out: Path, *, command: str = "") -> dict[str, Path]:
-    """Write summary.json, episodes.csv, houses.csv, failures.png and failed trajectories to ``out``."""
+def write_report(report: EvalReport, house_set: HouseSet, out: Path, *, command: str = "",
+                 render: Callable[..., Image.Image] | None = None) -> dict[str, Path]:
+    """Write summary.json, episodes.csv, houses.csv, failed trajectories and, given ``render`` (see
+    :func:`failure_grid`; the CLI and the loop pass ``render_house``), failures.png to ``out``."""
     out.mkdir(parents=True, exist_ok=True)
     paths = {"summary": out / "summary.json", "episodes": out / "episodes.csv", "houses": out / "houses.csv"}
     doc = {"policy": report.policy, "weights": weights_record(report.policy), "houses": report.houses,
@@ -383,15 +270,15 @@ def write_report(report: EvalReport, house_set: HouseSet, out: Path, *, command:
     rows = [asdict(r) for r in report.results]
     _write_csv(paths["episodes"], rows)
     _write_csv(paths["houses"], per_house(report.results))
-    grid = failure_grid(report, house_set)
+    grid = failure_grid(report, house_set, render=render) if render is not None else None
     if grid is not None:
         paths["failures"] = out / "failures.png"
         grid.save(paths["failures"])
-        tdir = out / "failed"
-        for r in report.results:
-            if not r.success and r.index in report.recordings:
-                trajectory_of(house_set.worlds[r.env], r, report.recordings[r.index],
-                              report.policy).save(tdir / f"episode_{r.index:04d}.json")
+    tdir = out / "failed"
+    for r in report.results:
+        if not r.success and r.index in report.recordings:
+            trajectory_of(house_set.worlds[r.env], r, report.recordings[r.index],
+                          report.policy).save(tdir / f"episode_{r.index:04d}.json")
     return paths
 
 

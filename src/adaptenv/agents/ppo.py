@@ -76,10 +76,10 @@ from adaptenv.agents.network import (
     torch_threads,
 )
 from adaptenv.agents.registry import init_checkpoint
+from adaptenv.agents.runlog import RunLogger, TrainResult, check_precision
 from adaptenv.agents.stop import calibrate_end_threshold
 from adaptenv.agents.suites import EpisodeFloor
 from adaptenv.agents.teachers import TEACHERS, make_teacher
-from adaptenv.agents.train import RunLogger, TrainResult, check_precision
 from adaptenv.errors import ConfigError
 from adaptenv.progress import ProgressBar
 from adaptenv.sim.egomap import EgoMap

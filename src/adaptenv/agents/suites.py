@@ -25,6 +25,7 @@ from typing import Any
 import numpy as np
 
 from adaptenv.agents.policy import ExpertPolicy
+from adaptenv.agents.runner import run_episodes
 from adaptenv.errors import ConfigError
 from adaptenv.sim.spec import MAX_STEPS
 from adaptenv.sim.task import available_targets, sample_episode, start_cells
@@ -162,9 +163,6 @@ def sample_floored(worlds: Sequence[Any], n: int, seed: int, floor: EpisodeFloor
 def expert_steps(worlds: Sequence[Any], episodes: Sequence[tuple[int, Any]], max_steps: int = MAX_STEPS
                  ) -> list[int | None]:
     """Steps the shortest-path expert takes on each episode (None where it fails), run in one batch."""
-    # cycle: evaluate imports this module at its top (sample_floored), so its runner is imported here.
-    from adaptenv.agents.evaluate import run_episodes
-
     results, _ = run_episodes(worlds, episodes, ExpertPolicy(), max_steps=max_steps)
     return [r.steps if r.success else None for r in results]
 

@@ -38,14 +38,13 @@ is importable) and ``state.pt`` (weights, optimizer, dataset, counters and gener
 
 from __future__ import annotations
 
-import csv
 import json
 import os
 import time
 from collections.abc import Iterator, Sequence
 from concurrent.futures import ThreadPoolExecutor
 from contextlib import contextmanager
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict
 from pathlib import Path
 from typing import Any
 
@@ -56,7 +55,6 @@ import torch.nn.functional as F
 
 from adaptenv.agents.checkpoint import atomic_torch_save, load_checkpoint, save_checkpoint
 from adaptenv.agents.config import (
-    PRECISIONS,
     FinetuneConfig,
     PPOConfig,
     TrainConfig,
@@ -66,7 +64,6 @@ from adaptenv.agents.config import (
 from adaptenv.agents.evaluate import run_episodes, sample_episodes, summarize
 from adaptenv.agents.houses import compile_houses, load_house_set
 from adaptenv.agents.network import (
-    END_THRESHOLD,
     MapObserver,
     NavNet,
     NetConfig,
@@ -78,7 +75,10 @@ from adaptenv.agents.network import (
     observe,
     torch_threads,
 )
+from adaptenv.agents.ppo import train_ppo
 from adaptenv.agents.registry import init_checkpoint
+from adaptenv.agents.runlog import LOG_KEYS as LOG_KEYS
+from adaptenv.agents.runlog import RunLogger, TrainResult, check_precision
 from adaptenv.agents.stop import calibrate_end_threshold
 from adaptenv.agents.teachers import make_teacher
 from adaptenv.errors import ConfigError
@@ -111,12 +111,6 @@ def check_config(cfg: TrainConfig) -> None:
         if not 0.0 <= getattr(cfg, name) <= 1.0:
             raise ConfigError(f"--{name.replace('_', '-')} must lie in [0, 1], got {getattr(cfg, name)}")
     check_precision(cfg.precision, "--precision")
-
-
-def check_precision(precision: str, where: str) -> None:
-    """Raise a ConfigError unless ``precision`` names an arithmetic of the gradient steps (fp32 or bf16)."""
-    if precision not in PRECISIONS:
-        raise ConfigError(f"{where} must be one of {', '.join(PRECISIONS)}, got {precision!r}")
 
 
 def sequence_logits(net: NavNet, obs: dict[str, torch.Tensor], first: torch.Tensor, h0: torch.Tensor,
@@ -201,50 +195,6 @@ class SequenceBuffer:
             getattr(self, n)[: self.size] = state[n].numpy()
 
 
-# -- logging --------------------------------------------------------------------------------------
-
-LOG_KEYS = ("iteration", "frames", "updates", "wall_time", "charts/beta", "charts/learning_rate",
-            "charts/collect_fps", "charts/train_fps", "charts/episodes", "charts/episode_success",
-            "charts/episode_length", "charts/buffer_frames", "losses/loss", "losses/accuracy",
-            "eval/success", "eval/spl")
-
-
-class RunLogger:
-    """Metrics to ``metrics.csv`` always and to TensorBoard when it is importable."""
-
-    def __init__(self, run_dir: Path | None, tensorboard: bool, keys: Sequence[str] = LOG_KEYS):
-        self.keys = tuple(keys)
-        self.rows: list[dict[str, Any]] = []
-        self.csv_path = run_dir / "metrics.csv" if run_dir else None
-        self.writer = None
-        if run_dir and tensorboard:
-            try:
-                # tensorboard: optional, and slow to import; only when a run asks for it
-                from torch.utils.tensorboard import SummaryWriter
-
-                self.writer = SummaryWriter(str(run_dir / "tb"))
-            except ImportError:
-                self.writer = None
-
-    def log(self, row: dict[str, Any]) -> None:
-        self.rows.append(row)
-        if self.csv_path is not None:
-            new = not self.csv_path.exists()
-            with self.csv_path.open("a", newline="", encoding="utf-8") as f:
-                w = csv.DictWriter(f, fieldnames=list(self.keys), extrasaction="ignore")
-                if new:
-                    w.writeheader()
-                w.writerow({k: row.get(k, "") for k in self.keys})
-        if self.writer is not None:
-            for k, v in row.items():
-                if "/" in k and v is not None and v != "":
-                    self.writer.add_scalar(k, float(v), int(row["frames"]))
-
-    def close(self) -> None:
-        if self.writer is not None:
-            self.writer.close()
-
-
 # -- the resume state -----------------------------------------------------------------------------
 
 STATE_KEYS = ("net", "optimizer", "buffer", "frames", "updates", "iteration", "wall_time", "numpy_rng", "torch_rng",
@@ -282,20 +232,6 @@ def load_resume_state(cfg: TrainConfig, state_path: Path | None) -> dict[str, An
 
 
 # -- training -------------------------------------------------------------------------------------
-
-@dataclass
-class TrainResult:
-    """What a run returns: the trained policy network, its card and the logged rows."""
-
-    net: NavNet
-    card: dict[str, Any]
-    rows: list[dict[str, Any]] = field(default_factory=list)
-    learner: dict[str, Any] | None = None
-    """PPO's value head and optimizer state (``train_ppo(learner=...)`` continues from them); None for DAgger."""
-
-    def policy(self, *, name: str = "finetuned") -> NeuralPolicy:
-        return NeuralPolicy(self.net, name=name, end_threshold=self.card.get("end_threshold", END_THRESHOLD))
-
 
 def default_run_dir(cfg: TrainConfig) -> Path | None:
     """``cfg.run_dir``, else ``runs/train/<output stem>`` (None when nothing is written)."""
@@ -586,9 +522,6 @@ def finetune(net: NavNet, worlds: Sequence[NavWorld], cfg: FinetuneConfig, seed:
                           "them unset with algo='dagger'")
     evals = cfg.final_eval_episodes or len(worlds)
     if cfg.algo == "ppo":
-        # cycle: ppo imports this module (RunLogger, TrainResult)
-        from adaptenv.agents.ppo import train_ppo
-
         iterations = -(-cfg.frames // (cfg.num_envs * PPOConfig.rollout_steps))
         warmup = 0 if learner is not None else min(PPOConfig.value_warmup_iters, iterations // 4)
         pc = PPOConfig(houses="(in memory)", value_warmup_iters=warmup,

@@ -212,6 +212,7 @@ def evaluate(
     from adaptenv.agents.registry import resolve_policy
     from adaptenv.agents.suites import EpisodeFloor
     from adaptenv.progress import ProgressBar
+    from adaptenv.render.topdown import render_house
 
     folder = output_folder(out, "-o", "evaluate", force=force, inputs=[policy, *houses])
     configure_torch()
@@ -243,7 +244,7 @@ def evaluate(
                 report.summary["wipe_every"] = wipe_every
             sub = out / _slug(spec) if len(houses) > 1 else out
             report.summary["failure_modes"] = failure_modes(report, house_set)
-            paths = write_report(report, house_set, sub, command=command)
+            paths = write_report(report, house_set, sub, command=command, render=render_house)
             summaries.append((spec, report.summary, paths))
         table = Table(title=f"{policy}: {episodes} episodes per set, seed {seed}")
         for col in ("houses", "success [95% CI]", "SPL [95% CI]", "SEL", "collisions", "length"):

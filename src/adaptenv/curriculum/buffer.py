@@ -30,6 +30,7 @@ from typing import Any, Literal
 
 import numpy as np
 
+from adaptenv.agents.regret import spl_regret, success_regret
 from adaptenv.configfile import STRICT, parse_config
 from adaptenv.errors import ConfigError
 
@@ -338,31 +339,6 @@ def insert_children(state: LevelBufferState, cfg: LevelBufferConfig, plans: Sequ
 
 
 # --------------------------------------------------------------------------- scores
-
-
-def _episodes(values: float | Sequence[float] | np.ndarray, name: str) -> np.ndarray:
-    arr = np.atleast_1d(np.asarray(values, dtype=np.float64))
-    if arr.ndim != 1 or arr.size == 0:
-        raise ValueError(f"{name}: expected one value per episode (a non-empty 1-D sequence), got shape {arr.shape}")
-    if not np.all(np.isfinite(arr)):
-        raise ValueError(f"{name}: values must be finite")
-    return arr
-
-
-def success_regret(agent_success: float | Sequence[float], expert_success: float | Sequence[float]) -> float:
-    """Mean over episodes of max(0, expert success - agent success): true regret with the expert as optimum."""
-    a, e = _episodes(agent_success, "agent_success"), _episodes(expert_success, "expert_success")
-    if a.shape != e.shape:
-        raise ValueError(f"success_regret: {a.size} agent episodes but {e.size} expert episodes")
-    return float(np.mean(np.clip(e - a, 0.0, 1.0)))
-
-
-def spl_regret(agent_spl: float | Sequence[float], expert_success: float | Sequence[float]) -> float:
-    """Mean over episodes of (1 - SPL) where the expert succeeds, 0 where it fails (unsolvable: no signal)."""
-    s, e = _episodes(agent_spl, "agent_spl"), _episodes(expert_success, "expert_success")
-    if s.shape != e.shape:
-        raise ValueError(f"spl_regret: {s.size} agent episodes but {e.size} expert episodes")
-    return float(np.mean(np.where(e > 0.5, 1.0 - np.clip(s, 0.0, 1.0), 0.0)))
 
 
 def regret_score(agent_success: float | Sequence[float], agent_spl: float | Sequence[float],

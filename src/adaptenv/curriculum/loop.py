@@ -80,6 +80,7 @@ from adaptenv.curriculum.records import (
     write_iterations,
 )
 from adaptenv.errors import ConfigError
+from adaptenv.render.topdown import render_house
 
 #: The fix a corrupt state.json's errors suggest.
 STATE_FIX = "the file is damaged: restore it, or start the run again in a new folder"
@@ -279,7 +280,7 @@ def evaluate_sets(weights: PolicyWeights, specs: dict[str, str], episodes: int, 
             recordings = {k: v for (n, _), (_, recs) in zip(tagged, chunks, strict=True) if n == name
                           for k, v in recs.items()}
             report = EvalReport(label, spec, seed, summarize(results), results, recordings)
-            write_report(report, heldout_set(spec), out_dir / name)
+            write_report(report, heldout_set(spec), out_dir / name, render=render_house)
     return metrics
 
 

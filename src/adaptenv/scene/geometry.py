@@ -24,7 +24,7 @@ from adaptenv.scene.assets import (
     object_role,
 )
 from adaptenv.scene.grid import NormalizedGrid
-from adaptenv.scene.house import House, HouseObject, Opening, Wall
+from adaptenv.scene.model import House, HouseObject, Opening, Wall
 
 #: Walls whose endpoints agree to this many decimals are the same wall.
 _MERGE_DECIMALS = 3

@@ -23,7 +23,7 @@ from shapely.geometry import Point, Polygon
 from adaptenv.errors import HouseError, Problem
 from adaptenv.scene.assets import ROOM_TYPES, AssetCatalog, load_catalog
 from adaptenv.scene.geometry import object_footprint, wall_floor_segment
-from adaptenv.scene.house import (
+from adaptenv.scene.model import (
     House,
     HouseObject,
     Opening,

@@ -23,7 +23,7 @@ import numpy as np
 from scipy import ndimage
 
 from adaptenv.sim.spec import AGENT_RADIUS, SUCCESS_DISTANCE
-from adaptenv.sim.task import Episode, los_clear, target_points
+from adaptenv.sim.targets import Episode, los_clear, target_points
 from adaptenv.sim.world import NavWorld
 
 # Moves (dr, dc) and the two cells each crosses besides its ends (equal to an end for king moves).

@@ -39,14 +39,14 @@ import numpy as np
 
 from adaptenv.adapt.analysis import Analysis, Suggestion
 from adaptenv.adapt.edits import Edit
-from adaptenv.adapt.generators import (
+from adaptenv.adapt.generators._trial import edited_copy, moved_geometry
+from adaptenv.adapt.generators.base import (
     GenerationContext,
     GenerationResult,
     StepRecord,
     keep_render,
     render_scene,
 )
-from adaptenv.adapt.generators._trial import edited_copy, moved_geometry
 from adaptenv.adapt.objectives import (
     OBJECTIVE_KINDS,
     ObjectiveValues,

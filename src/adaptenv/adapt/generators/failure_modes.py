@@ -45,7 +45,7 @@ from scipy import ndimage
 
 from adaptenv.adapt.analysis import Analysis, analyze_trajectory
 from adaptenv.adapt.diagnosis import MODE_FAMILY, ModeFamily, SceneDiagnosis
-from adaptenv.adapt.generators import (
+from adaptenv.adapt.generators.base import (
     GenerationContext,
     GenerationResult,
     StepRecord,

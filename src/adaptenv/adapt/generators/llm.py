@@ -45,7 +45,7 @@ import numpy as np
 
 from adaptenv.adapt.analysis import Analysis, Suggestion
 from adaptenv.adapt.edits import Edit, EditLog
-from adaptenv.adapt.generators import (
+from adaptenv.adapt.generators.base import (
     GenerationContext,
     GenerationResult,
     StepRecord,
