@@ -81,6 +81,7 @@ from adaptenv.agents.suites import EpisodeFloor
 from adaptenv.agents.teachers import TEACHERS, make_teacher
 from adaptenv.agents.train import RunLogger, TrainResult, check_precision
 from adaptenv.errors import ConfigError
+from adaptenv.limits import check_numbers
 from adaptenv.progress import ProgressBar
 from adaptenv.sim.egomap import EgoMap
 from adaptenv.sim.spec import END, N_RAYS
@@ -97,10 +98,7 @@ PPO_LOG_KEYS = ("iteration", "frames", "updates", "wall_time", "charts/learning_
 
 def check_ppo_config(cfg: PPOConfig) -> None:
     """Raise one ConfigError for the first inconsistent setting (naming the flag and the fix)."""
-    for name in ("frames", "num_envs", "rollout_steps", "chunk_len", "num_minibatches", "update_epochs",
-                 "max_episode_steps", "hidden", "feature_dim", "conv_channels"):
-        if getattr(cfg, name) <= 0:
-            raise ConfigError(f"--{name.replace('_', '-')} must be positive, got {getattr(cfg, name)}")
+    check_numbers(cfg)
     if cfg.rollout_steps % cfg.chunk_len:
         raise ConfigError(f"--rollout-steps ({cfg.rollout_steps}) must be a multiple of --chunk-len ({cfg.chunk_len})")
     sequences = cfg.num_envs * (cfg.rollout_steps // cfg.chunk_len)
@@ -111,9 +109,6 @@ def check_ppo_config(cfg: PPOConfig) -> None:
         raise ConfigError(f"--bc-teacher {cfg.bc_teacher!r}: unknown teacher; choose one of {', '.join(TEACHERS)}")
     if cfg.stop_rule not in ("threshold", "sample"):
         raise ConfigError(f"--stop-rule must be 'threshold' or 'sample', got {cfg.stop_rule!r}")
-    for name in ("kl_coef", "explore_bonus", "bc_coef"):
-        if getattr(cfg, name) < 0:
-            raise ConfigError(f"--{name.replace('_', '-')} must be >= 0, got {getattr(cfg, name)}")
     check_precision(cfg.precision, "--precision")
 
 

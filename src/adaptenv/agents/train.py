@@ -82,6 +82,7 @@ from adaptenv.agents.registry import init_checkpoint
 from adaptenv.agents.stop import calibrate_end_threshold
 from adaptenv.agents.teachers import make_teacher
 from adaptenv.errors import ConfigError
+from adaptenv.limits import check_numbers
 from adaptenv.progress import ProgressBar
 from adaptenv.scene.house import House
 from adaptenv.sim.spec import END, N_RAYS
@@ -93,23 +94,13 @@ __all__ = ["TrainConfig", "FinetuneConfig", "field_docs", "train", "finetune", "
 
 def check_config(cfg: TrainConfig) -> None:
     """Raise one ConfigError for the first inconsistent setting (naming the field and the fix)."""
-    positive = ("frames", "num_envs", "rollout_steps", "chunk_len", "batch_chunks", "hidden", "feature_dim", "conv_channels",
-                "max_episode_steps", "buffer_frames", "save_every")
-    for name in positive:
-        if getattr(cfg, name) <= 0:
-            raise ConfigError(f"--{name.replace('_', '-')} must be positive, got {getattr(cfg, name)}")
+    check_numbers(cfg)
     if cfg.rollout_steps % cfg.chunk_len:
         raise ConfigError(f"--rollout-steps ({cfg.rollout_steps}) must be a multiple of --chunk-len "
                           f"({cfg.chunk_len}); e.g. --rollout-steps {cfg.chunk_len * 2}")
     if cfg.buffer_frames < cfg.rollout_steps * cfg.num_envs:
         raise ConfigError(f"--buffer-frames ({cfg.buffer_frames}) must hold at least one block of "
                           f"rollout_steps * num_envs = {cfg.rollout_steps * cfg.num_envs} frames")
-    if cfg.end_weight <= 0 or cfg.calibrate_episodes < 0:
-        raise ConfigError(f"--end-weight must be positive and --calibrate-episodes >= 0, got {cfg.end_weight} "
-                          f"and {cfg.calibrate_episodes}")
-    for name in ("beta_start", "beta_end", "beta_decay_fraction"):
-        if not 0.0 <= getattr(cfg, name) <= 1.0:
-            raise ConfigError(f"--{name.replace('_', '-')} must lie in [0, 1], got {getattr(cfg, name)}")
     check_precision(cfg.precision, "--precision")
 
 

@@ -16,6 +16,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 import typer
 
+from adaptenv.cli import _numbers as numbers
 from adaptenv.cli._common import JSON_OPTION, writable_folder
 from adaptenv.errors import AdaptenvError, ConfigError
 
@@ -162,7 +163,7 @@ def adapt(
     max_cost: float | None = MAX_COST_OPTION,
     allow_target_moves: bool = TARGET_MOVES_OPTION,
     llm_config_file: Path | None = LLM_CONFIG_OPTION,
-    seed: int = typer.Option(0, "--seed", help="Seed of the episode draw and the generator."),
+    seed: int = typer.Option(0, "--seed", callback=numbers.seed, help="Seed of the episode draw and the generator."),
     target: str | None = typer.Option(None, "--target", metavar="TYPE", help="Target object type (e.g. Fridge)."),
     as_json: bool = typer.Option(False, "--json", help="Print the summary as JSON."),
     diagnose: int = typer.Option(0, "--diagnose", min=0, max=50, help="Diagnose this many hard episodes (F over "
@@ -382,7 +383,7 @@ def bench_adapt(
     houses: int = typer.Option(50, "--houses", min=1, help="Procedural houses the policy solves."),
     steps: int = typer.Option(5, "--steps", min=1, help="Built-in edits per house."),
     policy: str = typer.Option("pretrained", "--policy", help="Policy to adapt to (pretrained, expert, ...)."),
-    seed: int = typer.Option(0, "--seed", help="Seed of houses and episodes."),
+    seed: int = typer.Option(0, "--seed", callback=numbers.seed, help="Seed of houses and episodes."),
     rooms: int = typer.Option(5, "--rooms", min=1, help="Rooms per procedural house."),
     as_json: bool = JSON_OPTION,
 ) -> None:
@@ -425,7 +426,7 @@ def audit(
 def bench_plausibility(
     houses: int = typer.Option(50, "--houses", min=1, help="Procedural houses to adapt."),
     steps: int = typer.Option(5, "--steps", min=1, help="Edits per house and generator."),
-    seed: int = typer.Option(0, "--seed", help="Seed of houses, episodes and edits."),
+    seed: int = typer.Option(0, "--seed", callback=numbers.seed, help="Seed of houses, episodes and edits."),
     rooms: int = typer.Option(5, "--rooms", min=1, help="Rooms per procedural house."),
     real: Path | None = typer.Option(None, "--real", metavar="HOUSE.json",
                                      help="Also adapt this house (e.g. a real ProcTHOR house) 5 times."),

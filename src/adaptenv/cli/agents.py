@@ -14,6 +14,7 @@ from typing import TYPE_CHECKING
 
 import typer
 
+from adaptenv.cli import _numbers as numbers
 from adaptenv.cli._common import JSON_OPTION, interrupted, writable_file, writable_folder
 
 if TYPE_CHECKING:
@@ -85,10 +86,11 @@ def _train_command():
         """Train a navigation policy by behaviour cloning + DAgger from the shortest-path expert."""
         from rich.console import Console
 
-        from adaptenv.agents.train import TrainConfig, default_run_dir
+        from adaptenv.agents.train import TrainConfig, check_config, default_run_dir
         from adaptenv.agents.train import train as run_training
 
         cfg = TrainConfig(**kwargs)
+        check_config(cfg)
         check_frames(cfg, "adaptenv train")
         check_outputs(cfg, default_run_dir(cfg))
         command = train_command_line(cfg)
@@ -117,9 +119,10 @@ def _ppo_command():
         """Fine-tune a navigation policy by PPO on the simulator's SPOC-style reward (warm start: --init)."""
         from rich.console import Console
 
-        from adaptenv.agents.ppo import default_ppo_run_dir, train_ppo
+        from adaptenv.agents.ppo import check_ppo_config, default_ppo_run_dir, train_ppo
 
         cfg = PPOConfig(**kwargs)
+        check_ppo_config(cfg)
         check_frames(cfg, "adaptenv ppo")
         check_outputs(cfg, default_ppo_run_dir(cfg))
         result = train_ppo(cfg, command=config_command_line("ppo", cfg))
@@ -137,8 +140,8 @@ def evaluate(
     policy: str = typer.Option("pretrained", "--policy", "-p",
                                help="Policy: pretrained, expert, explorer, map-explorer, random, a checkpoint path (.pt), or module:attribute."),
     houses: list[str] = _HOUSES_OPTION,
-    episodes: int = typer.Option(200, "--episodes", "-n", min=1, help="Episodes per house set."),
-    seed: int = typer.Option(0, "--seed", "-s", help="Seed of the episodes (same seed, same results)."),
+    episodes: int = typer.Option(200, "--episodes", "-n", callback=numbers.episodes, help="Episodes per house set."),
+    seed: int = typer.Option(0, "--seed", "-s", callback=numbers.seed, help="Seed of the episodes (same seed, same results)."),
     workers: int = typer.Option(1, "--workers", "-w", min=1, help="Worker processes (episodes are split among them)."),
     batch: int = typer.Option(64, "--batch", min=1, help="Episodes simulated at once per process."),
     out: Path = _OUT_OPTION,

@@ -12,6 +12,7 @@ from pathlib import Path
 
 import typer
 
+from adaptenv.cli import _numbers as numbers
 from adaptenv.cli._common import interrupted, writable_folder
 from adaptenv.cli.adapt import (
     API_OPTION,
@@ -93,7 +94,7 @@ def loop(
     iterations: int = typer.Option(3, "--iterations", "-T", min=1, help="Loop iterations."),
     method: str = typer.Option("ours", "--method", help="none, random, dr, dr-matched, sfl, plr, accel, ours, "
                                 "ours-noselect, ours-randomscene, ours-nof, ours-dr or ours-llm."),
-    seed: int = typer.Option(0, "--seed", help="Root seed."),
+    seed: int = typer.Option(0, "--seed", callback=numbers.seed, help="Root seed."),
     out: Path = typer.Option(Path("runs/loop"), "-o", "--out", help="Run folder."),
     resume: bool = typer.Option(False, "--resume", help="Continue the run in --out from its last iteration."),
     scenes: int = typer.Option(8, "--scenes", min=1, help="Scenes rolled out and made per iteration."),
@@ -139,7 +140,7 @@ def loop(
                                           "failures); otherwise no edit moves a target."),
     door_edits: bool = typer.Option(False, "--door-edits", help="G may also open or shut interior doors (the "
                                     "failure-mode G for search, looping and timeout failures; the LLM G by a tool)."),
-    heldout_episodes: int = typer.Option(100, "--heldout-episodes", min=1, help="Episodes per held-out set."),
+    heldout_episodes: int = typer.Option(100, "--heldout-episodes", callback=numbers.episodes, help="Episodes per held-out set."),
     heldout: list[str] = typer.Option(None, "--heldout", help="Held-out set NAME=HOUSES (repeatable); default: "
                                       "rearranged=preset:pretrain-rearranged and unseen=preset:pretrain-unseen."),
     model: str = typer.Option(None, "--model", help="LLM model for ours-llm (default gpt-4.1-mini)."),

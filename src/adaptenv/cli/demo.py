@@ -10,6 +10,8 @@ from pathlib import Path
 
 import typer
 
+from adaptenv.cli import _numbers as numbers
+
 DEMO_METHODS = ("dr", "ours")
 """The demo compares the closed loop (ours) with domain randomization on the same houses, seed and budget."""
 HELDOUT_EPISODES_PER_HOUSE = 25
@@ -48,7 +50,7 @@ def demo(
                              "an earlier demo's (whose houses/ and run/ are replaced)."),
     houses: int = typer.Option(4, "--houses", min=1, max=50, help="Procedural training houses to generate."),
     iterations: int = typer.Option(2, "--iterations", min=1, max=20, help="Closed-loop iterations."),
-    seed: int = typer.Option(0, "--seed", help="Root seed: the same seed gives the same outputs."),
+    seed: int = typer.Option(0, "--seed", callback=numbers.seed, help="Root seed: the same seed gives the same outputs."),
     policy: str = typer.Option("pretrained", "--policy", help="Starting policy: pretrained or a checkpoint path."),
 ) -> None:
     """Generate houses, run the closed loop and domain randomization on them, write the report and its verdict."""

@@ -80,6 +80,7 @@ from adaptenv.curriculum.records import (
     write_iterations,
 )
 from adaptenv.errors import ConfigError
+from adaptenv.limits import check_float, check_seed
 
 #: The fix a corrupt state.json's errors suggest.
 STATE_FIX = "the file is damaged: restore it, or start the run again in a new folder"
@@ -187,8 +188,10 @@ class LoopConfig:
         parse_config(LoopConfig, asdict(self), source)
         if self.method not in METHODS:
             raise ConfigError(f"{source}: method {self.method!r} is unknown; use one of {', '.join(METHODS)}")
-        if self.seed < 0:
-            raise ConfigError(f"{source}: seed must be >= 0, got {self.seed}")
+        check_seed(self.seed, f"{source}: seed")
+        check_float(self.finetune_lr, f"{source}: finetune_lr", lo_open=True)
+        for name in ("finetune_kl_coef", "finetune_explore_bonus", "finetune_bc_coef"):
+            check_float(getattr(self, name), f"{source}: {name}")
         for name in ("iterations", "scenes_per_iteration", "finetune_frames", "heldout_episodes", "finetune_envs",
                      "score_rollouts", "sfl_candidates"):
             if getattr(self, name) < 1:
