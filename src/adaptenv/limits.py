@@ -82,7 +82,8 @@ COUNTS = ("eval_every", "final_eval_episodes", "calibrate_episodes", "value_warm
 WIDTHS = ("hidden", "feature_dim", "conv_channels", "map_dim")
 PROBABILITIES = ("beta_start", "beta_end", "beta_decay_fraction", "beta", "end_threshold", "teacher_mix", "gamma",
                  "gae_lambda")
-POSITIVE_RATES = ("learning_rate", "max_grad_norm", "end_weight")
+LEARNING_RATES = ("learning_rate",)
+POSITIVE_RATES = ("max_grad_norm", "end_weight")
 RATES = ("min_start_distance", "clip_coef", "ent_coef", "vf_coef", "target_kl", "bc_coef", "kl_coef",
          "explore_bonus")
 
@@ -109,6 +110,8 @@ def check_numbers(cfg: object, flag=_flag) -> None:
         check_int(cfg.threads, flag("threads"), 0, THREADS_MAX)  # type: ignore[attr-defined]
     for name in filter(has, PROBABILITIES):
         check_float(getattr(cfg, name), flag(name), 0.0, 1.0)
+    for name in filter(has, LEARNING_RATES):
+        check_float(getattr(cfg, name), flag(name), 0.0, 1.0, lo_open=True)
     for name in filter(has, POSITIVE_RATES):
         check_float(getattr(cfg, name), flag(name), lo_open=True)
     for name in filter(has, RATES):

@@ -59,7 +59,7 @@ import torch
 import torch.nn.functional as F
 from torch import nn
 
-from adaptenv.agents.checkpoint import load_checkpoint, save_checkpoint
+from adaptenv.agents.checkpoint import load_checkpoint, non_finite_weight, save_checkpoint
 from adaptenv.agents.config import PPOConfig
 from adaptenv.agents.evaluate import run_episodes, sample_episodes, summarize
 from adaptenv.agents.houses import load_house_set
@@ -79,8 +79,8 @@ from adaptenv.agents.registry import init_checkpoint
 from adaptenv.agents.stop import calibrate_end_threshold
 from adaptenv.agents.suites import EpisodeFloor
 from adaptenv.agents.teachers import TEACHERS, make_teacher
-from adaptenv.agents.train import RunLogger, TrainResult, check_precision
-from adaptenv.errors import ConfigError
+from adaptenv.agents.train import RunLogger, TrainResult, card_config, check_finite, check_precision
+from adaptenv.errors import ConfigError, TrainingDiverged
 from adaptenv.limits import check_numbers
 from adaptenv.progress import ProgressBar
 from adaptenv.sim.egomap import EgoMap
@@ -469,6 +469,14 @@ def _train_ppo(cfg: PPOConfig, worlds: Sequence[Any] | None, init_net: NavNet | 
             "losses/entropy": float(np.mean(stats["ent"])), "losses/bc_loss": float(np.mean(stats["bc"])),
             "losses/approx_kl": float(np.mean(stats["kl"])), "losses/clipfrac": float(np.mean(stats["clip"])),
             "losses/explained_variance": explained}
+        if non_finite_weight(agent) is not None:  # PPO saves only at the end: nothing is written
+            logger.close()
+            if progress:
+                progress.stop()
+            check_finite(net, cfg, frames, 0)
+            raise TrainingDiverged(f"training diverged after {frames:,} frames: the value head's weights hold NaN "
+                                   f"or infinite values; no checkpoint was written; lower --learning-rate (now "
+                                   f"{cfg.learning_rate:g}) or --max-grad-norm (now {cfg.max_grad_norm:g})")
         if cfg.eval_every and iteration % cfg.eval_every == 0:
             row["eval/success"], row["eval/spl"] = evaluate_held_in(net)
         logger.log(row)
@@ -499,7 +507,8 @@ def _train_ppo(cfg: PPOConfig, worlds: Sequence[Any] | None, init_net: NavNet | 
         "final_train_success_ci95": final["success_ci95"], "final_train_spl": final["spl"],
         "final_eval_episodes": final["episodes"], "end_threshold": end_threshold,
         "end_threshold_calibration": calibration.card() if calibration else None,
-        "torch_threads": threads, "cpus": os.cpu_count(), "config": asdict(cfg)}
+        "torch_threads": threads, "cpus": os.cpu_count(), "config": card_config(cfg, net),
+        "net_config": asdict(net.config)}
     logger.log({"iteration": n_iterations, "frames": frames, "updates": updates, "wall_time": wall,
                 "eval/success": final["success"], "eval/spl": final["spl"]})
     logger.close()

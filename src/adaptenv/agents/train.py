@@ -54,7 +54,12 @@ import numpy as np
 import torch
 import torch.nn.functional as F
 
-from adaptenv.agents.checkpoint import atomic_torch_save, load_checkpoint, save_checkpoint
+from adaptenv.agents.checkpoint import (
+    atomic_torch_save,
+    load_checkpoint,
+    non_finite_weight,
+    save_checkpoint,
+)
 from adaptenv.agents.config import (
     PRECISIONS,
     FinetuneConfig,
@@ -81,7 +86,7 @@ from adaptenv.agents.network import (
 from adaptenv.agents.registry import init_checkpoint
 from adaptenv.agents.stop import calibrate_end_threshold
 from adaptenv.agents.teachers import make_teacher
-from adaptenv.errors import ConfigError
+from adaptenv.errors import ConfigError, TrainingDiverged
 from adaptenv.limits import check_numbers
 from adaptenv.progress import ProgressBar
 from adaptenv.scene.house import House
@@ -102,6 +107,25 @@ def check_config(cfg: TrainConfig) -> None:
         raise ConfigError(f"--buffer-frames ({cfg.buffer_frames}) must hold at least one block of "
                           f"rollout_steps * num_envs = {cfg.rollout_steps * cfg.num_envs} frames")
     check_precision(cfg.precision, "--precision")
+
+
+def check_finite(net: NavNet, cfg: TrainConfig, frames: int, saved_at: int) -> None:
+    """Stop with one TrainingDiverged line when a gradient step made a weight NaN or infinite (nothing more is
+    saved, so the last checkpoint written, ``saved_at`` updates, stays the last finite one)."""
+    if (bad := non_finite_weight(net)) is None:
+        return
+    kept = (f"the last finite checkpoint, {cfg.output} ({saved_at} updates), is kept" if cfg.output and saved_at
+            else "no checkpoint was written")
+    raise TrainingDiverged(f"training diverged after {frames:,} frames: the weight {bad} holds NaN or infinite "
+                           f"values; {kept}; lower --learning-rate (now {cfg.learning_rate:g}) or --max-grad-norm "
+                           f"(now {cfg.max_grad_norm:g})")
+
+
+def card_config(cfg: TrainConfig | PPOConfig, net: NavNet) -> dict[str, Any]:
+    """The run's settings for its card, the network sizes as trained (an ``init`` checkpoint's, not the flags')."""
+    c = net.config
+    return {**asdict(cfg), "hidden": c.hidden, "feature_dim": c.feature_dim, "conv_channels": c.conv_channels,
+            "map_dim": c.map_dim, **({"map": bool(c.map_channels)} if hasattr(cfg, "map") else {})}
 
 
 def check_precision(precision: str, where: str) -> None:
@@ -475,6 +499,7 @@ def _train(cfg: TrainConfig, worlds: Sequence[NavWorld] | None, init_net: NavNet
             return
         row.update(learning.result() if pool else learning)
         learning = None
+        check_finite(net, cfg, frames, last_save)
         updates += cfg.updates_per_iter
         row["updates"], row["wall_time"] = updates, wall_before + time.perf_counter() - start
         actor.load_state_dict(net.state_dict())
@@ -521,6 +546,11 @@ def _train(cfg: TrainConfig, worlds: Sequence[NavWorld] | None, init_net: NavNet
         if progress:
             progress.stop()
         raise
+    except TrainingDiverged:
+        logger.close()
+        if progress:
+            progress.stop()
+        raise
     finally:
         if pool:
             pool.shutdown(wait=True)
@@ -544,7 +574,8 @@ def _train(cfg: TrainConfig, worlds: Sequence[NavWorld] | None, init_net: NavNet
         "final_train_spl": final["spl"], "final_eval_episodes": final["episodes"],
         "end_threshold": end_threshold, "end_weight": cfg.end_weight,
         "end_threshold_calibration": calibration.card() if calibration else None,
-        "torch_threads": threads, "cpus": os.cpu_count(), "config": asdict(cfg)}
+        "torch_threads": threads, "cpus": os.cpu_count(), "config": card_config(cfg, net),
+        "net_config": asdict(net.config)}
     logger.log({"iteration": iteration, "frames": frames, "updates": updates, "wall_time": wall,
                 "eval/success": final["success"], "eval/spl": final["spl"]})
     logger.close()
