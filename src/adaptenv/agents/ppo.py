@@ -134,6 +134,34 @@ class ActorCritic(nn.Module):
         return self.net.head(z), value, h
 
 
+def _learner(net: NavNet, freeze_encoder: bool, learning_rate: float) -> tuple[ActorCritic, torch.optim.Adam]:
+    """The actor-critic around ``net`` and its Adam optimizer, as :func:`train_ppo` makes them."""
+    for module in net.encoder_modules() if freeze_encoder else ():
+        module.requires_grad_(False)
+    agent = ActorCritic(net)
+    return agent, torch.optim.Adam([p for p in agent.parameters() if p.requires_grad], lr=learning_rate, eps=1e-5)
+
+
+def learner_problem(learner: Any, net: NavNet, freeze_encoder: bool) -> str | None:
+    """Why ``learner`` (a saved ``{"value", "optimizer"}`` state) cannot continue PPO on ``net``, or None: it is
+    loaded into a copy of what :func:`train_ppo` builds, and every tensor must be finite."""
+    if not isinstance(learner, dict) or not {"value", "optimizer"} <= set(learner):
+        return "not a learner state (expected the value head and optimizer state the loop saves)"
+    tensors = [t for t in learner["value"].values()] if isinstance(learner["value"], dict) else []
+    tensors += [t for st in (learner["optimizer"].get("state") or {}).values() if isinstance(st, dict)
+                for t in st.values()] if isinstance(learner["optimizer"], dict) else []
+    if any(isinstance(t, torch.Tensor) and t.is_floating_point() and not bool(torch.isfinite(t).all())
+           for t in tensors):
+        return "its value head or optimizer state holds NaN or infinite values"
+    agent, optimizer = _learner(copy.deepcopy(net), freeze_encoder, 1e-4)
+    try:
+        agent.value.load_state_dict(learner["value"])
+        optimizer.load_state_dict(copy.deepcopy(learner["optimizer"]))
+    except (KeyError, RuntimeError, TypeError, ValueError, AttributeError, IndexError) as exc:
+        return f"it does not fit this policy's network ({type(exc).__name__})"
+    return None
+
+
 def acting_log_probs(logits: torch.Tensor, stop_rule: str) -> torch.Tensor:
     """Log-probabilities (..., A) of the distribution actions are drawn from.
 
@@ -273,10 +301,7 @@ def _train_ppo(cfg: PPOConfig, worlds: Sequence[Any] | None, init_net: NavNet | 
     net = _initial_net(cfg, init_net)
     anchor = copy.deepcopy(net).eval().requires_grad_(False)  # pi_0, frozen
     freeze = cfg.freeze_encoder  # the encoder keeps pi_0's weights: its features are computed once, while collecting
-    for module in net.encoder_modules() if freeze else ():
-        module.requires_grad_(False)
-    agent = ActorCritic(net)
-    optimizer = torch.optim.Adam([p for p in agent.parameters() if p.requires_grad], lr=cfg.learning_rate, eps=1e-5)
+    agent, optimizer = _learner(net, freeze, cfg.learning_rate)
     if learner is not None:  # a previous run's critic and Adam moments: this run continues it
         agent.value.load_state_dict(learner["value"])
         optimizer.load_state_dict(copy.deepcopy(learner["optimizer"]))  # Adam steps its tensors in place
