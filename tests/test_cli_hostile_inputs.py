@@ -359,7 +359,7 @@ def _state(**changes):
 
 
 RESUMES = [
-    ("corrupt-learner", _corrupt("iter_0001/learner.pt", b"\x80\x04 not torch"), "iter_0001/learner.pt: not a learner"),
+    ("corrupt-learner", _corrupt("iter_0001/learner.pt", b"not a torch file"), "iter_0001/learner.pt: not a learner"),
     ("foreign-learner", _foreign_learner, "iter_0001/learner.pt: not a learner state (expected"),
     ("misfit-learner", _misfit_learner, "iter_0001/learner.pt: it does not fit this policy's network"),
     ("corrupt-iterations", _corrupt("iterations.jsonl", b'{"iteration": "one"}\n'),
