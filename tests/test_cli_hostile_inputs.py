@@ -89,6 +89,10 @@ NUMBERS = [
     (["train", "--houses", "preset:tiny", "--beta-end", "nan"], "--beta-end nan"),
     (["ppo", "--houses", "preset:tiny", "--gamma", "inf"], "--gamma inf"),
     (["ppo", "--houses", "preset:tiny", "--ent-coef", "-1"], "--ent-coef -1.0"),
+    (["evaluate", "--houses", "preset:tiny", "--min-geodesic", "inf"], "--min-geodesic inf"),
+    (["loop", "--finetune-lr", "inf", "-o", "l"], "--finetune-lr inf"),
+    (["loop", "--finetune-min-start", "inf", "-o", "l"], "--finetune-min-start inf"),
+    (["experiment", "--final-episodes", "99999999999999999999", "-o", "x"], "--final-episodes 99999999999999999999"),
 ]
 
 

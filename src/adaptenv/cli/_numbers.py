@@ -6,6 +6,8 @@ command refuses a bad number the same way: ``option = typer.Option(0, "--seed", 
 
 from __future__ import annotations
 
+import math
+
 from adaptenv.limits import check_episodes, check_float, check_seed
 
 
@@ -24,9 +26,14 @@ def episodes(ctx, param, value):
     return value if value is None else check_episodes(value, _flag(param))
 
 
+def episodes_or_none(ctx, param, value):
+    """Callback: 0 (none), or an episode count from 1 to what fits in memory."""
+    return value if value in (None, 0) else check_episodes(value, _flag(param))
+
+
 def finite(ctx, param, value):
-    """Callback: a finite number (not nan or inf), at least the option's ``min`` (0 unless set)."""
+    """Callback: a finite number (not inf: click's ranges refuse nan but take inf), at least the option's ``min``."""
     if value is None:
         return value
     lo = getattr(getattr(param, "type", None), "min", None)
-    return check_float(value, _flag(param), lo=lo if lo is not None else -float("inf"))
+    return check_float(value, _flag(param), lo=-math.inf if lo is None else lo)

@@ -48,13 +48,13 @@ CACHE_OPTION = typer.Option(None, "--llm-cache", metavar="DIR", help="Cache LLM 
                             "with the same inputs makes no request.")
 PROMPTS_OPTION = typer.Option(None, "--prompts", help="adaptenv (default, richer prompts) or paper (the paper's "
                               "appendix prompts verbatim).")
-PRICE_IN_OPTION = typer.Option(None, "--price-in", min=0.0, metavar="USD", help="USD per million input tokens "
+PRICE_IN_OPTION = typer.Option(None, "--price-in", min=0.0, callback=numbers.finite, metavar="USD", help="USD per million input tokens "
                                "(cost estimates; gpt-4.1-mini: see docs/llm.md).")
-PRICE_OUT_OPTION = typer.Option(None, "--price-out", min=0.0, metavar="USD",
+PRICE_OUT_OPTION = typer.Option(None, "--price-out", min=0.0, callback=numbers.finite, metavar="USD",
                                 help="USD per million output tokens.")
 MAX_TOKENS_OPTION = typer.Option(None, "--max-tokens", min=1, help="Token budget (input + output) of the run; "
                                  "G stops cleanly when it is used up.")
-MAX_COST_OPTION = typer.Option(None, "--max-cost", min=0.0, metavar="USD", help="Cost budget of the run in USD "
+MAX_COST_OPTION = typer.Option(None, "--max-cost", min=0.0, callback=numbers.finite, metavar="USD", help="Cost budget of the run in USD "
                                "(needs --price-in and --price-out).")
 TARGET_MOVES_OPTION = typer.Option(False, "--allow-target-moves", help="Let the LLM G move the episode's target "
                                    "objects (excluded by default, like the built-in G).")

@@ -145,7 +145,7 @@ def evaluate(
     workers: int = typer.Option(1, "--workers", "-w", min=1, help="Worker processes (episodes are split among them)."),
     batch: int = typer.Option(64, "--batch", min=1, help="Episodes simulated at once per process."),
     out: Path = _OUT_OPTION,
-    min_geodesic: float = typer.Option(0.0, "--min-geodesic", min=0.0,
+    min_geodesic: float = typer.Option(0.0, "--min-geodesic", min=0.0, callback=numbers.finite,
                                        help="Keep only starts at least this geodesic distance (m) from the target "
                                             "(overrides a suite's floor; 0 keeps the suite's or none)."),
     min_expert_steps: int = typer.Option(0, "--min-expert-steps", min=0,

@@ -192,7 +192,7 @@ class LoopConfig:
             raise ConfigError(f"{source}: method {self.method!r} is unknown; use one of {', '.join(METHODS)}")
         check_seed(self.seed, f"{source}: seed")
         check_float(self.finetune_lr, f"{source}: finetune_lr", 0.0, 1.0, lo_open=True)
-        for name in ("finetune_kl_coef", "finetune_explore_bonus", "finetune_bc_coef"):
+        for name in ("finetune_kl_coef", "finetune_explore_bonus", "finetune_bc_coef", "finetune_min_start"):
             check_float(getattr(self, name), f"{source}: {name}")
         for name in ("iterations", "scenes_per_iteration", "finetune_frames", "heldout_episodes", "finetune_envs",
                      "score_rollouts", "sfl_candidates"):
