@@ -11,7 +11,7 @@ from typer.testing import CliRunner
 from adaptenv.cli import app
 from adaptenv.errors import ConfigError, HouseError
 from adaptenv.scene.house import save_house
-from adaptenv.sim.trajectory import Pose, Trajectory
+from adaptenv.sim.trajectory import Pose, Step, Trajectory
 
 runner = CliRunner()
 
@@ -86,7 +86,8 @@ def test_render_refuses_a_trajectory_from_another_house(real_house_path, tmp_pat
     from tests.sim import helpers as H
 
     fridge = {"target_ids": ["Fridge|2|1"], "target_positions": [(15.403, 2.205)]}  # the real house's fridge
-    traj = Trajectory(house=str(real_house_path), target_type="Fridge", start=Pose(x=10.0, z=2.5, yaw=0.0),
+    start = Pose(x=10.0, z=2.5, yaw=0.0)
+    traj = Trajectory(house=str(real_house_path), target_type="Fridge", start=start, steps=[Step(pose=start, action="end")],
                       **fridge).save(tmp_path / "traj.json")
     other = save_house(H.one_room(), tmp_path / "other.json")
     result = runner.invoke(app, ["render", str(other), "-t", str(traj), "-o", str(tmp_path / "map.png")])

@@ -39,3 +39,7 @@ class ConfigError(AdaptenvError):
 
 class RunsFailed(AdaptenvError):
     """Some runs of an experiment failed; the others ran to the end (each failure is one line of the message)."""
+
+
+class TrainingDiverged(AdaptenvError):
+    """Training made the network's weights NaN or infinite; the last finite checkpoint is kept."""

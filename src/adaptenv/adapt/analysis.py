@@ -17,6 +17,7 @@ from collections import Counter
 from typing import Any, Literal, Protocol, runtime_checkable
 
 import numpy as np
+import shapely
 from pydantic import BaseModel, Field
 
 from adaptenv.adapt.llm import LLMBackend, LLMError, Message, ModelAnswerError
@@ -192,6 +193,8 @@ def _failure_mode(traj: Trajectory, collisions: int, revisit_ratio: float) -> Fa
 
 #: Recorded and house target positions may differ by this much (m) and still be the same house.
 SAME_PLACE = 0.01
+#: A recorded pose may stand this far (m) outside every room (doorways, rounding) and still be on the floor.
+OFF_FLOOR = 0.5
 
 
 def trajectory_mismatch(traj: Trajectory, world: NavWorld) -> str | None:
@@ -206,6 +209,21 @@ def trajectory_mismatch(traj: Trajectory, world: NavWorld) -> str | None:
         if math.hypot(hx - x, hz - z) > SAME_PLACE:
             return f"{oid} stands at ({hx:.2f}, {hz:.2f}) m in the house but at ({x:.2f}, {z:.2f}) m in the trajectory"
     return None
+
+
+def pose_outside(traj: Trajectory, world: NavWorld) -> str | None:
+    """Which pose of ``traj`` lies off the house's floor (its rooms, widened by ``OFF_FLOOR``), or None."""
+    poses = [("start", traj.start), *((f"step {i}", s.pose) for i, s in enumerate(traj.steps))]
+    if traj.final_pose is not None:
+        poses.append(("the final pose", traj.final_pose))
+    floor = shapely.unary_union(list(world.geometry.rooms.values())).buffer(OFF_FLOOR)
+    xs = np.array([p.x for _, p in poses], dtype=np.float64)
+    zs = np.array([p.z for _, p in poses], dtype=np.float64)
+    inside = shapely.contains_xy(floor, xs, zs)
+    if inside.all():
+        return None
+    k = int(np.argmin(inside))
+    return f"{poses[k][0]} stands at ({xs[k]:.2f}, {zs[k]:.2f}) m, off the house's floor"
 
 
 def analyze_trajectory(traj: Trajectory, world: NavWorld) -> Analysis:

@@ -59,7 +59,7 @@ import torch
 import torch.nn.functional as F
 from torch import nn
 
-from adaptenv.agents.checkpoint import load_checkpoint, save_checkpoint
+from adaptenv.agents.checkpoint import load_checkpoint, non_finite_weight, save_checkpoint
 from adaptenv.agents.config import PPOConfig
 from adaptenv.agents.evaluate import run_episodes, sample_episodes, summarize
 from adaptenv.agents.houses import load_house_set
@@ -76,11 +76,18 @@ from adaptenv.agents.network import (
     torch_threads,
 )
 from adaptenv.agents.registry import init_checkpoint
-from adaptenv.agents.runlog import RunLogger, TrainResult, check_precision
+from adaptenv.agents.runlog import (
+    RunLogger,
+    TrainResult,
+    card_config,
+    check_finite,
+    check_precision,
+)
 from adaptenv.agents.stop import calibrate_end_threshold
 from adaptenv.agents.suites import EpisodeFloor
 from adaptenv.agents.teachers import TEACHERS, make_teacher
-from adaptenv.errors import ConfigError
+from adaptenv.errors import ConfigError, TrainingDiverged
+from adaptenv.limits import check_numbers
 from adaptenv.progress import ProgressBar
 from adaptenv.sim.egomap import EgoMap
 from adaptenv.sim.spec import END, N_RAYS
@@ -97,10 +104,7 @@ PPO_LOG_KEYS = ("iteration", "frames", "updates", "wall_time", "charts/learning_
 
 def check_ppo_config(cfg: PPOConfig) -> None:
     """Raise one ConfigError for the first inconsistent setting (naming the flag and the fix)."""
-    for name in ("frames", "num_envs", "rollout_steps", "chunk_len", "num_minibatches", "update_epochs",
-                 "max_episode_steps", "hidden", "feature_dim", "conv_channels"):
-        if getattr(cfg, name) <= 0:
-            raise ConfigError(f"--{name.replace('_', '-')} must be positive, got {getattr(cfg, name)}")
+    check_numbers(cfg)
     if cfg.rollout_steps % cfg.chunk_len:
         raise ConfigError(f"--rollout-steps ({cfg.rollout_steps}) must be a multiple of --chunk-len ({cfg.chunk_len})")
     sequences = cfg.num_envs * (cfg.rollout_steps // cfg.chunk_len)
@@ -111,9 +115,6 @@ def check_ppo_config(cfg: PPOConfig) -> None:
         raise ConfigError(f"--bc-teacher {cfg.bc_teacher!r}: unknown teacher; choose one of {', '.join(TEACHERS)}")
     if cfg.stop_rule not in ("threshold", "sample"):
         raise ConfigError(f"--stop-rule must be 'threshold' or 'sample', got {cfg.stop_rule!r}")
-    for name in ("kl_coef", "explore_bonus", "bc_coef"):
-        if getattr(cfg, name) < 0:
-            raise ConfigError(f"--{name.replace('_', '-')} must be >= 0, got {getattr(cfg, name)}")
     check_precision(cfg.precision, "--precision")
 
 
@@ -137,6 +138,34 @@ class ActorCritic(nn.Module):
         z, h = self.net.recur(feats, done, h0)
         value = self.value(z.detach() if detach_value else z).squeeze(-1)
         return self.net.head(z), value, h
+
+
+def _learner(net: NavNet, freeze_encoder: bool, learning_rate: float) -> tuple[ActorCritic, torch.optim.Adam]:
+    """The actor-critic around ``net`` and its Adam optimizer, as :func:`train_ppo` makes them."""
+    for module in net.encoder_modules() if freeze_encoder else ():
+        module.requires_grad_(False)
+    agent = ActorCritic(net)
+    return agent, torch.optim.Adam([p for p in agent.parameters() if p.requires_grad], lr=learning_rate, eps=1e-5)
+
+
+def learner_problem(learner: Any, net: NavNet, freeze_encoder: bool) -> str | None:
+    """Why ``learner`` (a saved ``{"value", "optimizer"}`` state) cannot continue PPO on ``net``, or None: it is
+    loaded into a copy of what :func:`train_ppo` builds, and every tensor must be finite."""
+    if not isinstance(learner, dict) or not {"value", "optimizer"} <= set(learner):
+        return "not a learner state (expected the value head and optimizer state the loop saves)"
+    tensors = [t for t in learner["value"].values()] if isinstance(learner["value"], dict) else []
+    tensors += [t for st in (learner["optimizer"].get("state") or {}).values() if isinstance(st, dict)
+                for t in st.values()] if isinstance(learner["optimizer"], dict) else []
+    if any(isinstance(t, torch.Tensor) and t.is_floating_point() and not bool(torch.isfinite(t).all())
+           for t in tensors):
+        return "its value head or optimizer state holds NaN or infinite values"
+    agent, optimizer = _learner(copy.deepcopy(net), freeze_encoder, 1e-4)
+    try:
+        agent.value.load_state_dict(learner["value"])
+        optimizer.load_state_dict(copy.deepcopy(learner["optimizer"]))
+    except (KeyError, RuntimeError, TypeError, ValueError, AttributeError, IndexError) as exc:
+        return f"it does not fit this policy's network ({type(exc).__name__})"
+    return None
 
 
 def acting_log_probs(logits: torch.Tensor, stop_rule: str) -> torch.Tensor:
@@ -278,10 +307,7 @@ def _train_ppo(cfg: PPOConfig, worlds: Sequence[Any] | None, init_net: NavNet | 
     net = _initial_net(cfg, init_net)
     anchor = copy.deepcopy(net).eval().requires_grad_(False)  # pi_0, frozen
     freeze = cfg.freeze_encoder  # the encoder keeps pi_0's weights: its features are computed once, while collecting
-    for module in net.encoder_modules() if freeze else ():
-        module.requires_grad_(False)
-    agent = ActorCritic(net)
-    optimizer = torch.optim.Adam([p for p in agent.parameters() if p.requires_grad], lr=cfg.learning_rate, eps=1e-5)
+    agent, optimizer = _learner(net, freeze, cfg.learning_rate)
     if learner is not None:  # a previous run's critic and Adam moments: this run continues it
         agent.value.load_state_dict(learner["value"])
         optimizer.load_state_dict(copy.deepcopy(learner["optimizer"]))  # Adam steps its tensors in place
@@ -474,6 +500,14 @@ def _train_ppo(cfg: PPOConfig, worlds: Sequence[Any] | None, init_net: NavNet | 
             "losses/entropy": float(np.mean(stats["ent"])), "losses/bc_loss": float(np.mean(stats["bc"])),
             "losses/approx_kl": float(np.mean(stats["kl"])), "losses/clipfrac": float(np.mean(stats["clip"])),
             "losses/explained_variance": explained}
+        if non_finite_weight(agent) is not None:  # PPO saves only at the end: nothing is written
+            logger.close()
+            if progress:
+                progress.stop()
+            check_finite(net, cfg, frames, 0)
+            raise TrainingDiverged(f"training diverged after {frames:,} frames: the value head's weights hold NaN "
+                                   f"or infinite values; no checkpoint was written; lower --learning-rate (now "
+                                   f"{cfg.learning_rate:g}) or --max-grad-norm (now {cfg.max_grad_norm:g})")
         if cfg.eval_every and iteration % cfg.eval_every == 0:
             row["eval/success"], row["eval/spl"] = evaluate_held_in(net)
         logger.log(row)
@@ -504,7 +538,8 @@ def _train_ppo(cfg: PPOConfig, worlds: Sequence[Any] | None, init_net: NavNet | 
         "final_train_success_ci95": final["success_ci95"], "final_train_spl": final["spl"],
         "final_eval_episodes": final["episodes"], "end_threshold": end_threshold,
         "end_threshold_calibration": calibration.card() if calibration else None,
-        "torch_threads": threads, "cpus": os.cpu_count(), "config": asdict(cfg)}
+        "torch_threads": threads, "cpus": os.cpu_count(), "config": card_config(cfg, net),
+        "net_config": asdict(net.config)}
     logger.log({"iteration": n_iterations, "frames": frames, "updates": updates, "wall_time": wall,
                 "eval/success": final["success"], "eval/spl": final["spl"]})
     logger.close()

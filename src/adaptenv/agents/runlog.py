@@ -7,19 +7,39 @@ from __future__ import annotations
 
 import csv
 from collections.abc import Sequence
-from dataclasses import dataclass, field
+from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
 
-from adaptenv.agents.config import PRECISIONS
+from adaptenv.agents.checkpoint import non_finite_weight
+from adaptenv.agents.config import PRECISIONS, PPOConfig, TrainConfig
 from adaptenv.agents.network import END_THRESHOLD, NavNet, NeuralPolicy
-from adaptenv.errors import ConfigError
+from adaptenv.errors import ConfigError, TrainingDiverged
 
 
 def check_precision(precision: str, where: str) -> None:
     """Raise a ConfigError unless ``precision`` names an arithmetic of the gradient steps (fp32 or bf16)."""
     if precision not in PRECISIONS:
         raise ConfigError(f"{where} must be one of {', '.join(PRECISIONS)}, got {precision!r}")
+
+
+def check_finite(net: NavNet, cfg: TrainConfig, frames: int, saved_at: int) -> None:
+    """Stop with one TrainingDiverged line when a gradient step made a weight NaN or infinite (nothing more is
+    saved, so the last checkpoint written, ``saved_at`` updates, stays the last finite one)."""
+    if (bad := non_finite_weight(net)) is None:
+        return
+    kept = (f"the last finite checkpoint, {cfg.output} ({saved_at} updates), is kept" if cfg.output and saved_at
+            else "no checkpoint was written")
+    raise TrainingDiverged(f"training diverged after {frames:,} frames: the weight {bad} holds NaN or infinite "
+                           f"values; {kept}; lower --learning-rate (now {cfg.learning_rate:g}) or --max-grad-norm "
+                           f"(now {cfg.max_grad_norm:g})")
+
+
+def card_config(cfg: TrainConfig | PPOConfig, net: NavNet) -> dict[str, Any]:
+    """The run's settings for its card, the network sizes as trained (an ``init`` checkpoint's, not the flags')."""
+    c = net.config
+    return {**asdict(cfg), "hidden": c.hidden, "feature_dim": c.feature_dim, "conv_channels": c.conv_channels,
+            "map_dim": c.map_dim, **({"map": bool(c.map_channels)} if hasattr(cfg, "map") else {})}
 
 
 LOG_KEYS = ("iteration", "frames", "updates", "wall_time", "charts/beta", "charts/learning_rate",

@@ -53,7 +53,11 @@ import numpy as np
 import torch
 import torch.nn.functional as F
 
-from adaptenv.agents.checkpoint import atomic_torch_save, load_checkpoint, save_checkpoint
+from adaptenv.agents.checkpoint import (
+    atomic_torch_save,
+    load_checkpoint,
+    save_checkpoint,
+)
 from adaptenv.agents.config import (
     FinetuneConfig,
     PPOConfig,
@@ -78,10 +82,17 @@ from adaptenv.agents.network import (
 from adaptenv.agents.ppo import train_ppo
 from adaptenv.agents.registry import init_checkpoint
 from adaptenv.agents.runlog import LOG_KEYS as LOG_KEYS
-from adaptenv.agents.runlog import RunLogger, TrainResult, check_precision
+from adaptenv.agents.runlog import (
+    RunLogger,
+    TrainResult,
+    card_config,
+    check_finite,
+    check_precision,
+)
 from adaptenv.agents.stop import calibrate_end_threshold
 from adaptenv.agents.teachers import make_teacher
-from adaptenv.errors import ConfigError
+from adaptenv.errors import ConfigError, TrainingDiverged
+from adaptenv.limits import check_numbers
 from adaptenv.progress import ProgressBar
 from adaptenv.scene.house import House
 from adaptenv.sim.spec import END, N_RAYS
@@ -93,23 +104,13 @@ __all__ = ["TrainConfig", "FinetuneConfig", "field_docs", "train", "finetune", "
 
 def check_config(cfg: TrainConfig) -> None:
     """Raise one ConfigError for the first inconsistent setting (naming the field and the fix)."""
-    positive = ("frames", "num_envs", "rollout_steps", "chunk_len", "batch_chunks", "hidden", "feature_dim", "conv_channels",
-                "max_episode_steps", "buffer_frames", "save_every")
-    for name in positive:
-        if getattr(cfg, name) <= 0:
-            raise ConfigError(f"--{name.replace('_', '-')} must be positive, got {getattr(cfg, name)}")
+    check_numbers(cfg)
     if cfg.rollout_steps % cfg.chunk_len:
         raise ConfigError(f"--rollout-steps ({cfg.rollout_steps}) must be a multiple of --chunk-len "
                           f"({cfg.chunk_len}); e.g. --rollout-steps {cfg.chunk_len * 2}")
     if cfg.buffer_frames < cfg.rollout_steps * cfg.num_envs:
         raise ConfigError(f"--buffer-frames ({cfg.buffer_frames}) must hold at least one block of "
                           f"rollout_steps * num_envs = {cfg.rollout_steps * cfg.num_envs} frames")
-    if cfg.end_weight <= 0 or cfg.calibrate_episodes < 0:
-        raise ConfigError(f"--end-weight must be positive and --calibrate-episodes >= 0, got {cfg.end_weight} "
-                          f"and {cfg.calibrate_episodes}")
-    for name in ("beta_start", "beta_end", "beta_decay_fraction"):
-        if not 0.0 <= getattr(cfg, name) <= 1.0:
-            raise ConfigError(f"--{name.replace('_', '-')} must lie in [0, 1], got {getattr(cfg, name)}")
     check_precision(cfg.precision, "--precision")
 
 
@@ -420,6 +421,7 @@ def _train(cfg: TrainConfig, worlds: Sequence[NavWorld] | None, init_net: NavNet
             return
         row.update(learning.result() if pool else learning)
         learning = None
+        check_finite(net, cfg, frames, last_save)
         updates += cfg.updates_per_iter
         row["updates"], row["wall_time"] = updates, wall_before + time.perf_counter() - start
         actor.load_state_dict(net.state_dict())
@@ -466,6 +468,11 @@ def _train(cfg: TrainConfig, worlds: Sequence[NavWorld] | None, init_net: NavNet
         if progress:
             progress.stop()
         raise
+    except TrainingDiverged:
+        logger.close()
+        if progress:
+            progress.stop()
+        raise
     finally:
         if pool:
             pool.shutdown(wait=True)
@@ -489,7 +496,8 @@ def _train(cfg: TrainConfig, worlds: Sequence[NavWorld] | None, init_net: NavNet
         "final_train_spl": final["spl"], "final_eval_episodes": final["episodes"],
         "end_threshold": end_threshold, "end_weight": cfg.end_weight,
         "end_threshold_calibration": calibration.card() if calibration else None,
-        "torch_threads": threads, "cpus": os.cpu_count(), "config": asdict(cfg)}
+        "torch_threads": threads, "cpus": os.cpu_count(), "config": card_config(cfg, net),
+        "net_config": asdict(net.config)}
     logger.log({"iteration": iteration, "frames": frames, "updates": updates, "wall_time": wall,
                 "eval/success": final["success"], "eval/spl": final["spl"]})
     logger.close()

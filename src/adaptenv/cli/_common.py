@@ -59,12 +59,16 @@ def interrupted(how: str = "") -> NoReturn:
 
 
 def check_recorded_in(traj, world, trajectory: Path, house: Path) -> None:
-    """Raise a one-sentence error when the trajectory ``traj`` was not recorded in ``world``."""
-    from adaptenv.adapt.analysis import trajectory_mismatch
+    """Raise a one-sentence error when the trajectory ``traj`` was not recorded in ``world`` (other targets, or a
+    pose off its floor)."""
+    from adaptenv.adapt.analysis import pose_outside, trajectory_mismatch
 
     if (why := trajectory_mismatch(traj, world)) is not None:
         raise ConfigError(f"{trajectory}: recorded in house {traj.house!r}, not in {house} ({why}); "
                           "pass the house the episode ran in")
+    if (why := pose_outside(traj, world)) is not None:
+        raise ConfigError(f"{trajectory}: {why} of {house}; pass the house the episode ran in, or record the "
+                          "episode again")
 
 
 JSON_OPTION = typer.Option(False, "--json", help="Print the figures as one JSON object instead of a table.")

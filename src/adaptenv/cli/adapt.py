@@ -16,6 +16,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 import typer
 
+from adaptenv.cli import _numbers as numbers
 from adaptenv.cli._common import JSON_OPTION
 from adaptenv.cli._outputs import FORCE_OPTION, output_folder
 from adaptenv.errors import AdaptenvError, ConfigError
@@ -48,13 +49,13 @@ CACHE_OPTION = typer.Option(None, "--llm-cache", metavar="DIR", help="Cache LLM 
                             "with the same inputs makes no request.")
 PROMPTS_OPTION = typer.Option(None, "--prompts", help="adaptenv (default, richer prompts) or paper (the paper's "
                               "appendix prompts verbatim).")
-PRICE_IN_OPTION = typer.Option(None, "--price-in", min=0.0, metavar="USD", help="USD per million input tokens "
+PRICE_IN_OPTION = typer.Option(None, "--price-in", min=0.0, callback=numbers.finite, metavar="USD", help="USD per million input tokens "
                                "(cost estimates; gpt-4.1-mini: see docs/llm.md).")
-PRICE_OUT_OPTION = typer.Option(None, "--price-out", min=0.0, metavar="USD",
+PRICE_OUT_OPTION = typer.Option(None, "--price-out", min=0.0, callback=numbers.finite, metavar="USD",
                                 help="USD per million output tokens.")
 MAX_TOKENS_OPTION = typer.Option(None, "--max-tokens", min=1, help="Token budget (input + output) of the run; "
                                  "G stops cleanly when it is used up.")
-MAX_COST_OPTION = typer.Option(None, "--max-cost", min=0.0, metavar="USD", help="Cost budget of the run in USD "
+MAX_COST_OPTION = typer.Option(None, "--max-cost", min=0.0, callback=numbers.finite, metavar="USD", help="Cost budget of the run in USD "
                                "(needs --price-in and --price-out).")
 TARGET_MOVES_OPTION = typer.Option(False, "--allow-target-moves", help="Let the LLM G move the episode's target "
                                    "objects (excluded by default, like the built-in G).")
@@ -164,7 +165,7 @@ def adapt(
     max_cost: float | None = MAX_COST_OPTION,
     allow_target_moves: bool = TARGET_MOVES_OPTION,
     llm_config_file: Path | None = LLM_CONFIG_OPTION,
-    seed: int = typer.Option(0, "--seed", help="Seed of the episode draw and the generator."),
+    seed: int = typer.Option(0, "--seed", callback=numbers.seed, help="Seed of the episode draw and the generator."),
     target: str | None = typer.Option(None, "--target", metavar="TYPE", help="Target object type (e.g. Fridge)."),
     as_json: bool = typer.Option(False, "--json", help="Print the summary as JSON."),
     diagnose: int = typer.Option(0, "--diagnose", min=0, max=50, help="Diagnose this many hard episodes (F over "
@@ -386,7 +387,7 @@ def bench_adapt(
     houses: int = typer.Option(50, "--houses", min=1, help="Procedural houses the policy solves."),
     steps: int = typer.Option(5, "--steps", min=1, help="Built-in edits per house."),
     policy: str = typer.Option("pretrained", "--policy", help="Policy to adapt to (pretrained, expert, ...)."),
-    seed: int = typer.Option(0, "--seed", help="Seed of houses and episodes."),
+    seed: int = typer.Option(0, "--seed", callback=numbers.seed, help="Seed of houses and episodes."),
     rooms: int = typer.Option(5, "--rooms", min=1, help="Rooms per procedural house."),
     as_json: bool = JSON_OPTION,
 ) -> None:
@@ -429,7 +430,7 @@ def audit(
 def bench_plausibility(
     houses: int = typer.Option(50, "--houses", min=1, help="Procedural houses to adapt."),
     steps: int = typer.Option(5, "--steps", min=1, help="Edits per house and generator."),
-    seed: int = typer.Option(0, "--seed", help="Seed of houses, episodes and edits."),
+    seed: int = typer.Option(0, "--seed", callback=numbers.seed, help="Seed of houses, episodes and edits."),
     rooms: int = typer.Option(5, "--rooms", min=1, help="Rooms per procedural house."),
     real: Path | None = typer.Option(None, "--real", metavar="HOUSE.json",
                                      help="Also adapt this house (e.g. a real ProcTHOR house) 5 times."),

@@ -14,6 +14,7 @@ from typing import TYPE_CHECKING
 
 import typer
 
+from adaptenv.cli import _numbers as numbers
 from adaptenv.cli._common import JSON_OPTION, interrupted
 from adaptenv.cli._outputs import FORCE_OPTION, OutputFolder, output_file, output_folder, recording
 
@@ -121,11 +122,12 @@ def _train_command():
         """Train a navigation policy by behaviour cloning + DAgger from the shortest-path expert."""
         from rich.console import Console
 
-        from adaptenv.agents.train import TrainConfig, default_run_dir
+        from adaptenv.agents.train import TrainConfig, check_config, default_run_dir
         from adaptenv.agents.train import train as run_training
 
         force = kwargs.pop("force")
         cfg = TrainConfig(**kwargs)
+        check_config(cfg)
         check_frames(cfg, "adaptenv train")
         files, folder = check_outputs(cfg, default_run_dir(cfg), "train", force)
         command = train_command_line(cfg)
@@ -156,10 +158,11 @@ def _ppo_command():
         """Fine-tune a navigation policy by PPO on the simulator's SPOC-style reward (warm start: --init)."""
         from rich.console import Console
 
-        from adaptenv.agents.ppo import default_ppo_run_dir, train_ppo
+        from adaptenv.agents.ppo import check_ppo_config, default_ppo_run_dir, train_ppo
 
         force = kwargs.pop("force")
         cfg = PPOConfig(**kwargs)
+        check_ppo_config(cfg)
         check_frames(cfg, "adaptenv ppo")
         files, folder = check_outputs(cfg, default_ppo_run_dir(cfg), "ppo", force)
         with recording(files, folder, "ppo"):
@@ -181,12 +184,12 @@ def evaluate(
                                "pretrained-scan, expert, explorer, map-explorer, random, a checkpoint path (.pt), or "
                                "module:attribute."),
     houses: list[str] = _HOUSES_OPTION,
-    episodes: int = typer.Option(200, "--episodes", "-n", min=1, help="Episodes per house set."),
-    seed: int = typer.Option(0, "--seed", "-s", help="Seed of the episodes (same seed, same results)."),
+    episodes: int = typer.Option(200, "--episodes", "-n", callback=numbers.episodes, help="Episodes per house set."),
+    seed: int = typer.Option(0, "--seed", "-s", callback=numbers.seed, help="Seed of the episodes (same seed, same results)."),
     workers: int = typer.Option(1, "--workers", "-w", min=1, help="Worker processes (episodes are split among them)."),
     batch: int = typer.Option(64, "--batch", min=1, help="Episodes simulated at once per process."),
     out: Path = _OUT_OPTION,
-    min_geodesic: float = typer.Option(0.0, "--min-geodesic", min=0.0,
+    min_geodesic: float = typer.Option(0.0, "--min-geodesic", min=0.0, callback=numbers.finite,
                                        help="Keep only starts at least this geodesic distance (m) from the target "
                                             "(overrides a suite's floor; 0 keeps the suite's or none)."),
     min_expert_steps: int = typer.Option(0, "--min-expert-steps", min=0,

@@ -52,7 +52,7 @@ def from_objathor(
     fate = f"typed {FALLBACK_TYPE} (see each row's note)" if unmapped == "keep" else "left out"
     Console().print(f"wrote [bold]{out}[/]: {len(table.assets)} assets; types mapped: {by}; "
                     f"{len(table.unmapped)} named no catalog type, {fate}; "
-                    f"{len(table.no_size)} left out without a size", highlight=False)
+                    f"{len(table.no_size)} left out without a usable size (none, not finite, or over 100 m)", highlight=False)
 
 
 def register(app: typer.Typer, bench: typer.Typer) -> None:

@@ -10,6 +10,7 @@ from pathlib import Path
 
 import typer
 
+from adaptenv.cli import _numbers as numbers
 from adaptenv.cli._common import JSON_OPTION
 
 HOUSE_OPTION = typer.Option(None, "--house", help="A house JSON to use instead of a procedural 5-room house.")
@@ -17,7 +18,7 @@ HOUSE_OPTION = typer.Option(None, "--house", help="A house JSON to use instead o
 
 def bench_edits(
     n: int = typer.Option(2000, "--edits", min=10, help="How many random edit proposals to time."),
-    seed: int = typer.Option(0, "--seed", help="Seed of the house and the proposals."),
+    seed: int = typer.Option(0, "--seed", callback=numbers.seed, help="Seed of the house and the proposals."),
     house: Path | None = HOUSE_OPTION,
     as_json: bool = JSON_OPTION,
 ) -> None:

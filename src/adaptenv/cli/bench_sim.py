@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import typer
 
+from adaptenv.cli import _numbers as numbers
 from adaptenv.cli._common import JSON_OPTION
 
 
@@ -17,7 +18,7 @@ def bench_sim(
     repeats: int = typer.Option(5, "--repeats", min=1, help="Timed repeats per figure (the median is reported)."),
     p_end: float = typer.Option(0.01, "--p-end", min=0.0, max=1.0,
                                 help="Probability of the random policy issuing `end` at each step."),
-    seed: int = typer.Option(0, "--seed", help="Seed of the random actions and episodes."),
+    seed: int = typer.Option(0, "--seed", callback=numbers.seed, help="Seed of the random actions and episodes."),
     as_json: bool = JSON_OPTION,
 ) -> None:
     """Simulator throughput with the full observation, cost versus clutter, memory, MiniGrid alongside."""

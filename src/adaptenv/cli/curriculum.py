@@ -12,6 +12,7 @@ from pathlib import Path
 
 import typer
 
+from adaptenv.cli import _numbers as numbers
 from adaptenv.cli._common import interrupted
 from adaptenv.cli._outputs import output_folder
 from adaptenv.cli.adapt import (
@@ -94,7 +95,7 @@ def loop(
     iterations: int = typer.Option(3, "--iterations", "-T", min=1, help="Loop iterations."),
     method: str = typer.Option("ours", "--method", help="none, random, dr, dr-matched, sfl, plr, accel, ours, "
                                 "ours-noselect, ours-randomscene, ours-nof, ours-dr or ours-llm."),
-    seed: int = typer.Option(0, "--seed", help="Root seed."),
+    seed: int = typer.Option(0, "--seed", callback=numbers.seed, help="Root seed."),
     out: Path = typer.Option(Path("runs/loop"), "-o", "--out", help="Run folder."),
     resume: bool = typer.Option(False, "--resume", help="Continue the run in --out from its last iteration."),
     scenes: int = typer.Option(8, "--scenes", min=1, help="Scenes rolled out and made per iteration."),
@@ -102,11 +103,11 @@ def loop(
     finetune_frames: int = typer.Option(16_384, "--finetune-frames", min=1, help="Fine-tuning frames per iteration."),
     finetune_algo: str = typer.Option("dagger", "--finetune-algo", help="Fine-tuning: dagger (imitation of "
                                       "--finetune-teacher) or ppo (anchored PPO on the simulator's reward)."),
-    finetune_kl_coef: float = typer.Option(0.0, "--finetune-kl-coef", min=0.0, help="ppo: weight of the KL anchor "
+    finetune_kl_coef: float = typer.Option(0.0, "--finetune-kl-coef", min=0.0, callback=numbers.finite, help="ppo: weight of the KL anchor "
                                            "to pi_t (0.3 in docs/agent.md's runs)."),
-    finetune_explore_bonus: float = typer.Option(0.0, "--finetune-explore-bonus", min=0.0, help="ppo: reward per "
+    finetune_explore_bonus: float = typer.Option(0.0, "--finetune-explore-bonus", min=0.0, callback=numbers.finite, help="ppo: reward per "
                                                  "newly seen map cell (0.002 in docs/agent.md's runs)."),
-    finetune_bc_coef: float = typer.Option(0.0, "--finetune-bc-coef", min=0.0, help="ppo: weight of a "
+    finetune_bc_coef: float = typer.Option(0.0, "--finetune-bc-coef", min=0.0, callback=numbers.finite, help="ppo: weight of a "
                                            "cross-entropy to --finetune-teacher's labels of the visited states."),
     finetune_freeze_encoder: bool = typer.Option(False, "--finetune-freeze-encoder", help="ppo: train pi_t's memory "
                                                  "and heads only, the observation encoder fixed (faster updates)."),
@@ -121,7 +122,7 @@ def loop(
                                        "scene kept."),
     match_run: str = typer.Option("", "--match-run", help="dr-matched: the run folder (same seed) whose "
                                   "environment steps per iteration it matches."),
-    finetune_lr: float = typer.Option(1e-4, "--finetune-lr", min=0.0, help="Adam learning rate of fine-tuning."),
+    finetune_lr: float = typer.Option(1e-4, "--finetune-lr", min=0.0, callback=numbers.finite, help="Adam learning rate of fine-tuning."),
     finetune_teacher: str = typer.Option("expert", "--finetune-teacher", help="Who labels fine-tuning's states: "
                                          "expert, explorer (searches), map-explorer (searches on the agent's own map) "
                                          "or mix."),
@@ -129,7 +130,7 @@ def loop(
                                         "teacher's action is executed while fine-tuning (DAgger's beta)."),
     finetune_max_steps: int = typer.Option(300, "--finetune-max-steps", min=1, help="Episode cap of fine-tuning's "
                                            "episodes (600 for the map-reading agent)."),
-    finetune_min_start: float = typer.Option(0.0, "--finetune-min-start", min=0.0, help="Fine-tuning episodes start "
+    finetune_min_start: float = typer.Option(0.0, "--finetune-min-start", min=0.0, callback=numbers.finite, help="Fine-tuning episodes start "
                                              "at least this geodesic distance (m) from the target (0: uniform)."),
     finetune_precision: str = typer.Option("fp32", "--finetune-precision", help="Arithmetic of fine-tuning's "
                                            "gradient steps: fp32, or bf16 (faster on CPUs with AVX512_BF16)."),
@@ -140,7 +141,7 @@ def loop(
                                           "failures); otherwise no edit moves a target."),
     door_edits: bool = typer.Option(False, "--door-edits", help="G may also open or shut interior doors (the "
                                     "failure-mode G for search, looping and timeout failures; the LLM G by a tool)."),
-    heldout_episodes: int = typer.Option(100, "--heldout-episodes", min=1, help="Episodes per held-out set."),
+    heldout_episodes: int = typer.Option(100, "--heldout-episodes", callback=numbers.episodes, help="Episodes per held-out set."),
     heldout: list[str] = typer.Option(None, "--heldout", help="Held-out set NAME=HOUSES (repeatable); default: "
                                       "rearranged=preset:pretrain-rearranged and unseen=preset:pretrain-unseen."),
     model: str = typer.Option(None, "--model", help="LLM model for ours-llm (default gpt-4.1-mini)."),
@@ -221,7 +222,7 @@ def experiment(
     executor: str = EXECUTOR_OPTION,
     workers: int = WORKERS_OPTION,
     address: str = ADDRESS_OPTION,
-    final_episodes: int = typer.Option(0, "--final-episodes", min=0, help="Evaluate pi_0 and each run's last "
+    final_episodes: int = typer.Option(0, "--final-episodes", callback=numbers.episodes_or_none, help="Evaluate pi_0 and each run's last "
                                        "policy on this many held-out episodes per set as the run finishes "
                                        "(final_eval.json; summary_final.md at the end)."),
     strict: bool = STRICT_OPTION,

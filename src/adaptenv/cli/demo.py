@@ -10,6 +10,7 @@ from pathlib import Path
 
 import typer
 
+from adaptenv.cli import _numbers as numbers
 from adaptenv.cli._outputs import MANIFEST, OutputFolder, output_folder
 
 DEMO_METHODS = ("dr", "ours")
@@ -39,7 +40,7 @@ def demo(
                              "an earlier demo's (whose houses/ and run/ are replaced)."),
     houses: int = typer.Option(4, "--houses", min=1, max=50, help="Procedural training houses to generate."),
     iterations: int = typer.Option(2, "--iterations", min=1, max=20, help="Closed-loop iterations."),
-    seed: int = typer.Option(0, "--seed", help="Root seed: the same seed gives the same outputs."),
+    seed: int = typer.Option(0, "--seed", callback=numbers.seed, help="Root seed: the same seed gives the same outputs."),
     policy: str = typer.Option("pretrained", "--policy", help="Starting policy: pretrained (the strongest shipped agent), pretrained-map, pretrained-scan or a checkpoint path."),
 ) -> None:
     """Generate houses, run the closed loop and domain randomization on them, write the report and its verdict."""

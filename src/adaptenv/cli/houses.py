@@ -16,6 +16,7 @@ from typing import Annotated
 import typer
 from typer.core import TyperCommand
 
+from adaptenv.cli import _numbers as numbers
 from adaptenv.cli._common import JSON_OPTION, existing_file
 from adaptenv.cli._outputs import FORCE_OPTION, output_file, output_folder, record_file
 from adaptenv.errors import ConfigError
@@ -99,7 +100,7 @@ class _GenerateCommand(TyperCommand):
 def generate(
     out: Annotated[Path, typer.Option("-o", "--out", help="Folder to write house_0000.json, ... (or the preset's names) to.")],
     n: Annotated[int, typer.Option("--n", help="Number of houses (ignored with --preset).")] = 1,
-    seed: Annotated[int, typer.Option("--seed", help="Root seed: the same seed gives byte-identical houses.")] = 0,
+    seed: Annotated[int, typer.Option("--seed", callback=numbers.seed, help="Root seed: the same seed gives byte-identical houses.")] = 0,
     rooms: Annotated[str | None, typer.Option("--rooms", help=_ROOMS_HELP)] = None,
     preset: Annotated[str | None, typer.Option("--preset", help="A named house set (listed by --help).")] = None,
     split: Annotated[str, typer.Option("--split", help="ProcTHOR asset split the furniture comes from.")] = "train",
@@ -143,7 +144,7 @@ def generate(
 def rearrange(
     house_path: Annotated[Path, typer.Argument(metavar="HOUSE.json", help="The house to rearrange.")],
     out: Annotated[Path, typer.Option("-o", "--out", help="Where to write the rearranged house (a .json file).")],
-    seed: Annotated[int, typer.Option("--seed", help="Seed of the new arrangement.")] = 0,
+    seed: Annotated[int, typer.Option("--seed", callback=numbers.seed, help="Seed of the new arrangement.")] = 0,
     force: bool = FORCE_OPTION,
 ) -> None:
     """Place a house's movable furniture anew (same rooms, doors, fixtures and target types)."""

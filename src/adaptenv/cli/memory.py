@@ -12,6 +12,7 @@ from typing import Any
 
 import typer
 
+from adaptenv.cli import _numbers as numbers
 from adaptenv.cli._outputs import FORCE_OPTION
 
 
@@ -20,9 +21,9 @@ def memory_check(
                                "or module:attribute with forget(state, indices) or an array state."),
     houses: str = typer.Option(..., "--houses", help="Folder of house JSON files, a house file, a dataset "
                                "FILE.jsonl[.gz][:START:STOP], preset:NAME or suite:NAME."),
-    episodes: int = typer.Option(200, "--episodes", "-n", min=1, help="Episodes per interval (the same episodes "
+    episodes: int = typer.Option(200, "--episodes", "-n", callback=numbers.episodes, help="Episodes per interval (the same episodes "
                                  "for every interval)."),
-    seed: int = typer.Option(0, "--seed", "-s", help="Seed of the episodes (same seed, same results)."),
+    seed: int = typer.Option(0, "--seed", "-s", callback=numbers.seed, help="Seed of the episodes (same seed, same results)."),
     every: list[int] = typer.Option([128, 32, 8], "--every", help="Wipe interval K in steps; repeat for several "
                                     "(never wiping always runs as the baseline)."),
     workers: int = typer.Option(1, "--workers", "-w", min=1, help="Worker processes (episodes are split among them)."),

@@ -42,6 +42,7 @@ def render(
     from rich.console import Console
 
     from adaptenv.cli._common import check_recorded_in
+    from adaptenv.render.labels import LABEL_LIMIT, labels_fit
     from adaptenv.render.topdown import render_to_file
     from adaptenv.scene.house import load_house
     from adaptenv.sim.trajectory import Trajectory
@@ -58,8 +59,19 @@ def render(
         colours[oid] = colour or "deepskyblue"
     path = render_to_file(h, out, trajectory=traj, grid=grid, size=size, labels=not no_labels, title=title,
                           highlight=colours or None)
+    if not no_labels and not labels_fit(n := _floor_objects(h)):
+        Console().print(f"{house}: {n:,} floor objects, more than the {LABEL_LIMIT} that get id labels; the map "
+                        "shows room names only", highlight=False)
     record_file(path, "render")
     Console().print(f"wrote [bold]{path}[/]")
+
+
+def _floor_objects(house) -> int:
+    """How many floor objects a render of ``house`` labels (only counted when there may be too many)."""
+    from adaptenv.render.labels import LABEL_LIMIT
+    from adaptenv.scene.geometry import SceneGeometry
+
+    return len(house.objects) if len(house.objects) <= LABEL_LIMIT else len(SceneGeometry.from_house(house).floor_objects)
 
 
 def bench_render(

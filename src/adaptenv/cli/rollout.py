@@ -10,6 +10,7 @@ from pathlib import Path
 
 import typer
 
+from adaptenv.cli import _numbers as numbers
 from adaptenv.cli._common import JSON_OPTION, existing_file
 from adaptenv.cli._outputs import FORCE_OPTION, output_file, record_file
 
@@ -35,7 +36,7 @@ def rollout(
     house: Path = _HOUSE,
     policy: str = typer.Option("expert", "--policy", help="Who acts: pretrained (the strongest shipped agent), pretrained-map, pretrained-scan, expert, explorer, map-explorer, random, a checkpoint (.pt) or module:attribute."),
     target: str | None = typer.Option(None, "--target", help="Target object type (default: drawn among the solvable ones)."),
-    seed: int = typer.Option(0, "--seed", help="Seed of the episode draw (and of the random policy)."),
+    seed: int = typer.Option(0, "--seed", callback=numbers.seed, help="Seed of the episode draw (and of the random policy)."),
     use_house_start: bool = typer.Option(False, "--use-house-start", help="Start at the house's metadata agent pose."),
     max_steps: int | None = typer.Option(None, "--max-steps", min=1, help="Step limit (default: spec.MAX_STEPS = 600)."),
     out: Path = _OUT,
@@ -87,7 +88,7 @@ def rollout(
 def bench_expert(
     episodes: int = typer.Option(500, "--episodes", min=1, help="Episodes to run."),
     houses: int = typer.Option(50, "--houses", min=1, help="Procedural houses to spread them over."),
-    seed: int = typer.Option(0, "--seed", help="Root seed."),
+    seed: int = typer.Option(0, "--seed", callback=numbers.seed, help="Root seed."),
     as_json: bool = JSON_OPTION,
 ) -> None:
     """Shortest-path expert: success rate, SPL, labels/s and unsolvable episodes on generated houses."""

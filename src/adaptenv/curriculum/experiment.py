@@ -220,7 +220,7 @@ def run_experiment(cfg: ExperimentConfig, out: str | Path, *, executor: Any = No
             failures.append(_run_one(job))
     else:
         failures = executor.map(_run_one, jobs, desc="experiment runs")
-    summary = summarize(out, cfg)
+    summary = summarize(out, cfg, failed=[why for why in failures if why])
     if failed := [why for why in failures if why]:
         raise RunsFailed(f"{len(failed)} of {len(jobs)} runs failed ({'; '.join(failed)}); the others are in "
                          f"{out}, and running the same command again retries the failed ones where they stopped")
@@ -237,12 +237,13 @@ def _mean_se(values: list[float]) -> tuple[float, float | None]:
 
 
 def final_figures(out: Path, cfg: ExperimentConfig) -> dict[str, dict[int, dict[str, float]]]:
-    """method -> seed -> {"metric:set": value} at each run's last finished iteration."""
+    """method -> seed -> {"metric:set": value} at each run's last iteration, for the runs that finished every
+    iteration (a run that failed or stopped early is no row: :func:`unfinished_runs` names it)."""
     table: dict[str, dict[int, dict[str, float]]] = {}
     for m in cfg.methods:
         for s in cfg.seeds:
             recs = read_iterations(run_dir(out, m, s))
-            if not recs:
+            if not recs or recs[-1].iteration < cfg.loop.get("iterations", LoopConfig.iterations):
                 continue
             last = recs[-1]
             row = {f"{k}:{name}": getattr(v, k) for name, v in last.heldout.items() for k in METRICS}
@@ -251,6 +252,20 @@ def final_figures(out: Path, cfg: ExperimentConfig) -> dict[str, dict[int, dict[
             row.update(_budget(last))
             table.setdefault(m, {})[s] = row
     return table
+
+
+def unfinished_runs(out: Path, cfg: ExperimentConfig) -> dict[str, str]:
+    """``method seed N`` -> how far each run that has not finished every iteration got (it failed, stopped at its
+    budget or is still running): these are left out of the figures."""
+    total = cfg.loop.get("iterations", LoopConfig.iterations)
+    left = {}
+    for m in cfg.methods:
+        for s in cfg.seeds:
+            recs = read_iterations(run_dir(out, m, s))
+            done = recs[-1].iteration if recs else None
+            if done is None or done < total:
+                left[f"{m} seed {s}"] = "not started" if done is None else f"{done} of {total} iterations"
+    return left
 
 
 def _budget(last: Any) -> dict[str, float]:
@@ -292,18 +307,21 @@ def holm(pvalues: dict[str, float | None]) -> dict[str, float | None]:
     return adjusted
 
 
-def summarize(out: str | Path, cfg: ExperimentConfig | None = None) -> dict[str, Any]:
-    """Write per-seed CSVs, summary.json, summary.md and plots for an experiment folder."""
+def summarize(out: str | Path, cfg: ExperimentConfig | None = None, failed: list[str] | None = None) -> dict[str, Any]:
+    """Write per-seed CSVs, summary.json, summary.md and plots for an experiment folder; ``failed`` are the lines
+    saying why runs failed (they are marked, never rows)."""
     out = Path(out)
     cfg = cfg or ExperimentConfig(**json.loads((out / "experiment.json").read_text(encoding="utf-8")))
-    summary = write_summary(out, cfg, final_figures(out, cfg), episode_effects=episode_effects(out, cfg))
+    summary = write_summary(out, cfg, final_figures(out, cfg), episode_effects=episode_effects(out, cfg),
+                            unfinished=unfinished_runs(out, cfg), failed=failed)
     _plots(out, cfg)
     return summary
 
 
 def write_summary(out: Path, cfg: ExperimentConfig, table: dict[str, dict[int, dict[str, float]]],
                   suffix: str = "", episodes: int | None = None,
-                  episode_effects: dict[str, Any] | None = None) -> dict[str, Any]:
+                  episode_effects: dict[str, Any] | None = None, unfinished: dict[str, str] | None = None,
+                  failed: list[str] | None = None) -> dict[str, Any]:
     """From method -> seed -> figures: ``<method>/per_seed{suffix}.csv`` and ``summary{suffix}.json/md``.
 
     ``episodes``: episodes per held-out set behind each figure (the final evaluation's), recorded when given;
@@ -348,6 +366,10 @@ def write_summary(out: Path, cfg: ExperimentConfig, table: dict[str, dict[int, d
     if episode_effects is not None:
         summary["episode_effects"] = episode_effects
     summary["skipped_houses"] = {k: v.model_dump() for k, v in skipped_in_runs(out, cfg).items()}
+    if unfinished:
+        summary["unfinished_runs"] = unfinished
+    if failed:
+        summary["failed_runs"] = failed
     atomic_write_text(out / f"summary{suffix}.json", json.dumps(summary, indent=1, default=float))
     atomic_write_text(out / f"summary{suffix}.md", summary_markdown(summary))
     return summary
@@ -400,14 +422,19 @@ def episode_effects(out: Path, cfg: ExperimentConfig) -> dict[str, dict[str, dic
     """Per method: held-out success of the reference minus the method's, paired over the episodes both runs' last
     iterations were evaluated on (``all``: every seed and set pooled; ``success:<set>``: one set), each with
     the mean difference, its t-based 95% interval, the paired t-test's ``p_episodes`` and ``episodes``."""
-    ref = {s: _episode_successes(run_dir(out, cfg.reference, s)) for s in cfg.seeds}
+    left = unfinished_runs(out, cfg)  # no episodes of a failed or unfinished run
+
+    def successes(m: str, s: int) -> dict[tuple[str, int], float]:
+        return {} if f"{m} seed {s}" in left else _episode_successes(run_dir(out, m, s))
+
+    ref = {s: successes(cfg.reference, s) for s in cfg.seeds}
     effects: dict[str, dict[str, dict[str, float] | None]] = {}
     for m in cfg.methods:
         if m == cfg.reference:
             continue
         pairs: dict[str, tuple[list[float], list[float]]] = {}
         for s in cfg.seeds:
-            other = _episode_successes(run_dir(out, m, s))
+            other = successes(m, s)
             for key in sorted(set(ref[s]) & set(other)):
                 for group in ("all", f"success:{key[0]}"):
                     a, b = pairs.setdefault(group, ([], []))
@@ -535,6 +562,11 @@ def summary_markdown(summary: dict[str, Any]) -> str:
                  "method on the same seeds (two-sided).")
     lines += ["", *effects_markdown(summary)]
     lines += ["", skipped_line(summary.get("skipped_houses") or {})]
+    if unfinished := summary.get("unfinished_runs"):
+        lines += ["", "Not in the table (failed, stopped at a budget or unfinished; run the same command again to "
+                  "finish them): " + "; ".join(f"{run} ({how})" for run, how in unfinished.items()) + "."]
+    for why in summary.get("failed_runs") or []:
+        lines.append(f"- FAILED {why}")
     return "\n".join(lines) + "\n"
 
 

@@ -48,7 +48,8 @@ from adaptenv.agents.checkpoint import load_checkpoint, save_checkpoint
 from adaptenv.agents.config import FinetuneConfig
 from adaptenv.agents.evaluate import EpisodeResult, EvalReport, mean_se, summarize, write_report
 from adaptenv.agents.houses import load_house_set
-from adaptenv.agents.network import NeuralPolicy, torch_threads
+from adaptenv.agents.network import NavNet, NeuralPolicy, torch_threads
+from adaptenv.agents.ppo import learner_problem
 from adaptenv.agents.registry import resolve_policy, weights_record
 from adaptenv.agents.teachers import TEACHERS
 from adaptenv.agents.train import check_precision, finetune
@@ -69,6 +70,7 @@ from adaptenv.curriculum.llm_usage import budget_left, iteration_lines, record_i
 from adaptenv.curriculum.methods import LEVEL_SCORES, METHODS, Iteration, Stream
 from adaptenv.curriculum.records import (
     HELDOUT_DIR,
+    ITERATIONS,
     STATE,
     IterationRecord,
     RunInfo,
@@ -80,6 +82,7 @@ from adaptenv.curriculum.records import (
     write_iterations,
 )
 from adaptenv.errors import ConfigError
+from adaptenv.limits import check_float, check_seed
 from adaptenv.render.topdown import render_house
 
 #: The fix a corrupt state.json's errors suggest.
@@ -188,8 +191,10 @@ class LoopConfig:
         parse_config(LoopConfig, asdict(self), source)
         if self.method not in METHODS:
             raise ConfigError(f"{source}: method {self.method!r} is unknown; use one of {', '.join(METHODS)}")
-        if self.seed < 0:
-            raise ConfigError(f"{source}: seed must be >= 0, got {self.seed}")
+        check_seed(self.seed, f"{source}: seed")
+        check_float(self.finetune_lr, f"{source}: finetune_lr", 0.0, 1.0, lo_open=True)
+        for name in ("finetune_kl_coef", "finetune_explore_bonus", "finetune_bc_coef", "finetune_min_start"):
+            check_float(getattr(self, name), f"{source}: {name}")
         for name in ("iterations", "scenes_per_iteration", "finetune_frames", "heldout_episodes", "finetune_envs",
                      "score_rollouts", "sfl_candidates"):
             if getattr(self, name) < 1:
@@ -421,10 +426,41 @@ def _run_loop(cfg: LoopConfig, run_dir: str | Path, resume: bool, executor: Exec
 LEARNER_FILE = "learner.pt"
 
 
-def _load_learner(folder: Path) -> dict[str, Any] | None:
-    """The learner state an iteration saved, or None (the first iteration, DAgger, or a run made without it)."""
+def _load_learner(folder: Path, net: NavNet | None = None, freeze_encoder: bool = False) -> dict[str, Any] | None:
+    """The learner state an iteration saved, or None (the first iteration, DAgger, or a run made without it); one
+    ConfigError when it is not one (never code: tensors only), or, given the iteration's ``net``, does not fit it."""
     path = folder / LEARNER_FILE
-    return torch.load(path, weights_only=True) if path.is_file() else None
+    if not path.is_file():
+        return None
+    try:
+        learner = torch.load(path, map_location="cpu", weights_only=True)
+    except Exception as exc:  # torch raises many types for corrupt or foreign files
+        raise ConfigError(f"{path}: not a learner state the loop wrote ({type(exc).__name__}); {STATE_FIX}") from None
+    if net is not None and (why := learner_problem(learner, net, freeze_encoder)) is not None:
+        raise ConfigError(f"{path}: {why}; {STATE_FIX}")
+    return learner
+
+
+def check_resume_files(cfg: LoopConfig, run_dir: Path, state: LoopState, records: list[IterationRecord]) -> None:
+    """Before any work on --resume: the state must fit its run (iteration in range, one record per finished
+    iteration, no negative counter) and the last policy and learner state must load, each failure one line."""
+    path = run_dir / STATE
+    if not 0 <= state.iteration <= cfg.iterations:
+        raise ConfigError(f"{path}: state.iteration {state.iteration} lies outside 0 .. {cfg.iterations} "
+                          f"(--iterations); {STATE_FIX}")
+    if len(records) != state.iteration + 1 and (state.iteration or records):
+        raise ConfigError(f"{path}: state.iteration {state.iteration} but {run_dir / ITERATIONS} records "
+                          f"{len(records)} iterations; {STATE_FIX}")
+    counts = {"env_steps": state.env_steps, "grad_updates": state.grad_updates, "edits": state.edits,
+              "generated": state.generated}
+    if (bad := next((k for k, v in counts.items() if v < 0), None)) is not None:
+        raise ConfigError(f"{path}: state.{bad} is negative ({counts[bad]}); {STATE_FIX}")
+    if (state.iteration == 0 and not records) or state.iteration >= cfg.iterations:
+        return  # nothing to continue from, or nothing left to do (a packed copy holds no policies)
+    policy = iteration_dir(run_dir, state.iteration) / "policy.pt"
+    net = load_checkpoint(policy).net
+    if cfg.finetune_algo == "ppo" and cfg.finetune_keep_learner:
+        _load_learner(iteration_dir(run_dir, state.iteration), net, cfg.finetune_freeze_encoder)
 
 
 class StageClock:
@@ -467,6 +503,7 @@ def _open_run(cfg: LoopConfig, run_dir: Path, resume: bool, command: str
         if state.buffer:
             lb.LevelBufferState.from_dict(state.buffer, f"{state_path}: state.buffer")
         records = read_iterations(run_dir)[: state.iteration + 1]
+        check_resume_files(cfg, run_dir, state, records)
         info = run_dir / "run.json"
         if info.is_file():  # keep the command that started the run
             command = RunInfo.model_validate_json(info.read_text(encoding="utf-8")).command or command

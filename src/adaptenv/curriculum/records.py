@@ -26,8 +26,9 @@ import tempfile
 from pathlib import Path
 from typing import Any
 
-from pydantic import BaseModel, Field, field_validator
+from pydantic import BaseModel, Field, ValidationError, field_validator
 
+from adaptenv.errors import ConfigError
 from adaptenv.scene.house import House, load_house, save_house
 from adaptenv.sim.world import NavWorld, compile_world
 
@@ -153,7 +154,22 @@ def read_iterations(run_dir: Path) -> list[IterationRecord]:
     p = Path(run_dir) / ITERATIONS
     if not p.exists():
         return []
-    return [IterationRecord.model_validate_json(line) for line in p.read_text(encoding="utf-8").splitlines() if line.strip()]
+    try:
+        lines = p.read_text(encoding="utf-8").splitlines()
+    except (OSError, UnicodeDecodeError) as exc:
+        raise ConfigError(f"{p}: cannot read the iteration log ({exc}); restore it, or run again in a new folder") from None
+    records = []
+    for n, line in enumerate(lines, 1):
+        if not line.strip():
+            continue
+        try:
+            records.append(IterationRecord.model_validate_json(line))
+        except ValidationError as exc:
+            err = exc.errors()[0]
+            where = ".".join(map(str, err.get("loc", ()))) or "the line"
+            raise ConfigError(f"{p}: line {n} is not an iteration record the loop wrote (at {where}: {err['msg']}); "
+                              "restore the file, or run again in a new folder") from None
+    return records
 
 
 def write_iterations(run_dir: Path, records: list[IterationRecord]) -> None:

@@ -84,6 +84,17 @@ COSTS: dict[Kind, Costs] = {
     Kind.LABEL: Costs(cover=300.0, touch=50.0, edge=5.0),
     Kind.LEADER: Costs(cross=10.0, point=15.0),
 }
+#: The most floor objects that get id labels. Each label is weighed against every record near its candidate spots,
+#: and a fixed-size map packs more objects closer together, so placement grows with the square of the objects (2,000
+#: took 21 s): a house with more is drawn with its room names only, where the ids would cover the map anyway.
+LABEL_LIMIT = 500
+
+
+def labels_fit(n_objects: int) -> bool:
+    """Whether ``n_objects`` floor objects get id labels (at most :data:`LABEL_LIMIT`)."""
+    return n_objects <= LABEL_LIMIT
+
+
 # ---------------------------------------------------------------- pixel box geometry
 
 

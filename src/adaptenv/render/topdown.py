@@ -29,6 +29,7 @@ from adaptenv.render.labels import (
     Box,
     PlacedLabel,
     label_obstacles,
+    labels_fit,
     leader_start,
     place_object_labels,
     place_room_names,
@@ -647,7 +648,8 @@ def render_map(house: House | None = None, *, trajectory: Trajectory | None = No
     if trajectory is not None:
         _draw_trajectory(canvas.draw, trajectory, canvas.t, max(2, round(canvas.t.scale * 0.05)))
     placed = place_object_labels(scene.floor, canvas.t, layout, obstacles, scene.boxes, colours, LABEL_EDGE,
-                                 scene.tick_len + 1, target_boxes(canvas.t, trajectory, scene.cross_arm)) if labels else []
+                                 scene.tick_len + 1, target_boxes(canvas.t, trajectory, scene.cross_arm)) \
+        if labels and labels_fit(len(scene.floor)) else []
     _draw_labels(canvas, placed)
     if trajectory is not None:
         _draw_markers(canvas, trajectory, scene)
@@ -774,7 +776,7 @@ def render_house(house: House | None = None, *, trajectory: Trajectory | None = 
         size: the image's longer side in pixels (at least 256).
         highlight: object id -> colour (a Pillow colour name or '#rrggbb') to fill that object with;
             the legend names the (first) colour "moved object".
-        labels: write every floor object's id and each room's type.
+        labels: write every floor object's id (up to ``labels.LABEL_LIMIT`` objects) and each room's type.
         title: a bold line above the map.
         geometry: precomputed ``SceneGeometry.from_house(house)`` (saves ~2 ms per render).
         legend: a key of the symbols under the map.

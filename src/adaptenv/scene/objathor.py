@@ -24,6 +24,7 @@ from __future__ import annotations
 
 import gzip
 import json
+import math
 import re
 import zlib
 from dataclasses import dataclass, field
@@ -37,6 +38,8 @@ from adaptenv.scene.assets import load_catalog
 #: Catalog type of an asset whose annotation names no catalog type: a generic floor decoration,
 #: which no task targets; the scan sees it as an obstacle of that class.
 FALLBACK_TYPE = "RoomDecor"
+#: The largest extent (m) of a usable asset size: no asset is larger than a house.
+MAX_SIZE = 100.0
 #: Annotation fields that may name the type, in the order they are tried.
 TYPE_FIELDS = ("ref_category", "most_specific_lemma", "synset", "category")
 
@@ -148,23 +151,29 @@ def annotation_type(entry: dict[str, Any], types: frozenset[str]) -> tuple[str, 
 
 def annotation_size(entry: dict[str, Any]) -> tuple[float, float, float] | None:
     """Full extents (x, y, z) in meters: AI2-THOR's bounding box, else the annotator's cm estimate."""
-    box = ((entry.get("thor_metadata") or {}).get("assetMetadata") or {}).get("boundingBox")
+    box = _field(_field(_field(entry, "thor_metadata"), "assetMetadata"), "boundingBox")
     size: Any = None
     try:
         if isinstance(box, dict) and isinstance(box.get("min"), dict) and isinstance(box.get("max"), dict):
             size = [float(box["max"][k]) - float(box["min"][k]) for k in "xyz"]
         elif isinstance(box, dict):
             size = [float(box[k]) for k in "xyz"]
-        elif all(isinstance(entry.get(k), (int, float)) for k in ("width", "height", "depth")):
+        elif all(isinstance(entry.get(k), (int, float)) and not isinstance(entry.get(k), bool)
+                 for k in ("width", "height", "depth")):
             size = [entry["width"] / 100, entry["height"] / 100, entry["depth"] / 100]
         elif isinstance(entry.get("size"), list) and len(entry["size"]) == 3:
             w, d, h = (float(v) for v in entry["size"])
             size = [w / 100, h / 100, d / 100]
     except (KeyError, TypeError, ValueError):
         return None
-    if size is None or min(size) <= 0:
-        return None
+    if size is None or not all(math.isfinite(v) and 0 < v <= MAX_SIZE for v in size):
+        return None  # NaN, Infinity, nothing or more than a house
     return (round(size[0], 4), round(size[1], 4), round(size[2], 4))
+
+
+def _field(node: Any, key: str) -> Any:
+    """``node[key]`` when ``node`` is a JSON object, else None (a file of another shape has no such field)."""
+    return node.get(key) if isinstance(node, dict) else None
 
 
 def read_annotations(path: str | Path) -> dict[str, dict[str, Any]]:

@@ -7,11 +7,14 @@ draws them and the analysis step F reads them.
 from __future__ import annotations
 
 import json
+import math
+from collections.abc import Iterator
 from pathlib import Path
 
 from pydantic import BaseModel, Field
 
 from adaptenv.errors import AdaptenvError
+from adaptenv.sim.spec import ACTIONS
 
 
 class Pose(BaseModel):
@@ -93,7 +96,7 @@ class Trajectory(BaseModel):
         """Read a trajectory JSON file; a malformed file raises one clear AdaptenvError."""
         p = Path(path)
         try:
-            return cls.model_validate(json.loads(p.read_text(encoding="utf-8")))
+            traj = cls.model_validate(json.loads(p.read_text(encoding="utf-8")))
         except FileNotFoundError:
             raise AdaptenvError(f"{p}: no such trajectory file; check the path") from None
         except OSError as exc:
@@ -102,3 +105,38 @@ class Trajectory(BaseModel):
             first = (str(exc).splitlines() or [type(exc).__name__])[0]
             raise AdaptenvError(f"{p}: not a valid adaptenv trajectory ({first}); write it with "
                                 "`adaptenv rollout ... -o traj.json`") from None
+        if (why := traj.problem()) is not None:
+            raise AdaptenvError(f"{p}: not a recorded episode, at {why}; write it with `adaptenv rollout ... -o "
+                                "traj.json` or `adaptenv trajectory from-ai2thor`")
+        return traj
+
+    def problem(self) -> str | None:
+        """What makes this recorded episode impossible (no steps, an unknown action, a number that is not finite,
+        targets and positions that do not pair up), or None."""
+        if not self.steps:
+            return "steps: the episode has no steps"
+        if len(self.target_positions) != len(self.target_ids):
+            return (f"target_positions: {len(self.target_positions)} positions for {len(self.target_ids)} "
+                    "target_ids")
+        for where, value in self._numbers():
+            if value is not None and not math.isfinite(value):
+                return f"{where}: {value} is not a finite number"
+        for i, step in enumerate(self.steps):
+            if step.action not in ACTIONS:
+                return f"steps[{i}].action: unknown action {step.action!r} (actions are {', '.join(ACTIONS)})"
+        return None
+
+    def _numbers(self) -> Iterator[tuple[str, float | None]]:
+        """Every number of the record, with its JSON path."""
+        for name, pose in (("start", self.start), ("final_pose", self.final_pose)):
+            if pose is not None:
+                yield from ((f"{name}.{k}", v) for k, v in pose.model_dump().items())
+        for i, step in enumerate(self.steps):
+            yield from ((f"steps[{i}].pose.{k}", v) for k, v in step.pose.model_dump().items())
+            yield f"steps[{i}].clearance", step.clearance
+            yield f"steps[{i}].geodesic", step.geodesic
+        for i, (x, z) in enumerate(self.target_positions):
+            yield from ((f"target_positions[{i}]", v) for v in (x, z))
+        if self.metrics is not None:
+            yield from ((f"metrics.{k}", v) for k, v in self.metrics.model_dump().items()
+                        if isinstance(v, float))
