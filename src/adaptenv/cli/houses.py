@@ -16,7 +16,12 @@ from typing import Annotated
 import typer
 from typer.core import TyperCommand
 
-from adaptenv.cli._common import JSON_OPTION, existing_file, writable_file, writable_folder
+from adaptenv.cli._common import (
+    JSON_OPTION,
+    load_house_argument,
+    writable_file,
+    writable_folder,
+)
 from adaptenv.errors import ConfigError
 
 houses_app = typer.Typer(help="ProcTHOR-format houses: generate new ones, rearrange existing ones, split datasets "
@@ -138,14 +143,15 @@ def generate(
 
 @houses_app.command("rearrange")
 def rearrange(
-    house_path: Annotated[Path, typer.Argument(metavar="HOUSE.json", help="The house to rearrange.")],
+    house_path: Annotated[Path, typer.Argument(metavar="HOUSE", help="The house to rearrange: a house JSON file or "
+                                               "one line of a dataset, e.g. FILE.jsonl.gz:2:3.")],
     out: Annotated[Path, typer.Option("-o", "--out", help="Where to write the rearranged house (a .json file).")],
     seed: Annotated[int, typer.Option("--seed", help="Seed of the new arrangement.")] = 0,
 ) -> None:
     """Place a house's movable furniture anew (same rooms, doors, fixtures and target types)."""
     from rich.console import Console
 
-    from adaptenv.scene.house import load_house, save_house
+    from adaptenv.scene.house import save_house
     from adaptenv.scene.procedural import rearrange_house
 
     if seed < 0:
@@ -153,7 +159,7 @@ def rearrange(
     if out.suffix.lower() != ".json":
         raise ConfigError(f"{out}: the output must be a .json file; pass e.g. -o rearranged.json")
     writable_file(out, "-o")
-    house = load_house(existing_file(house_path, "house file"))
+    _, house = load_house_argument(house_path)
     new = rearrange_house(house, seed)
     save_house(new, out)
     old = {o.id: o.position for o in house.objects}

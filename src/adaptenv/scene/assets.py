@@ -115,7 +115,8 @@ class AssetCatalog:
         try:
             return self.assets[asset_id]
         except KeyError:
-            raise KeyError(f"unknown assetId {asset_id!r} (not in the ProcTHOR catalog nor in an --assets table)") from None
+            raise KeyError(f"unknown assetId {asset_id!r} (not in the ProcTHOR catalog nor in an --assets table; "
+                           f"{TABLE_HINT})") from None
 
     def type_info(self, object_type: str) -> TypeInfo:
         """Placement annotations of a type (all-false defaults for types without annotations)."""
@@ -140,6 +141,12 @@ class AssetCatalog:
 
 #: Environment variable listing user asset tables (``os.pathsep``-separated) that extend the catalog.
 ASSETS_ENV = "ADAPTENV_ASSETS"
+#: Environment variable that, set to 1, makes house loading leave out child objects of unknown assets.
+SKIP_UNKNOWN_ENV = "ADAPTENV_SKIP_UNKNOWN_ASSETS"
+#: How to get a table for Objaverse assets, for every message about unknown asset ids.
+TABLE_HINT = ("for Objaverse assets build one with `adaptenv assets from-objathor ANNOTATIONS -o TABLE` "
+              "and pass --assets TABLE, or pass --skip-unknown-assets to leave out the unknown objects that "
+              "rest on others")
 #: Depth (m) of one arm of an L- or C-shaped counter: every straight ProcTHOR counter
 #: (``Countertop_I_*``) is 0.611 m (2 ft) deep, and ``Countertop_L_4x4`` is 2 x 0.611 m square.
 COUNTER_ARM_DEPTH = 0.611
@@ -185,6 +192,20 @@ def use_assets(*paths: str | Path) -> AssetCatalog:
             current.append(str(Path(p).resolve()))
     os.environ[ASSETS_ENV] = os.pathsep.join(current)
     return load_catalog()
+
+
+def skip_unknown_assets(on: bool = True) -> None:
+    """Make house loading leave out child objects whose asset is unknown (this process and the worker
+    processes it starts; the CLI's ``--skip-unknown-assets``). Unknown top-level objects stay errors."""
+    if on:
+        os.environ[SKIP_UNKNOWN_ENV] = "1"
+    else:
+        os.environ.pop(SKIP_UNKNOWN_ENV, None)
+
+
+def skipping_unknown_assets() -> bool:
+    """Whether :func:`skip_unknown_assets` is on (``$ADAPTENV_SKIP_UNKNOWN_ASSETS`` is 1)."""
+    return os.environ.get(SKIP_UNKNOWN_ENV, "") == "1"
 
 
 @lru_cache(maxsize=8)

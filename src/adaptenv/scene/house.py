@@ -16,7 +16,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from pydantic import BaseModel, ConfigDict, Field, ValidationError
+from pydantic import BaseModel, ConfigDict, Field, PrivateAttr, ValidationError
 
 from adaptenv.errors import HouseError, Problem
 
@@ -122,6 +122,13 @@ class House(_Model):
     objects: list[HouseObject] = Field(default_factory=list)
     proceduralParameters: dict[str, Any] = Field(default_factory=dict)
     metadata: Metadata = Field(default_factory=Metadata)
+    _dropped_children: list[tuple[str, str]] = PrivateAttr(default_factory=list)
+
+    @property
+    def dropped_children(self) -> list[tuple[str, str]]:
+        """(object id, asset id) of the child objects of unknown assets left out when the house was read
+        (``--skip-unknown-assets``; see :func:`adaptenv.scene.validate.drop_unknown_children`)."""
+        return self._dropped_children
 
     def to_dict(self) -> dict[str, Any]:
         """The house as a JSON-ready dict, unknown keys included."""
@@ -363,7 +370,8 @@ def read_house_document(path: str | Path) -> Any:
                                   "write a ProcTHOR house JSON file", str(p))]) from None
 
 
-def load_house(path: str | Path, *, validate: bool = True, catalog: Any = None) -> House:
+def load_house(path: str | Path, *, validate: bool = True, catalog: Any = None,
+               skip_unknown: bool | None = None) -> House:
     """Load a ProcTHOR house JSON file.
 
     Args:
@@ -372,18 +380,20 @@ def load_house(path: str | Path, *, validate: bool = True, catalog: Any = None) 
             (wall ids, door walls, asset ids, polygons, objects inside rooms).
         catalog: the AssetCatalog to check asset ids against (default ``load_catalog()``; e.g.
             ``load_catalog("my_assets.json")`` for a house of Objaverse assets).
+        skip_unknown: leave out child objects whose asset the catalog does not know (recorded in
+            ``House.dropped_children``); default: the process setting (``--skip-unknown-assets``).
 
     Raises:
         HouseError: with one sentence per problem naming the file and JSON path.
     """
+    from adaptenv.scene.validate import validate_read_house  # cycle: validate imports this module
+
     doc = read_house_document(path)
     house = parse_house(doc, str(path))
-    if validate:
-        from adaptenv.scene.validate import validate_house  # cycle: validate imports this module
-
-        problems = validate_house(house, file=str(path), catalog=catalog)
-        if problems:
-            raise HouseError(problems)
+    problems = validate_read_house(house, file=str(path), catalog=catalog, skip_unknown=skip_unknown,
+                                   validate=validate)
+    if problems:
+        raise HouseError(problems)
     return house
 
 
