@@ -14,23 +14,8 @@ from adaptenv.cli import app
 from adaptenv.errors import HouseError
 from adaptenv.scene.assets import SKIP_UNKNOWN_ENV, load_catalog
 from adaptenv.scene.house import load_house
-from tests.conftest import REAL_HOUSE
-
-CHILD_IDS = ("0f6b3c1e9a8d4e2f8b7c6d5e4f3a2b1c", "7e1d2c3b4a5f46e7a8b9c0d1e2f3a4b5")
-FLOOR_ID = "3c4d5e6f7a8b49c0b1d2e3f4a5b6c7d8"
-
-
-def objaverse_house(*, floor: bool) -> dict:
-    """The real house with two children (on the counter and on the sofa) of made-up Objaverse ids, and
-    with ``floor`` also its fridge."""
-    doc = json.loads(REAL_HOUSE.read_text(encoding="utf-8"))
-    by_id = {o["id"]: o for o in doc["objects"]}
-    by_id["CounterTop|2|0"]["children"][0]["assetId"] = CHILD_IDS[0]  # Book|surface|2|0
-    by_id["Sofa|3|3"]["children"][1]["assetId"] = CHILD_IDS[1]  # RemoteControl|surface|3|18
-    by_id["CounterTop|2|0"]["children"][1]["assetId"] = CHILD_IDS[1]  # Ladle|surface|2|1: same asset again
-    if floor:
-        by_id["Fridge|2|1"]["assetId"] = FLOOR_ID
-    return doc
+from tests.conftest import CHILD_IDS, FLOOR_ID, REAL_HOUSE
+from tests.conftest import objaverse_house_doc as objaverse_house
 
 
 @pytest.fixture(autouse=True)
