@@ -325,6 +325,7 @@ def _print_adapt_summary(console, s: dict, h, out: Path) -> None:
                   f"generator {s['generator']}")
     console.print(f"edits applied: {s['edits_applied']} of {s['steps_requested']} "
                   f"({s['edits_verified']} verified); moves are in grid units (0..100 across the house)")
+    console.print(edit_counts_text(s["edit_counts"]), highlight=False)
     console.print("objectives along the episode's route (before -> after):")
     for k in ob:
         what, unit = MEANING.get(k, (k, ""))
@@ -353,6 +354,19 @@ def _print_adapt_summary(console, s: dict, h, out: Path) -> None:
             console.print(f"tokens {role:6s} {_usage_text(u)}", highlight=False)
         console.print(f"tokens total  {_usage_text(s['usage'])}", highlight=False)
     console.print(f"wrote {out}/ (house.json, before.png, after.png, analysis.json, edits.json, summary.json)")
+
+
+def edit_counts_text(c: dict) -> str:
+    """The edit counts in words: distinct objects (type beside id, edits each) and what changed on net."""
+    from adaptenv.scene.assets import object_label
+
+    if not c["edits"]:
+        return "no edit applied"
+    objects = ", ".join(f"{object_label(o['id'], o['type'])} x{o['edits']}"
+                        + ("" if o["changed"] else " (back where it stood)") for o in c["objects"])
+    return (f"{c['edits']} edit{'s' if c['edits'] != 1 else ''} of {c['objects_edited']} object"
+            f"{'s' if c['objects_edited'] != 1 else ''} ({objects}); {c['objects_changed']} changed on net, "
+            f"net displacement {c['net_displacement_m']:.2f} m")
 
 
 def _verdict_text(v: str, before: dict, after: dict) -> str:
@@ -400,16 +414,24 @@ def audit(
 ) -> None:
     """Plausibility audit: every moved object checked against the original (docs/adapt.md); exit 1 on a violation."""
     from adaptenv.adapt.plausibility import audit as run_audit
+    from adaptenv.adapt.step import house_types
+    from adaptenv.scene.assets import object_label
+
     _, before = load_house_argument(original, "original house")
     _, after = load_house_argument(adapted, "adapted house")
     report = run_audit(before, after)
+    types = house_types(before, after)
     if as_json:
-        typer.echo(json.dumps({"moved": report.moved, "counts": report.counts(),
-                               "violations": [{"rule": v.rule, "object": v.object_id, "others": list(v.others),
+        typer.echo(json.dumps({"moved": report.moved, "moved_types": [types.get(o) for o in report.moved],
+                               "counts": report.counts(),
+                               "violations": [{"rule": v.rule, "object": v.object_id,
+                                               "object_type": types.get(v.object_id), "others": list(v.others),
+                                               "other_types": [types.get(o) for o in v.others],
                                                "message": v.message} for v in report.violations]}, indent=1))
     else:
         for v in report.violations:
-            typer.echo(str(v))
+            unnamed = [o for o in (v.object_id, *v.others) if object_label(o, types.get(o)) != o]
+            typer.echo(str(v) + (f" ({', '.join(f'{o} is a {types[o]}' for o in unnamed)})" if unnamed else ""))
         counts = ", ".join(f"{k} {n}" for k, n in report.counts().items())
         typer.echo(f"{len(report.moved)} moved object(s), {report.total} violation(s): {counts}")
     if report.total:

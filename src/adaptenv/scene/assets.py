@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import json
 import os
+from collections.abc import Iterable
 from dataclasses import dataclass, field, replace
 from functools import lru_cache
 from importlib import resources
@@ -321,6 +322,27 @@ def object_role(object_type: str, bottom_height: float, is_child: bool) -> Objec
     if object_type in WALL_TYPES or bottom_height > WALL_MOUNT_MIN_BOTTOM:
         return "wall"
     return "floor"
+
+
+def object_label(object_id: str, object_type: str | None) -> str:
+    """How a person reads an object: its id, led by its type when the id does not name it (ProcTHOR-100K's
+    ``6|1|3`` is ``Chair 6|1|3``; ProcTHOR-10K's ``Chair|3|0|3`` stays as it is)."""
+    head = object_id.split("|", 1)[0].lower()
+    if not object_type or (head and (object_type.lower().startswith(head) or head.startswith(object_type.lower()))):
+        return object_id
+    return f"{object_type} {object_id}"
+
+
+def object_types(objects: Iterable[Any], catalog: AssetCatalog | None = None) -> dict[str, str | None]:
+    """Object id -> object type of objects with ``id`` and ``assetId`` (a house's objects, children and doors);
+    None for an object of an unknown asset."""
+    catalog = catalog or load_catalog()
+    return {obj.id: (a.object_type if (a := catalog.assets.get(obj.assetId)) is not None else None) for obj in objects}
+
+
+def object_labels(objects: Iterable[Any], catalog: AssetCatalog | None = None) -> dict[str, str]:
+    """Object id -> :func:`object_label` of objects with ``id`` and ``assetId`` (see :func:`object_types`)."""
+    return {oid: object_label(oid, t) for oid, t in object_types(objects, catalog).items()}
 
 
 def is_movable(object_type: str, role: ObjectRole) -> bool:
