@@ -27,7 +27,12 @@ import numpy as np
 from adaptenv.adapt.analysis import Analysis, Analyzer
 from adaptenv.adapt.diagnosis import SceneDiagnosis, diagnose_scene
 from adaptenv.adapt.edits import edit_counts
-from adaptenv.adapt.generators import GenerationContext, GenerationResult, Generator
+from adaptenv.adapt.generators import (
+    GenerationContext,
+    GenerationResult,
+    Generator,
+    house_object_types,
+)
 from adaptenv.adapt.llm.accounting import scene_usage
 from adaptenv.adapt.llm.usage import Prices
 from adaptenv.adapt.objectives import RouteSpec, measure, realism_score
@@ -37,7 +42,6 @@ from adaptenv.agents.policy import ExpertPolicy, Policy, as_policy
 from adaptenv.agents.rollout import rollout
 from adaptenv.render.compare import render_before_after
 from adaptenv.render.topdown import save_render
-from adaptenv.scene.assets import object_types
 from adaptenv.scene.house import House, save_house
 from adaptenv.scene.validate import validate_house
 from adaptenv.sim.geodesic import is_solvable
@@ -167,7 +171,7 @@ def house_types(*houses: House) -> dict[str, str | None]:
     """Object id -> object type over the objects, children and doors of ``houses``."""
     out: dict[str, str | None] = {}
     for h in houses:
-        out.update(object_types([*(o for o, _ in h.iter_objects()), *h.doors]))
+        out.update(house_object_types(h))
     return out
 
 
@@ -178,17 +182,6 @@ def typed_edit_counts(result: AdaptResult) -> dict[str, Any]:
     counts["objects"] = [{"id": o["id"], "type": types.get(o["id"]), **{k: v for k, v in o.items() if k != "id"}}
                          for o in counts["objects"]]
     return counts
-
-
-def edit_log_with_types(generation: GenerationResult, original: House) -> dict[str, Any]:
-    """G's log as written to edits.json, every edit with its object's type beside its id (ProcTHOR-100K ids
-    such as ``6|1|3`` do not name it)."""
-    doc = generation.to_json_dict()
-    types = house_types(original)
-    edits = [s["edit"] for s in doc["steps"] if s.get("edit")] + list(doc["edit_log"])
-    for edit in edits:
-        edit["object_type"] = types.get(edit["object_id"])
-    return doc
 
 
 def verdict(before: dict[str, Any], after: dict[str, Any], *, tol: float = 1e-3) -> str:
@@ -228,7 +221,7 @@ def write_outputs(result: AdaptResult, summary: dict[str, Any], out: Path) -> di
     files["after_png"] = save_render(pair.after, out / "after.png")
     files["before_after_png"] = save_render(pair.side_by_side(), out / "before_after.png")
     files["analysis"] = _write_json(out / "analysis.json", result.analysis.model_dump(mode="json"))
-    files["edits"] = _write_json(out / "edits.json", edit_log_with_types(result.generation, result.original))
+    files["edits"] = _write_json(out / "edits.json", result.generation.to_json_dict())
     files["trajectory_before"] = result.before.save(out / "trajectory_before.json")
     files["trajectory_after"] = result.after.save(out / "trajectory_after.json")
     files["summary"] = _write_json(out / "summary.json", summary)
