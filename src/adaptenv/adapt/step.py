@@ -215,8 +215,9 @@ def write_outputs(result: AdaptResult, summary: dict[str, Any], out: Path) -> di
     trajectories and summary into ``out``."""
     out.mkdir(parents=True, exist_ok=True)
     files = {"house": save_house(result.house, out / "house.json")}
-    pair = render_before_after(result.original, result.house, result.before, result.after,
-                               [e.object_id for e in result.generation.applied])
+    counts = edit_counts(result.generation.applied, result.original, result.house)
+    changed = [o["id"] for o in counts["objects"] if o["changed"]]  # an object moved back is not drawn as moved
+    pair = render_before_after(result.original, result.house, result.before, result.after, changed)
     files["before_png"] = save_render(pair.before, out / "before.png")
     files["after_png"] = save_render(pair.after, out / "after.png")
     files["before_after_png"] = save_render(pair.side_by_side(), out / "before_after.png")
