@@ -28,10 +28,10 @@ def test_two_sets_from_one_folder_read_apart_at_80_columns(tmp_path):
     res = CliRunner().invoke(app, ["evaluate", "--policy", "expert", "--houses", specs[0], "--houses", specs[1],
                                    "--episodes", "2", "-o", str(tmp_path / "eval")], env={"COLUMNS": "80"})
     assert res.exit_code == 0, res.output
-    lines = res.output.splitlines()
-    rows = [line for line in lines if line.startswith("│") and "+-" in line]
-    assert len(rows) == 2 and all(len(line) <= 80 for line in rows)
-    names = [row.split("│")[1].strip() for row in rows]
+    table = [line for line in res.output.splitlines() if line[:1] in "┏┃┡│└"]
+    assert table and all(len(line) <= 80 and line[-1] in "┓┃┩│┘" for line in table)  # whole, never cropped
+    names = [name for line in table if line[0] == "│" and (name := line.split("│")[1].strip())]
+    assert len(names) == 2
     assert len(set(names)) == 2 and names[0].endswith(":0:1") and names[1].endswith(":1:2")
     joined = " ".join(res.output.split())
     assert all(f"{n} = {s}" in joined for n, s in zip(names, specs, strict=True))  # the legend names the full spec

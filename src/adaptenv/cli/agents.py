@@ -205,10 +205,12 @@ def evaluate(
              f"{s['sel']:.3f} +- {s['sel_se']:.3f}", f"{s['collisions']:.1f} +- {s['collisions_se']:.1f}",
              f"{s['steps']:.0f} +- {s['steps_se']:.0f}"] for _, s, _ in summaries]
     specs = [spec for spec, _, _ in summaries]
-    labels = set_labels(specs, houses_column_width(console.width, rows))
-    table.add_column("houses", justify="left", no_wrap=True)
-    for col in ("success [95% CI]", "SPL [95% CI]", "SEL", "collisions", "length"):
-        table.add_column(col, justify="right")
+    headers = ["success [95% CI]", "SPL [95% CI]", "SEL", "collisions", "length"]
+    room, widths = column_widths(console.width, headers, rows)
+    labels = set_labels(specs, room)
+    table.add_column("houses", justify="left", no_wrap=True, width=max(map(len, labels)))
+    for col, width in zip(headers, widths, strict=True):
+        table.add_column(col, justify="right", width=width)
     for label, row in zip(labels, rows, strict=True):
         table.add_row(label, *row)
     console.print(table)
@@ -291,11 +293,17 @@ def floor_line(spec: str, s: dict) -> str:
             + f"; the episodes used {s['houses_used']} of its {s['houses_in_set']} houses")
 
 
-def houses_column_width(console_width: int, rows: list[list[str]]) -> int:
-    """Characters left for the evaluate table's houses column beside the other columns at this console width
-    (one space of padding each side and a border per column); at least 12."""
-    others = sum(max(len(r[i]) for r in rows) for i in range(len(rows[0])))
-    return max(12, console_width - others - 3 * (len(rows[0]) + 1) - 1)
+def column_widths(console_width: int, headers: list[str], rows: list[list[str]]) -> tuple[int, list[int]]:
+    """(characters left for the houses column, width of each figure column) of the evaluate table: the figures
+    on one line when that leaves the houses 24 characters, else wrapped to their longest word (one space of
+    padding each side and a border per column)."""
+    texts = [[h, *(r[i] for r in rows)] for i, h in enumerate(headers)]
+    one_line = [max(len(t) for t in col) for col in texts]
+    frame = 3 * (len(headers) + 1) + 1
+    if console_width - sum(one_line) - frame >= 24:
+        return console_width - sum(one_line) - frame, one_line
+    narrowest = [max(len(w) for t in col for w in t.split()) for col in texts]
+    return max(12, console_width - sum(narrowest) - frame), narrowest
 
 
 def set_labels(specs: list[str], width: int) -> list[str]:
