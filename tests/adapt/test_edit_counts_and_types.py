@@ -92,3 +92,16 @@ def test_audit_json_and_renders_name_the_type(house, tmp_path):
     texts = {lab.text for lab in render_map(h, size=512).labels}
     assert f"{house.objects[0].id.split('|')[0]} {obj.id}" in texts
     assert obj.id not in texts  # never the bare typeless id
+
+
+def test_audit_lines_name_the_type_of_every_typeless_id(house, tmp_path):
+    h = typeless(house)
+    moved = h.model_copy(deep=True)
+    obj = moved.objects[13]  # moved into the clearance of a door: the door_approach message names no type
+    obj.position = obj.position.model_copy(update={"x": obj.position.x - 0.4})
+    kind = house.objects[13].id.split("|")[0]
+    before, after = save_house(h, tmp_path / "before.json"), save_house(moved, tmp_path / "after.json")
+    res = CliRunner().invoke(app, ["audit", str(before), str(after)])
+    lines = [line for line in res.output.splitlines() if obj.id in line]
+    assert res.exit_code == 1 and lines
+    assert all(f"{obj.id} ({kind})" in line or f"{obj.id} is a {kind}" in line for line in lines)

@@ -430,7 +430,8 @@ def audit(
                                                "message": v.message} for v in report.violations]}, indent=1))
     else:
         for v in report.violations:
-            unnamed = [o for o in (v.object_id, *v.others) if object_label(o, types.get(o)) != o]
+            unnamed = [o for o in dict.fromkeys((v.object_id, *v.others))
+                       if object_label(o, types.get(o)) != o and f"{o} ({types[o]})" not in str(v)]
             typer.echo(str(v) + (f" ({', '.join(f'{o} is a {types[o]}' for o in unnamed)})" if unnamed else ""))
         counts = ", ".join(f"{k} {n}" for k, n in report.counts().items())
         typer.echo(f"{len(report.moved)} moved object(s), {report.total} violation(s): {counts}")
