@@ -243,8 +243,9 @@ def _check_objects(house: House, floor, catalog: AssetCatalog, add, skip_unknown
             if _check_object(child, ("objects", i, "children", j), seen, catalog, add, unknown,
                              is_child=True) is not None:
                 kids.append((i, j, found[1] if found is not None else None))
-    if unknown and skip_unknown:
-        _unknown_top_level(house, unknown, add)
+    tops_unknown = [(i, o) for i, o in enumerate(house.objects) if o.assetId in unknown]
+    if skip_unknown and tops_unknown:
+        _unknown_top_level(tops_unknown, add)
     elif unknown:
         first = ", ".join(repr(a) for a in list(unknown)[:3])
         add((*next(iter(unknown.values())), "assetId"),
@@ -280,11 +281,12 @@ def _check_objects(house: House, floor, catalog: AssetCatalog, add, skip_unknown
             f"z={c.position.z:.2f}) is neither on its parent {objs[i].id!r} nor inside a room; move it onto its parent")
 
 
-def _unknown_top_level(house: House, unknown: dict[str, tuple], add) -> None:
-    """One problem naming the top-level objects of unknown assets, which --skip-unknown-assets cannot leave out."""
-    objs = [o for o in house.objects if o.assetId in unknown]
+def _unknown_top_level(tops: list[tuple[int, HouseObject]], add) -> None:
+    """One problem naming the top-level objects (index, object) of unknown assets, which --skip-unknown-assets
+    cannot leave out."""
+    objs = [o for _, o in tops]
     first = ", ".join(f"{o.id!r} (assetId {o.assetId!r})" for o in objs[:3])
-    add((*next(iter(unknown.values())), "assetId"),
+    add(("objects", tops[0][0], "assetId"),
         f"{len(objs)} top-level object{'s have assets' if len(objs) > 1 else ' has an asset'} in neither the "
         f"ProcTHOR catalog nor an --assets table ({'first: ' if len(objs) > 3 else ''}{first}); "
         "--skip-unknown-assets leaves out only objects resting on others, since an object of unknown size "
