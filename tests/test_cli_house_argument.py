@@ -53,6 +53,10 @@ def test_render_rollout_analyze_and_audit_take_a_slice(dataset, tmp_path):
     assert res.exit_code == 0, res.output
     res = runner.invoke(app, ["audit", one, one])
     assert res.exit_code == 0 and "0 moved object(s)" in res.output, res.output
+    res = runner.invoke(app, ["adapt", one, "--trajectory", str(traj), "--steps", "1", "-o", str(tmp_path / "ad"),
+                              "--json"])
+    assert res.exit_code == 0, res.output
+    assert json.loads((tmp_path / "ad" / "summary.json").read_text())["house"] == one  # one house: OUT itself
 
 
 def test_several_houses_are_refused_where_one_is_expected(dataset, tmp_path):
