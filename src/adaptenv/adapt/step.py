@@ -175,6 +175,13 @@ def house_types(*houses: House) -> dict[str, str | None]:
     return out
 
 
+def changed_objects(result: AdaptResult) -> list[str]:
+    """Ids of the objects (and doors) the applied edits changed on net, in edit order: an object moved back
+    where it stood is not among them."""
+    counts = edit_counts(result.generation.applied, result.original, result.house)
+    return [o["id"] for o in counts["objects"] if o["changed"]]
+
+
 def typed_edit_counts(result: AdaptResult) -> dict[str, Any]:
     """:func:`~adaptenv.adapt.edits.edit_counts` of the applied edits, each object with its type."""
     counts = edit_counts(result.generation.applied, result.original, result.house)
@@ -215,9 +222,7 @@ def write_outputs(result: AdaptResult, summary: dict[str, Any], out: Path) -> di
     trajectories and summary into ``out``."""
     out.mkdir(parents=True, exist_ok=True)
     files = {"house": save_house(result.house, out / "house.json")}
-    counts = edit_counts(result.generation.applied, result.original, result.house)
-    changed = [o["id"] for o in counts["objects"] if o["changed"]]  # an object moved back is not drawn as moved
-    pair = render_before_after(result.original, result.house, result.before, result.after, changed)
+    pair = render_before_after(result.original, result.house, result.before, result.after, changed_objects(result))
     files["before_png"] = save_render(pair.before, out / "before.png")
     files["after_png"] = save_render(pair.after, out / "after.png")
     files["before_after_png"] = save_render(pair.side_by_side(), out / "before_after.png")
