@@ -2,12 +2,30 @@
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 
 import pytest
 
 DATA = Path(__file__).parent / "data"
 REAL_HOUSE = DATA / "procthor-10k-train-1.json"
+
+CHILD_IDS = ("0f6b3c1e9a8d4e2f8b7c6d5e4f3a2b1c", "7e1d2c3b4a5f46e7a8b9c0d1e2f3a4b5")
+FLOOR_ID = "3c4d5e6f7a8b49c0b1d2e3f4a5b6c7d8"
+"""Made-up Objaverse-style asset ids (32 hex digits) of :func:`objaverse_house_doc`."""
+
+
+def objaverse_house_doc(*, floor: bool) -> dict:
+    """The real house with two children (on the counter and on the sofa) of made-up Objaverse ids, and
+    with ``floor`` also its fridge."""
+    doc = json.loads(REAL_HOUSE.read_text(encoding="utf-8"))
+    by_id = {o["id"]: o for o in doc["objects"]}
+    by_id["CounterTop|2|0"]["children"][0]["assetId"] = CHILD_IDS[0]  # Book|surface|2|0
+    by_id["Sofa|3|3"]["children"][1]["assetId"] = CHILD_IDS[1]  # RemoteControl|surface|3|18
+    by_id["CounterTop|2|0"]["children"][1]["assetId"] = CHILD_IDS[1]  # Ladle|surface|2|1: same asset again
+    if floor:
+        by_id["Fridge|2|1"]["assetId"] = FLOOR_ID
+    return doc
 
 
 @pytest.fixture(autouse=True, scope="session")

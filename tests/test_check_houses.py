@@ -40,3 +40,23 @@ def test_reads_a_sliced_house_dataset(tmp_path):
     path.write_text("\n".join([*map(json.dumps, docs), "{"]) + "\n", encoding="utf-8")  # a broken line past the slice
     rep = tool.check_set(f"{path}:0:2", episodes=2, seed=0, agent=None)
     assert (rep.houses, rep.loaded, rep.round_trip, rep.usable, rep.solvable) == (2, 2, 2, 2, 2)
+
+
+def test_counts_objaverse_houses_that_all_fail_to_load(tmp_path, capsys, monkeypatch):
+    from adaptenv.scene.assets import SKIP_UNKNOWN_ENV
+    from tests.conftest import objaverse_house_doc
+
+    monkeypatch.setenv(SKIP_UNKNOWN_ENV, "0")  # restored after the test (main's flag sets it)
+    tool = _tool()
+    path = tmp_path / "objaverse.jsonl"
+    docs = [objaverse_house_doc(floor=False), objaverse_house_doc(floor=True), objaverse_house_doc(floor=False)]
+    path.write_text("".join(json.dumps(d) + "\n" for d in docs), encoding="utf-8")
+    rep = tool.check_set(str(path), episodes=2, seed=0, agent=None)
+    assert (rep.houses, rep.loaded, rep.usable) == (3, 0, 0)
+    assert rep.failures[-1] == "none of the 3 houses read loaded, so none can be used"
+    assert not any("none of the 0" in f for f in rep.failures)
+    assert tool.counts_line(rep).startswith("read 3 house(s): 3 left out at load")
+    assert tool.main([str(path), "--episodes", "2", "--agent", "none", "--skip-unknown-assets"]) == 0
+    out = capsys.readouterr().out
+    assert "read 3 house(s): 1 left out at load (invalid or unreadable), 0 left out as unusable (no episode), " \
+           "2 usable" in " ".join(out.split()) and "'Fridge|2|1'" in out

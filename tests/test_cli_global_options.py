@@ -49,3 +49,4 @@ def test_every_command_takes_the_global_options():
     commands = leaves(typer.main.get_command(app))
     assert len(commands) > 20
     assert all(any(p.name == "assets" for p in c.params) for c in commands)
+    assert all(any(p.name == "skip_unknown_assets" for p in c.params) for c in commands)

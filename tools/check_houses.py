@@ -2,7 +2,7 @@
 
 Usage:
     python tools/check_houses.py HOUSES [HOUSES ...] [--episodes N] [--seed S] [--agent pretrained|none]
-                                 [--assets FILE] [--check]
+                                 [--assets FILE] [--skip-unknown-assets] [--check]
 
 HOUSES is a folder of house JSON files, one house file, a dataset FILE.jsonl[.gz] (one house per line,
 optionally sliced: FILE.jsonl.gz:0:100), or preset:NAME. For each set the script
@@ -10,7 +10,7 @@ runs, per house: load (parse and the semantic checks of ``adaptenv validate``), 
 trip (the written document must parse back to the same JSON), compile and episode availability
 (the ``load_house_set`` rule), then ``--episodes`` sampled episodes over the usable houses
 (solvability, the shortest-path expert, and the pretrained agent), and prints one table of counts
-and rates. ``--check`` exits 1 when a house fails to load or round-trip, an episode cannot be
+and rates, then per set how many houses were read and how many were left out, and why. ``--check`` exits 1 when a house fails to load or round-trip, an episode cannot be
 sampled in a usable house, or the expert solves fewer than ``--min-expert`` of the solvable
 episodes (CI runs it on the procedural presets and tests/data; see docs/scene.md).
 """
@@ -33,11 +33,11 @@ from adaptenv.agents.network import configure_torch
 from adaptenv.agents.policy import ExpertPolicy
 from adaptenv.agents.registry import resolve_policy
 from adaptenv.errors import AdaptenvError, HouseError
-from adaptenv.scene.assets import use_assets
+from adaptenv.scene.assets import skip_unknown_assets, use_assets
 from adaptenv.scene.dataset import dataset_houses, parse_dataset_spec
 from adaptenv.scene.house import House, parse_house, read_house_document, save_house
 from adaptenv.scene.procedural import PRESETS, generate_preset
-from adaptenv.scene.validate import validate_house
+from adaptenv.scene.validate import validate_read_house
 from adaptenv.sim.geodesic import is_solvable
 
 
@@ -85,11 +85,11 @@ def load_one(item: House | Path | HouseError) -> House:
     if isinstance(item, HouseError):
         raise item
     if isinstance(item, House):
-        problems = validate_house(item)
+        problems = validate_read_house(item)
         house = item
     else:
         house = parse_house(read_house_document(item), str(item))
-        problems = validate_house(house, file=str(item))
+        problems = validate_read_house(house, file=str(item))
     if problems:
         raise HouseError(problems)
     return house
@@ -120,6 +120,9 @@ def check_set(spec: str, episodes: int, seed: int, agent) -> SetReport:
                 rep.failures.append(f"{name}: the saved house does not read back the same")
             houses.append(house)
             names.append(name)
+    if not houses:
+        rep.failures.append(f"none of the {rep.houses} houses read loaded, so none can be used")
+        return rep
     try:
         _, worlds, rep.skipped = usable_houses(houses, names, spec=spec)
     except AdaptenvError as exc:
@@ -168,10 +171,19 @@ def print_table(reports: list[SetReport], console: Console) -> None:
         table.add_row(label, *[cell(r) for r in reports])
     console.print(table)
     for r in reports:
+        console.print(f"{r.spec}: {counts_line(r)}", highlight=False)
         for s in r.skipped:
             console.print(f"{r.spec}: skipped {s.name}: {s.reason}", highlight=False)
         for f in r.failures[:10]:
             console.print(f"{r.spec}: {f}", highlight=False)
+        if len(r.failures) > 10:
+            console.print(f"{r.spec}: ... and {len(r.failures) - 10} more failure(s)", highlight=False)
+
+
+def counts_line(r: SetReport) -> str:
+    """How many houses a set read, and how many of them were left out at each stage (reasons follow)."""
+    return (f"read {r.houses} house(s): {r.houses - r.loaded} left out at load (invalid or unreadable), "
+            f"{len(r.skipped)} left out as unusable (no episode), {r.usable} usable")
 
 
 def failed(reports: list[SetReport], min_expert: float) -> list[str]:
@@ -198,12 +210,16 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--agent", default="pretrained",
                         help="policy to run besides the expert (any --policy spec), or none (default pretrained)")
     parser.add_argument("--assets", type=Path, action="append", default=[], help="user asset table(s)")
+    parser.add_argument("--skip-unknown-assets", action="store_true",
+                        help="leave out objects resting on others whose assets are unknown (as adaptenv's flag)")
     parser.add_argument("--check", action="store_true", help="exit 1 when a stage fails (for CI)")
     parser.add_argument("--min-expert", type=float, default=0.98,
                         help="with --check: least expert success on solvable episodes (default 0.98)")
     args = parser.parse_args(argv)
     if args.assets:
         use_assets(*args.assets)
+    if args.skip_unknown_assets:
+        skip_unknown_assets()
     configure_torch()  # one thread on a small machine: spinning OpenMP threads slow every small op
     agent = None if args.agent == "none" else resolve_policy(args.agent, seed=args.seed)
     console = Console(width=max(100, Console().width))

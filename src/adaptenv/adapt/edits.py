@@ -170,3 +170,43 @@ def replay(house: House, log: EditLog | list[Edit]) -> House:
     for edit in log:
         apply_edit(out, edit, in_place=True)
     return out
+
+
+#: A net move smaller than this (m) or a net turn smaller than NET_TURN (degrees) is no net change.
+NET_MOVE = 0.01
+NET_TURN = 1.0
+
+
+def net_change(original: House, edited: House, object_id: str) -> tuple[float, float, bool]:
+    """(distance m, turn degrees, door toggled) from an object's (or door's) place in ``original`` to
+    ``edited``: what its edits add up to, so an object moved back where it stood has (0, 0, False)."""
+    doors = {d.id: d for d in original.doors}
+    if object_id in doors:
+        after = next((d for d in edited.doors if d.id == object_id), doors[object_id])
+        def openness(d) -> float:  # a door without an openness is open
+            return 1.0 if d.openness is None else float(d.openness)
+
+        return 0.0, 0.0, openness(after) != openness(doors[object_id])
+    try:
+        a, b = original.object_by_id(object_id), edited.object_by_id(object_id)
+    except KeyError:
+        return 0.0, 0.0, False
+    turn = (b.yaw - a.yaw) % 360.0
+    return math.hypot(b.position.x - a.position.x, b.position.z - a.position.z), min(turn, 360.0 - turn), False
+
+
+def edit_counts(edits: list[Edit], original: House, edited: House) -> dict:
+    """How a person counts a run's edits: applied edits, distinct objects edited, objects changed on net
+    (moved at least NET_MOVE, turned at least NET_TURN, or a door opened or shut) and the net displacement
+    (m, summed over the objects); ``objects`` gives each edited object's edits and net move, in edit order."""
+    per: dict[str, int] = {}
+    for e in edits:
+        per[e.object_id] = per.get(e.object_id, 0) + 1
+    objects = []
+    for oid, n in per.items():
+        dist, turn, toggled = net_change(original, edited, oid)
+        changed = dist >= NET_MOVE or turn >= NET_TURN or toggled
+        objects.append({"id": oid, "edits": n, "net_move_m": round(dist, 4), "net_turn_deg": round(turn, 2),
+                        "changed": changed})
+    return {"edits": len(edits), "objects_edited": len(per), "objects_changed": sum(o["changed"] for o in objects),
+            "net_displacement_m": round(sum(o["net_move_m"] for o in objects if o["changed"]), 4), "objects": objects}

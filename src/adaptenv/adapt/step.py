@@ -26,7 +26,13 @@ import numpy as np
 
 from adaptenv.adapt.analysis import Analysis, Analyzer
 from adaptenv.adapt.diagnosis import SceneDiagnosis, diagnose_scene
-from adaptenv.adapt.generators import GenerationContext, GenerationResult, Generator
+from adaptenv.adapt.edits import edit_counts
+from adaptenv.adapt.generators import (
+    GenerationContext,
+    GenerationResult,
+    Generator,
+    house_object_types,
+)
 from adaptenv.adapt.llm.accounting import scene_usage
 from adaptenv.adapt.llm.usage import Prices
 from adaptenv.adapt.objectives import RouteSpec, measure, realism_score
@@ -145,7 +151,7 @@ def summarize(result: AdaptResult, *, analyzer: Analyzer, seed: int | None = Non
         "house": result.before.house, "policy": result.before.policy, "analyzer": analyzer.name, "generator": gen.generator, "seed": seed,
         "episode": {"target_type": ep.target_type, "start": list(ep.start), "seed": ep.seed},
         "steps_requested": len(gen.steps), "edits_applied": result.edits_applied,
-        "edits_verified": result.edits_verified,
+        "edits_verified": result.edits_verified, "edit_counts": typed_edit_counts(result),
         "agent_before": _agent(result.before), "agent_after": _agent(result.after),
         "verdict": verdict(_agent(result.before), _agent(result.after)),
         "objective_before": measure(world, route).as_dict(), "objective_after": measure(new_world, route).as_dict(),
@@ -159,6 +165,30 @@ def summarize(result: AdaptResult, *, analyzer: Analyzer, seed: int | None = Non
         **({"diagnosis": result.diagnosis.model_dump(mode="json"),
             "diagnosis_after": result.diagnosis_after.model_dump(mode="json")} if result.diagnosis else {}),
     }
+
+
+def house_types(*houses: House) -> dict[str, str | None]:
+    """Object id -> object type over the objects, children and doors of ``houses``."""
+    out: dict[str, str | None] = {}
+    for h in houses:
+        out.update(house_object_types(h))
+    return out
+
+
+def changed_objects(result: AdaptResult) -> list[str]:
+    """Ids of the objects (and doors) the applied edits changed on net, in edit order: an object moved back
+    where it stood is not among them."""
+    counts = edit_counts(result.generation.applied, result.original, result.house)
+    return [o["id"] for o in counts["objects"] if o["changed"]]
+
+
+def typed_edit_counts(result: AdaptResult) -> dict[str, Any]:
+    """:func:`~adaptenv.adapt.edits.edit_counts` of the applied edits, each object with its type."""
+    counts = edit_counts(result.generation.applied, result.original, result.house)
+    types = house_types(result.original)
+    counts["objects"] = [{"id": o["id"], "type": types.get(o["id"]), **{k: v for k, v in o.items() if k != "id"}}
+                         for o in counts["objects"]]
+    return counts
 
 
 def verdict(before: dict[str, Any], after: dict[str, Any], *, tol: float = 1e-3) -> str:
@@ -192,8 +222,7 @@ def write_outputs(result: AdaptResult, summary: dict[str, Any], out: Path) -> di
     trajectories and summary into ``out``."""
     out.mkdir(parents=True, exist_ok=True)
     files = {"house": save_house(result.house, out / "house.json")}
-    pair = render_before_after(result.original, result.house, result.before, result.after,
-                               [e.object_id for e in result.generation.applied])
+    pair = render_before_after(result.original, result.house, result.before, result.after, changed_objects(result))
     files["before_png"] = save_render(pair.before, out / "before.png")
     files["after_png"] = save_render(pair.after, out / "after.png")
     files["before_after_png"] = save_render(pair.side_by_side(), out / "before_after.png")

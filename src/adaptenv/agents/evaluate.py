@@ -215,10 +215,18 @@ def evaluate(policy: Policy | str, house_set: HouseSet, *, episodes: int = 200, 
     active = floor if floor is not None else getattr(worlds, "floor", None)
     if active is not None and active.active:
         summary["floor"] = active.label()
+        summary["floor_left_out"] = [house_set.names[e] for e in floor_left_out(eps, len(worlds))]
+        summary["houses_used"], summary["houses_in_set"] = len({e for e, _ in eps}), len(worlds)
     if with_expert:
         summary["expert_success"] = summarize(expert)["success"]
     summary["skipped_houses"] = {h.name: h.reason for h in getattr(house_set, "skipped", [])}
     return EvalReport(name, house_set.spec, seed, summary, results, recordings)
+
+
+def floor_left_out(eps: Sequence[tuple[int, task.Episode]], n_houses: int) -> list[int]:
+    """Houses an episode floor left out: episode k belongs to house ``k % n_houses`` and goes to a later
+    house only when that one has no start far enough from a target (sorted house indices)."""
+    return sorted({k % n_houses for k, (e, _) in enumerate(eps) if e != k % n_houses})
 
 
 def trajectory_of(world: NavWorld, result: EpisodeResult, rec: Recorded, policy: str) -> Trajectory:

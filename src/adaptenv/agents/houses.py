@@ -13,6 +13,10 @@ that does not load, validate or compile, or in which no target type has an episo
 every target visible from everywhere), is skipped with one warning line naming it and the reason,
 and listed in ``HouseSet.skipped``; ``strict=True`` (``--strict``) turns the first such house into
 an error instead. ``evaluate``, ``train``, ``loop`` and ``experiment`` all load houses here.
+
+With ``skip_unknown`` (``--skip-unknown-assets``; default: the process setting) objects resting on others
+whose asset is in neither the catalog nor an ``--assets`` table are left out, counted in one warning line
+for the whole set; a house whose top-level object has an unknown asset is still skipped, naming it.
 """
 
 from __future__ import annotations
@@ -20,6 +24,7 @@ from __future__ import annotations
 import logging
 from collections.abc import Sequence
 from dataclasses import dataclass, field
+from functools import partial
 from pathlib import Path
 
 from adaptenv.agents.suites import SuiteWorlds, suite_spec
@@ -27,6 +32,7 @@ from adaptenv.errors import AdaptenvError, ConfigError
 from adaptenv.scene.dataset import dataset_houses, parse_dataset_spec
 from adaptenv.scene.house import House, load_house
 from adaptenv.scene.procedural import PRESETS, generate_preset
+from adaptenv.scene.validate import dropped_children_line
 from adaptenv.sim.spec import TARGET_TYPES
 from adaptenv.sim.task import available_targets, trivial_targets
 from adaptenv.sim.world import NavWorld, compile_world
@@ -55,6 +61,8 @@ class HouseSet:
     houses: list[House]
     worlds: list[NavWorld]
     skipped: list[SkippedHouse] = field(default_factory=list)
+    dropped_children: int = 0
+    """Objects resting on others left out for their unknown assets (``--skip-unknown-assets``)."""
 
     @property
     def names(self) -> list[str]:
@@ -120,6 +128,8 @@ def usable_houses(houses: Sequence[House | NavWorld | BaseException], names: Seq
                               "(drop --strict to skip such houses with a warning)")
         log.warning("skipping house %s: %s", name, reason)
         skipped.append(SkippedHouse(name, reason))
+    if not kept_w and not skipped:
+        raise ConfigError(f"--houses {spec}: the set holds no house")
     if not kept_w:
         first = f"; the first, {skipped[0].name}: {skipped[0].reason}" if skipped else ""
         raise ConfigError(f"--houses {spec}: none of the {len(skipped)} houses can be used for ObjectNav "
@@ -127,16 +137,18 @@ def usable_houses(houses: Sequence[House | NavWorld | BaseException], names: Seq
     return kept_h, kept_w, skipped
 
 
-def load_house_set(spec: str | Path, *, strict: bool = False) -> HouseSet:
+def load_house_set(spec: str | Path, *, strict: bool = False, skip_unknown: bool | None = None) -> HouseSet:
     """Load and compile the houses named by ``spec`` (see module docstring), in a stable order.
 
-    Houses that cannot be used are skipped (``HouseSet.skipped``) unless ``strict``.
+    Houses that cannot be used are skipped (``HouseSet.skipped``) unless ``strict``; ``skip_unknown``
+    leaves out objects of unknown assets resting on others (default: the process setting).
     """
     text = str(spec)
     if text.startswith("suite:"):
         suite = suite_spec(text.partition(":")[2])
-        base = load_house_set(suite.houses, strict=strict)
-        return HouseSet(text, base.houses, SuiteWorlds(base.worlds, suite.floor), base.skipped)
+        base = load_house_set(suite.houses, strict=strict, skip_unknown=skip_unknown)
+        return HouseSet(text, base.houses, SuiteWorlds(base.worlds, suite.floor), base.skipped,
+                        base.dropped_children)
     if text.startswith("preset:"):
         name = text.partition(":")[2]
         if name not in PRESETS:
@@ -144,13 +156,17 @@ def load_house_set(spec: str | Path, *, strict: bool = False) -> HouseSet:
                               + ", ".join(f"preset:{p}" for p in PRESETS))
         pairs = generate_preset(name)
     elif (dataset := parse_dataset_spec(text)) is not None:
-        pairs = list(dataset_houses(dataset))
+        pairs = list(dataset_houses(dataset, skip_unknown=skip_unknown))
     else:
-        pairs = [(f.stem, _try_load(load_house, f)) for f in _house_files(text)]
+        pairs = [(f.stem, _try_load(partial(load_house, skip_unknown=skip_unknown), f)) for f in _house_files(text)]
     names = [n for n, _ in pairs]
     houses = [h for _, h in pairs]
+    read = [h for h in houses if isinstance(h, House)]
+    if line := dropped_children_line(read, of=len(pairs)):
+        log.warning("--houses %s: %s", text, line)
     houses, worlds, skipped = usable_houses(houses, names, strict=strict, spec=text)
-    return HouseSet(text, houses, worlds, skipped)
+    dropped = sum(len(h.dropped_children) for h in read)
+    return HouseSet(text, houses, worlds, skipped, dropped)
 
 
 def _house_files(text: str) -> list[Path]:

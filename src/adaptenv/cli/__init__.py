@@ -5,8 +5,8 @@ they are discovered here, so adding a command never means editing this file. Com
 imports inside their functions so that ``adaptenv --help`` stays fast. Errors adaptenv raises on
 purpose (:class:`~adaptenv.errors.AdaptenvError`), and as a last resort file-system errors (``OSError``),
 are printed as one line, without a traceback.
-Global options (``--assets``) are accepted before the command and after it: :class:`_Root` gives
-every command a copy of them.
+Global options (``--assets``, ``--skip-unknown-assets``) are accepted before the command and after it:
+:class:`_Root` gives every command a copy of them.
 """
 
 from __future__ import annotations
@@ -33,6 +33,20 @@ ASSETS_HELP = ("A JSON table of your own assets (asset id -> object type, boundi
                "adaptenv --assets my_assets.json evaluate ... or adaptenv evaluate ... --assets my_assets.json")
 
 
+SKIP_UNKNOWN_HELP = ("Load houses whose objects resting on others (children) have asset ids in neither the catalog "
+                     "nor an --assets table by leaving those objects out, counted in one line; a house with such a "
+                     "top-level object is still refused, naming it (it would block the agent unseen). For every "
+                     "command, before or after it.")
+
+
+def _skip_unknown(on: bool) -> None:
+    """Turn on ``--skip-unknown-assets`` for this process and its workers."""
+    if on:
+        from adaptenv.scene.assets import skip_unknown_assets
+
+        skip_unknown_assets()
+
+
 def _use_assets(assets) -> None:
     """Extend the asset catalog with the ``--assets`` tables, for this process and its workers."""
     if assets:
@@ -49,13 +63,16 @@ class _Root(TyperGroup):
         assets = copy.copy(next(p for p in self.params if p.name == "assets"))  # the callback's --assets
         assets.expose_value, assets.help = False, "As adaptenv --assets FILE: your own asset table (repeatable)."
         assets.callback = lambda ctx, param, value: _use_assets(value)
+        skip = copy.copy(next(p for p in self.params if p.name == "skip_unknown_assets"))
+        skip.expose_value, skip.help = False, "As adaptenv --skip-unknown-assets: leave out unknown child objects."
+        skip.callback = lambda ctx, param, value: _skip_unknown(value)
         groups = [self]
         while groups:
             for command in groups.pop().commands.values():
                 if isinstance(command, TyperGroup):
                     groups.append(command)
                 else:
-                    command.params.append(assets)
+                    command.params += [assets, skip]
 
 
 app = typer.Typer(
@@ -75,9 +92,11 @@ err_console = Console(stderr=True)
 
 
 @app.callback()
-def _options(assets: list[Path] = typer.Option(None, "--assets", metavar="FILE", help=ASSETS_HELP)) -> None:
+def _options(assets: list[Path] = typer.Option(None, "--assets", metavar="FILE", help=ASSETS_HELP),
+             skip_unknown_assets: bool = typer.Option(False, "--skip-unknown-assets", help=SKIP_UNKNOWN_HELP)) -> None:
     """Closed-loop, adaptive environment generation for embodied navigation agents."""
     _use_assets(assets)
+    _skip_unknown(skip_unknown_assets)
 
 
 def _register_all() -> None:

@@ -18,6 +18,17 @@ def existing_file(path: Path, what: str = "file") -> Path:
     return path
 
 
+HOUSE_HELP = "A house JSON file (ProcTHOR format) or one line of a dataset, e.g. FILE.jsonl.gz:2:3 (line index 2)."
+"""Help of every argument that names one house (read by :func:`load_house_argument`)."""
+
+
+def load_house_argument(spec: Path | str, what: str = "house"):
+    """(name, House) of a HOUSE argument: a house JSON file or a dataset slice of one house."""
+    from adaptenv.scene.dataset import load_one_house
+
+    return load_one_house(spec, what=what)
+
+
 def _nearest_existing(path: Path) -> Path:
     """``path`` itself or its closest ancestor that exists (a path under a regular file stops at the file)."""
     return next((p for p in (path, *path.parents) if p.exists()), Path("."))

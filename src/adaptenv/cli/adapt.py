@@ -17,7 +17,7 @@ import numpy as np
 import typer
 
 from adaptenv.cli import _numbers as numbers
-from adaptenv.cli._common import JSON_OPTION
+from adaptenv.cli._common import HOUSE_HELP, JSON_OPTION, load_house_argument
 from adaptenv.cli._outputs import FORCE_OPTION, output_folder
 from adaptenv.errors import AdaptenvError, ConfigError
 
@@ -31,8 +31,7 @@ ADAPT_HOUSE_ARGUMENT = typer.Argument(..., metavar="HOUSE", show_default=False,
                                       help="House JSON file (ProcTHOR format), or a folder of them or a dataset "
                                            "FILE.jsonl[.gz][:START:STOP] (each house adapted into OUT/NAME/; houses "
                                            "that cannot be used are skipped).")
-HOUSE_ARGUMENT = typer.Argument(..., metavar="HOUSE.json", help="House JSON file (ProcTHOR format).",
-                                show_default=False)
+HOUSE_ARGUMENT = typer.Argument(..., metavar="HOUSE", help=HOUSE_HELP, show_default=False)
 TRAJ_ARGUMENT = typer.Argument(..., metavar="TRAJ.json", help="Trajectory JSON (from `adaptenv rollout -o` or "
                                "`adaptenv trajectory from-ai2thor`).",
                                show_default=False)
@@ -127,12 +126,10 @@ def analyze(
 ) -> None:
     """Analyze one recorded episode (the paper's F): outcome, concerns and suggestions."""
     from adaptenv.adapt.analysis import BuiltinAnalyzer, LLMAnalyzer
-    from adaptenv.cli._common import existing_file
-    from adaptenv.scene.house import load_house
     from adaptenv.sim.world import compile_world
 
-    h = load_house(existing_file(house, "house file"))
-    world = compile_world(h, house.stem)
+    name, h = load_house_argument(house)
+    world = compile_world(h, name)
     traj = load_trajectory_in(trajectory, world, house)
     analyzer = (LLMAnalyzer(llm_backend(model, base_url, llm_cache, "--llm", api=api, api_key_env=api_key_env,
                                         prompts=prompts, config_file=llm_config_file))
@@ -200,10 +197,10 @@ def adapt(
     if analyzer not in ("builtin", "llm"):
         raise ConfigError(f"--analyzer {analyzer!r}: unknown analyzer; use builtin or llm")
     folder = output_folder(out, "-o", "adapt", force=force, inputs=[house, trajectory, policy])
-    many = _is_house_set(house)
+    many = _is_house_set(house, one=trajectory is not None)
     if trajectory is not None and (many or diagnose):
-        raise ConfigError("--trajectory: give one house file and no --diagnose (the trajectory is the episode F "
-                          "analyzes)")
+        raise ConfigError("--trajectory: give one house (a file or a one-line dataset slice FILE.jsonl.gz:2:3) and "
+                          "no --diagnose (the trajectory is the episode F analyzes)")
     names, houses, skipped = _adapt_inputs(house, many, strict)
     before = None
     if trajectory is not None:
@@ -284,23 +281,22 @@ def _adapt_one(h, name: str, out: Path, policy, analyzer, generator, *, steps: i
     return s
 
 
-def _is_house_set(house: Path) -> bool:
-    """Whether HOUSE names several houses (a folder or a dataset) rather than one house file."""
+def _is_house_set(house: Path, one: bool = False) -> bool:
+    """Whether HOUSE names several houses (a folder, or a dataset unless ``one`` house is asked for)."""
     from adaptenv.scene.dataset import parse_dataset_spec
 
-    return house.is_dir() or parse_dataset_spec(house) is not None
+    return house.is_dir() or (not one and parse_dataset_spec(house) is not None)
 
 
 def _adapt_inputs(house: Path, many: bool, strict: bool) -> tuple[list[str], list, list]:
     """(names, houses, skipped): one file (its errors stay errors) or a set (unusable houses skipped)."""
     from adaptenv.agents.houses import load_house_set
-    from adaptenv.cli._common import existing_file
-    from adaptenv.scene.house import load_house
 
     if many:
         hs = load_house_set(house, strict=strict)
         return hs.names, hs.houses, list(hs.skipped)
-    return [house.stem], [load_house(existing_file(house, "house file"))], []
+    name, h = load_house_argument(house)
+    return [name], [h], []
 
 
 def _finish_folder(house: Path, out: Path, summaries: list[dict], skipped: list, as_json: bool) -> None:
@@ -334,6 +330,7 @@ def _print_adapt_summary(console, s: dict, h, out: Path) -> None:
                   f"generator {s['generator']}")
     console.print(f"edits applied: {s['edits_applied']} of {s['steps_requested']} "
                   f"({s['edits_verified']} verified); moves are in grid units (0..100 across the house)")
+    console.print(edit_counts_text(s["edit_counts"]), highlight=False)
     console.print("objectives along the episode's route (before -> after):")
     for k in ob:
         what, unit = MEANING.get(k, (k, ""))
@@ -362,6 +359,19 @@ def _print_adapt_summary(console, s: dict, h, out: Path) -> None:
             console.print(f"tokens {role:6s} {_usage_text(u)}", highlight=False)
         console.print(f"tokens total  {_usage_text(s['usage'])}", highlight=False)
     console.print(f"wrote {out}/ (house.json, before.png, after.png, analysis.json, edits.json, summary.json)")
+
+
+def edit_counts_text(c: dict) -> str:
+    """The edit counts in words: distinct objects (type beside id, edits each) and what changed on net."""
+    from adaptenv.scene.assets import object_label
+
+    if not c["edits"]:
+        return "no edit applied"
+    objects = ", ".join(f"{object_label(o['id'], o['type'])} x{o['edits']}"
+                        + ("" if o["changed"] else " (back where it stood)") for o in c["objects"])
+    return (f"{c['edits']} edit{'s' if c['edits'] != 1 else ''} of {c['objects_edited']} object"
+            f"{'s' if c['objects_edited'] != 1 else ''} ({objects}); {c['objects_changed']} changed on net, "
+            f"net displacement {c['net_displacement_m']:.2f} m")
 
 
 def _verdict_text(v: str, before: dict, after: dict) -> str:
@@ -400,27 +410,34 @@ def bench_adapt(
 
 
 def audit(
-    original: Path = typer.Argument(..., metavar="ORIGINAL.json", show_default=False,
-                                    help="The house before editing (ProcTHOR format)."),
+    original: Path = typer.Argument(..., metavar="ORIGINAL", show_default=False,
+                                    help="The house before editing: a house JSON file or one line of a dataset, "
+                                         "e.g. FILE.jsonl.gz:2:3."),
     adapted: Path = typer.Argument(..., metavar="ADAPTED.json", show_default=False,
                                    help="The same house after editing (e.g. OUT/house.json of `adaptenv adapt`)."),
     as_json: bool = JSON_OPTION,
 ) -> None:
     """Plausibility audit: every moved object checked against the original (docs/adapt.md); exit 1 on a violation."""
     from adaptenv.adapt.plausibility import audit as run_audit
-    from adaptenv.cli._common import existing_file
-    from adaptenv.scene.house import load_house
+    from adaptenv.adapt.step import house_types
+    from adaptenv.scene.assets import object_label
 
-    before = load_house(existing_file(original, "original house"))
-    after = load_house(existing_file(adapted, "adapted house"))
+    _, before = load_house_argument(original, "original house")
+    _, after = load_house_argument(adapted, "adapted house")
     report = run_audit(before, after)
+    types = house_types(before, after)
     if as_json:
-        typer.echo(json.dumps({"moved": report.moved, "counts": report.counts(),
-                               "violations": [{"rule": v.rule, "object": v.object_id, "others": list(v.others),
+        typer.echo(json.dumps({"moved": report.moved, "moved_types": [types.get(o) for o in report.moved],
+                               "counts": report.counts(),
+                               "violations": [{"rule": v.rule, "object": v.object_id,
+                                               "object_type": types.get(v.object_id), "others": list(v.others),
+                                               "other_types": [types.get(o) for o in v.others],
                                                "message": v.message} for v in report.violations]}, indent=1))
     else:
         for v in report.violations:
-            typer.echo(str(v))
+            unnamed = [o for o in dict.fromkeys((v.object_id, *v.others))
+                       if object_label(o, types.get(o)) != o and f"{o} ({types[o]})" not in str(v)]
+            typer.echo(str(v) + (f" ({', '.join(f'{o} is a {types[o]}' for o in unnamed)})" if unnamed else ""))
         counts = ", ".join(f"{k} {n}" for k, n in report.counts().items())
         typer.echo(f"{len(report.moved)} moved object(s), {report.total} violation(s): {counts}")
     if report.total:

@@ -250,19 +250,31 @@ def evaluate(
             paths = write_report(report, house_set, sub, command=command, render=render_house)
             summaries.append((spec, report.summary, paths))
         table = Table(title=f"{policy}: {episodes} episodes per set, seed {seed}")
-        for col in ("houses", "success [95% CI]", "SPL [95% CI]", "SEL", "collisions", "length"):
-            table.add_column(col, justify="left" if col == "houses" else "right")
-        for spec, s, _ in summaries:
-            table.add_row(spec, f"{s['success']:.3f} [{s['success_ci95'][0]:.3f}, {s['success_ci95'][1]:.3f}]",
-                          f"{s['spl']:.3f} [{s['spl_ci95'][0]:.3f}, {s['spl_ci95'][1]:.3f}]",
-                          f"{s['sel']:.3f} +- {s['sel_se']:.3f}", f"{s['collisions']:.1f} +- {s['collisions_se']:.1f}",
-                          f"{s['steps']:.0f} +- {s['steps_se']:.0f}")
+        rows = [[f"{s['success']:.3f} [{s['success_ci95'][0]:.3f}, {s['success_ci95'][1]:.3f}]",
+                 f"{s['spl']:.3f} [{s['spl_ci95'][0]:.3f}, {s['spl_ci95'][1]:.3f}]",
+                 f"{s['sel']:.3f} +- {s['sel_se']:.3f}", f"{s['collisions']:.1f} +- {s['collisions_se']:.1f}",
+                 f"{s['steps']:.0f} +- {s['steps_se']:.0f}"] for _, s, _ in summaries]
+        specs = [spec for spec, _, _ in summaries]
+        headers = ["success [95% CI]", "SPL [95% CI]", "SEL", "collisions", "length"]
+        room, widths = column_widths(console.width, headers, rows)
+        labels = set_labels(specs, room)
+        table.add_column("houses", justify="left", no_wrap=True, width=max(map(len, labels)))
+        for col, width in zip(headers, widths, strict=True):
+            table.add_column(col, justify="right", width=width)
+        for label, row in zip(labels, rows, strict=True):
+            table.add_row(label, *row)
         console.print(table)
+        for label, spec in zip(labels, specs, strict=True):
+            if label != spec:
+                console.print(f"{label} = {spec}", highlight=False, soft_wrap=True)
         for spec, s, _ in summaries:
             if s["skipped_houses"]:
                 console.print(f"skipped {len(s['skipped_houses'])} house(s) of {spec} that cannot be used "
                               f"({', '.join(list(s['skipped_houses'])[:5])}{', ...' if len(s['skipped_houses']) > 5 else ''}); "
                               "see summary.json for the reasons", highlight=False)
+        for spec, s, _ in summaries:
+            if "floor_left_out" in s:
+                console.print(floor_line(spec, s), highlight=False)
         for spec, s, _ in summaries:
             if s["failure_modes"]:
                 console.print(f"failures on {spec} (built-in analysis F): "
@@ -321,6 +333,38 @@ def config_command_line(command: str, cfg) -> str:
         else:
             args += [flag, str(value)]
     return shlex.join(args)
+
+
+def floor_line(spec: str, s: dict) -> str:
+    """How many houses of a set the episode floor left out (no start that far), and how many the episodes used."""
+    left = s["floor_left_out"]
+    return (f"floor {s['floor']} on {spec}: left out {len(left)} house(s) with no start that far from a target"
+            + (f" ({', '.join(left[:3])}{', ...' if len(left) > 3 else ''}; see summary.json)" if left else "")
+            + f"; the episodes used {s['houses_used']} of its {s['houses_in_set']} houses")
+
+
+def column_widths(console_width: int, headers: list[str], rows: list[list[str]]) -> tuple[int, list[int]]:
+    """(characters left for the houses column, width of each figure column) of the evaluate table: the figures
+    on one line when that leaves the houses 24 characters, else wrapped to their longest word (one space of
+    padding each side and a border per column)."""
+    texts = [[h, *(r[i] for r in rows)] for i, h in enumerate(headers)]
+    one_line = [max(len(t) for t in col) for col in texts]
+    frame = 3 * (len(headers) + 1) + 1
+    if console_width - sum(one_line) - frame >= 24:
+        return console_width - sum(one_line) - frame, one_line
+    narrowest = [max(len(w) for t in col for w in t.split()) for col in texts]
+    return max(12, console_width - sum(narrowest) - frame), narrowest
+
+
+def set_labels(specs: list[str], width: int) -> list[str]:
+    """Distinct names of at most ``width`` characters for house sets: the specs when they fit, else their
+    tails ("..." and the end, where sets from one folder differ), else "set 1", "set 2", ..."""
+    if all(len(s) <= width for s in specs):
+        return list(specs)
+    tails = [s if len(s) <= width else "..." + s[len(s) - width + 3:] for s in specs]
+    if len(set(tails)) == len(tails):
+        return tails
+    return [f"set {i + 1}" for i in range(len(specs))]
 
 
 def _slug(spec: str) -> str:

@@ -13,7 +13,8 @@ import typer
 from adaptenv.cli import _numbers as numbers
 from adaptenv.cli._common import JSON_OPTION
 
-HOUSE_OPTION = typer.Option(None, "--house", help="A house JSON to use instead of a procedural 5-room house.")
+HOUSE_OPTION = typer.Option(None, "--house", help="A house JSON (or one dataset line, FILE.jsonl.gz:2:3) to use "
+                            "instead of a procedural 5-room house.")
 
 
 def bench_edits(
@@ -28,10 +29,9 @@ def bench_edits(
 
     h = None
     if house is not None:
-        from adaptenv.cli._common import existing_file
-        from adaptenv.scene.house import load_house
+        from adaptenv.cli._common import load_house_argument
 
-        h = load_house(existing_file(house, "house file"))
+        _, h = load_house_argument(house)
     figures = run(n, seed, h)
     emit("edits: collision-aware placement + validation", figures, as_json,
          notes=[f"target: at least {TARGET_PER_SECOND:,.0f} validated edits per second"])

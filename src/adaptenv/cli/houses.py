@@ -17,7 +17,7 @@ import typer
 from typer.core import TyperCommand
 
 from adaptenv.cli import _numbers as numbers
-from adaptenv.cli._common import JSON_OPTION, existing_file
+from adaptenv.cli._common import JSON_OPTION, load_house_argument
 from adaptenv.cli._outputs import FORCE_OPTION, output_file, output_folder, record_file
 from adaptenv.errors import ConfigError
 
@@ -142,7 +142,8 @@ def generate(
 
 @houses_app.command("rearrange")
 def rearrange(
-    house_path: Annotated[Path, typer.Argument(metavar="HOUSE.json", help="The house to rearrange.")],
+    house_path: Annotated[Path, typer.Argument(metavar="HOUSE", help="The house to rearrange: a house JSON file or "
+                                               "one line of a dataset, e.g. FILE.jsonl.gz:2:3.")],
     out: Annotated[Path, typer.Option("-o", "--out", help="Where to write the rearranged house (a .json file).")],
     seed: Annotated[int, typer.Option("--seed", callback=numbers.seed, help="Seed of the new arrangement.")] = 0,
     force: bool = FORCE_OPTION,
@@ -150,7 +151,7 @@ def rearrange(
     """Place a house's movable furniture anew (same rooms, doors, fixtures and target types)."""
     from rich.console import Console
 
-    from adaptenv.scene.house import load_house, save_house
+    from adaptenv.scene.house import save_house
     from adaptenv.scene.procedural import rearrange_house
 
     if seed < 0:
@@ -158,7 +159,7 @@ def rearrange(
     if out.suffix.lower() != ".json":
         raise ConfigError(f"{out}: the output must be a .json file; pass e.g. -o rearranged.json")
     output_file(out, "-o", "houses rearrange", force=force, inputs=[house_path])
-    house = load_house(existing_file(house_path, "house file"))
+    _, house = load_house_argument(house_path)
     new = rearrange_house(house, seed)
     save_house(new, out)
     record_file(out, "houses rearrange")

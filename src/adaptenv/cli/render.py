@@ -10,11 +10,10 @@ from pathlib import Path
 
 import typer
 
-from adaptenv.cli._common import JSON_OPTION
+from adaptenv.cli._common import HOUSE_HELP, JSON_OPTION, load_house_argument
 from adaptenv.cli._outputs import FORCE_OPTION, output_file, record_file
 
-HOUSE_ARGUMENT = typer.Argument(..., metavar="HOUSE.json", help="House JSON file (ProcTHOR format).",
-                                show_default=False)
+HOUSE_ARGUMENT = typer.Argument(..., metavar="HOUSE", help=HOUSE_HELP, show_default=False)
 OUT_OPTION = typer.Option(Path("map.png"), "-o", "--out", help="Image file to write (PNG).")
 TRAJECTORY_OPTION = typer.Option(None, "--trajectory", "-t", metavar="TRAJ.json",
                                  help="Trajectory JSON to draw on the map (path, collisions, targets).")
@@ -44,15 +43,14 @@ def render(
     from adaptenv.cli._common import check_recorded_in
     from adaptenv.render.labels import LABEL_LIMIT, labels_fit
     from adaptenv.render.topdown import render_to_file
-    from adaptenv.scene.house import load_house
     from adaptenv.sim.trajectory import Trajectory
     from adaptenv.sim.world import compile_world
 
+    name, h = load_house_argument(house)
     output_file(out, "-o", "render", force=force, inputs=[house, trajectory])
-    h = load_house(house)
     traj = Trajectory.load(trajectory) if trajectory is not None else None
     if traj is not None:
-        check_recorded_in(traj, compile_world(h, house.stem), trajectory, house)
+        check_recorded_in(traj, compile_world(h, name), trajectory, house)
     colours = {}
     for item in highlight:
         oid, _, colour = item.partition("=")

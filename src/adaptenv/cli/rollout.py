@@ -11,11 +11,11 @@ from pathlib import Path
 import typer
 
 from adaptenv.cli import _numbers as numbers
-from adaptenv.cli._common import JSON_OPTION, existing_file
+from adaptenv.cli._common import HOUSE_HELP, JSON_OPTION, load_house_argument
 from adaptenv.cli._outputs import FORCE_OPTION, output_file, record_file
 
 POLICIES = ("expert", "random")
-_HOUSE = typer.Argument(..., help="A ProcTHOR house JSON file.")
+_HOUSE = typer.Argument(..., metavar="HOUSE", help=HOUSE_HELP, show_default=False)
 _OUT = typer.Option(Path("traj.json"), "-o", "--out", help="Where to write the trajectory JSON.")
 UNITS = {"spl": "0..1", "sel": "0..1", "episode_length": "steps", "path_length": "m", "final_geodesic": "m",
          "collisions": "blocked moves", "min_clearance": "m", "rooms_visited": "rooms", "first_sight_step": "step",
@@ -47,17 +47,15 @@ def rollout(
     from rich.console import Console
     from rich.table import Table
 
-    from adaptenv.scene.house import load_house
     from adaptenv.sim.rollout import expert_episode_length, run_episode
     from adaptenv.sim.spec import MAX_STEPS
     from adaptenv.sim.task import sample_episode
     from adaptenv.sim.world import compile_world
 
-    existing_file(house, "house file")
+    _, house_model = load_house_argument(house)
     output_file(out, "-o", "rollout", force=force, inputs=[house])
     if render is not None:
         output_file(render, "--render", "rollout", force=force, inputs=[house, out])
-    house_model = load_house(house)
     world = compile_world(house_model, name=str(house))
     pol = resolve_policy(policy, seed)
     episode = sample_episode(world, seed, target_type=target, use_house_start=use_house_start)

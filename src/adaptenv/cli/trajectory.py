@@ -10,7 +10,7 @@ from pathlib import Path
 
 import typer
 
-from adaptenv.cli._common import existing_file
+from adaptenv.cli._common import existing_file, load_house_argument
 from adaptenv.cli._outputs import FORCE_OPTION, output_file, record_file
 
 trajectory_app = typer.Typer(help="Trajectories from other simulators: convert an AI2-THOR episode log.",
@@ -22,8 +22,9 @@ def from_ai2thor(
     log: Path = typer.Argument(..., metavar="LOG", show_default=False,
                                help="JSON lines: an optional header {house, target_type}, then one "
                                     "{action, agent, lastActionSuccess} per AI2-THOR event (docs/simulator.md)."),
-    house: Path = typer.Option(..., "--house", metavar="HOUSE.json", help="The house the episode ran in "
-                               "(ProcTHOR format; give --assets first for Objaverse assets)."),
+    house: Path = typer.Option(..., "--house", metavar="HOUSE", help="The house the episode ran in: a ProcTHOR "
+                               "house JSON file or one line of a dataset, e.g. FILE.jsonl.gz:2:3 (give --assets "
+                               "first for Objaverse assets)."),
     out: Path = typer.Option(..., "-o", "--out", metavar="TRAJ.json", help="Where to write the trajectory."),
     target: str | None = typer.Option(None, "--target", metavar="TYPE", help="Target type (e.g. Bed, or bed.n.01); "
                                       "default: the log header's target_type."),
@@ -38,12 +39,12 @@ def from_ai2thor(
     """
     from rich.console import Console
 
-    from adaptenv.scene.house import load_house
     from adaptenv.sim.ai2thor import convert_ai2thor_log
     from adaptenv.sim.world import compile_world
 
     output_file(out, "-o", "trajectory from-ai2thor", force=force, inputs=[log, house])
-    world = compile_world(load_house(existing_file(house, "house file")), house.stem)
+    name, h = load_house_argument(house)
+    world = compile_world(h, name)
     conv = convert_ai2thor_log(existing_file(log, "AI2-THOR log"), world, target_type=target)
     traj = conv.trajectory
     traj.save(out)

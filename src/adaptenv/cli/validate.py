@@ -15,7 +15,8 @@ from adaptenv.cli._common import JSON_OPTION
 
 HOUSES_ARGUMENT = typer.Argument(..., metavar="HOUSE.json", help="House files to check, or house datasets "
                                  "FILE.jsonl[.gz][:START:STOP] (every selected line is checked).", show_default=False)
-HOUSE_ARGUMENT = typer.Argument(..., metavar="HOUSE.json", help="A house file to validate repeatedly.")
+HOUSE_ARGUMENT = typer.Argument(..., metavar="HOUSE", help="A house file, or one line of a dataset "
+                                "(FILE.jsonl.gz:2:3), to validate repeatedly.")
 VALIDATE_JSON_OPTION = typer.Option(False, "--json", help="Print the problems as one JSON object.")
 
 
@@ -66,13 +67,12 @@ def bench_validate(
 ) -> None:
     """Time house validation and scene-graph construction on one house."""
     from adaptenv.bench import emit, median_time
-    from adaptenv.cli._common import existing_file
+    from adaptenv.cli._common import load_house_argument
     from adaptenv.scene.geometry import SceneGeometry
     from adaptenv.scene.graph import build_scene_graph
-    from adaptenv.scene.house import load_house
     from adaptenv.scene.validate import validate_house
 
-    h = load_house(existing_file(house, "house file"))
+    _, h = load_house_argument(house)
     geometry = SceneGeometry.from_house(h)
     graph = build_scene_graph(h, geometry)
     figures = {

@@ -23,7 +23,7 @@ from adaptenv.adapt.generators.random_perturbation import random_single_edits
 from adaptenv.adapt.llm import LLMConfig, make_backend
 from adaptenv.adapt.llm.accounting import scene_usage
 from adaptenv.adapt.llm.usage import Usage
-from adaptenv.adapt.step import adapt_scene
+from adaptenv.adapt.step import adapt_scene, changed_objects
 from adaptenv.agents.evaluate import EpisodeResult, Recorded, run_episodes, sample_episodes
 from adaptenv.agents.houses import HouseSet, load_house_set
 from adaptenv.agents.map_explorer import MapExplorerPolicy
@@ -239,7 +239,7 @@ class Generated:
     after: Trajectory | None = None
     """pi_t's episode in the child (same start and target as the parent's rollout)."""
     moved: list[str] = field(default_factory=list)
-    """Ids of the objects the child's edits moved or turned."""
+    """Ids of the objects (and doors) the child's edits changed on net: moved or turned from where they stood."""
     valid: bool = True
     """False when the final validation refused the edited house (the child is then the parent, unedited)."""
     usage: Usage | None = None
@@ -281,7 +281,7 @@ def run_generate(job: GenerateJob) -> Generated:
         log["final_validation"] = res.problems
         return Generated(job.house, log, 0, res.analysis, res.before, valid=False, **common)
     return Generated(res.house, log, res.edits_applied, res.analysis, res.after,
-                     moved=[e.object_id for e in gen.applied], **common)
+                     moved=changed_objects(res), **common)
 
 
 def _run_diagnosed(job: GenerateJob, rng: np.random.Generator) -> Generated:
@@ -306,7 +306,7 @@ def _run_diagnosed(job: GenerateJob, rng: np.random.Generator) -> Generated:
         return Generated(job.house, log, 0, res.analysis, res.before, valid=False,
                          regret_after=res.diagnosis.regret, success_after=res.diagnosis.success_rate, **common)
     return Generated(res.house, log, res.edits_applied, res.analysis, res.after,
-                     moved=[e.object_id for e in res.generation.applied], regret_after=res.diagnosis_after.regret,
+                     moved=changed_objects(res), regret_after=res.diagnosis_after.regret,
                      success_after=res.diagnosis_after.success_rate, **common)
 
 

@@ -24,6 +24,7 @@ import numpy as np
 import shapely
 
 from adaptenv.render.text import RGB, text_size
+from adaptenv.scene.assets import object_label
 from adaptenv.scene.geometry import Footprint, SceneGeometry
 
 if TYPE_CHECKING:
@@ -393,7 +394,8 @@ def fits_inside(fp: Footprint, t: MapTransform, w: float, h: float, inset: float
 def place_object_labels(floor: list[Footprint], t: MapTransform, layout: MapLayout, obst: Obstacles,
                         boxes: dict[str, Box], edges: dict[str, RGB], default_edge: RGB,
                         inset: float, keep_off: Sequence[Box] = ()) -> list[PlacedLabel]:
-    """Put every floor object's full id inside its rectangle when it fits, else beside it with a leader.
+    """Put every floor object's full id (led by its type when the id does not name it: :func:`object_label`)
+    inside its rectangle when it fits, else beside it with a leader.
 
     ``boxes`` are the objects' pixel bounding boxes (the first rows of ``obst``), ``edges`` the
     frame colours of highlighted objects, ``inset`` the pixels kept clear at an object's front and back;
@@ -406,12 +408,13 @@ def place_object_labels(floor: list[Footprint], t: MapTransform, layout: MapLayo
     fs, min_fs = layout.label_size, max(9, layout.label_size - 2)
     for fp in floor:
         anchor = t.point(*fp.center)
+        text = object_label(fp.object_id, fp.object_type)
         for s in range(fs, min_fs - 1, -1):
-            w, h = text_size(fp.object_id, s)
+            w, h = text_size(text, s)
             w += 4
             box = (anchor[0] - w / 2, anchor[1] - h / 2, anchor[0] + w / 2, anchor[1] + h / 2)
             if fits_inside(fp, t, w, h, inset) and not _touches(np.array([box]), off).any():
-                out.append(PlacedLabel(fp.object_id, box, s, True, anchor, edges.get(fp.object_id, default_edge)))
+                out.append(PlacedLabel(text, box, s, True, anchor, edges.get(fp.object_id, default_edge)))
                 obst.add_label(box, None)
                 break
         else:
@@ -421,7 +424,8 @@ def place_object_labels(floor: list[Footprint], t: MapTransform, layout: MapLayo
     crowd = [int((np.hypot(*(centres - c).T) < 6 * fs).sum()) for c in centres]
     for i in sorted(range(len(outside)), key=lambda k: -crowd[k]):
         fp = outside[i]
-        w, h = text_size(fp.object_id, fs)
+        text = object_label(fp.object_id, fp.object_type)
+        w, h = text_size(text, fs)
         w, h = w + 6, h + 2
         anchor = t.point(*fp.center)
         # Near spots first; look further out only when none of them is clean.
@@ -430,7 +434,7 @@ def place_object_labels(floor: list[Footprint], t: MapTransform, layout: MapLayo
         cost[_touches(cand, off)] = np.inf
         k = int(np.argmin(cost))
         box = tuple(float(v) for v in cand[k])
-        out.append(PlacedLabel(fp.object_id, box, fs, False, anchor, edges.get(fp.object_id, default_edge)))
+        out.append(PlacedLabel(text, box, fs, False, anchor, edges.get(fp.object_id, default_edge)))
         obst.add_label(box, anchor)
     return out
 

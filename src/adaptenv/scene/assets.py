@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import json
 import os
+from collections.abc import Iterable
 from dataclasses import dataclass, field, replace
 from functools import lru_cache
 from importlib import resources
@@ -115,7 +116,8 @@ class AssetCatalog:
         try:
             return self.assets[asset_id]
         except KeyError:
-            raise KeyError(f"unknown assetId {asset_id!r} (not in the ProcTHOR catalog nor in an --assets table)") from None
+            raise KeyError(f"unknown assetId {asset_id!r} (not in the ProcTHOR catalog nor in an --assets table; "
+                           f"{TABLE_HINT})") from None
 
     def type_info(self, object_type: str) -> TypeInfo:
         """Placement annotations of a type (all-false defaults for types without annotations)."""
@@ -140,6 +142,12 @@ class AssetCatalog:
 
 #: Environment variable listing user asset tables (``os.pathsep``-separated) that extend the catalog.
 ASSETS_ENV = "ADAPTENV_ASSETS"
+#: Environment variable that, set to 1, makes house loading leave out child objects of unknown assets.
+SKIP_UNKNOWN_ENV = "ADAPTENV_SKIP_UNKNOWN_ASSETS"
+#: How to get a table for Objaverse assets, for every message about unknown asset ids.
+TABLE_HINT = ("for Objaverse assets build one with `adaptenv assets from-objathor ANNOTATIONS -o TABLE` "
+              "and pass --assets TABLE, or pass --skip-unknown-assets to leave out the unknown objects that "
+              "rest on others")
 #: Depth (m) of one arm of an L- or C-shaped counter: every straight ProcTHOR counter
 #: (``Countertop_I_*``) is 0.611 m (2 ft) deep, and ``Countertop_L_4x4`` is 2 x 0.611 m square.
 COUNTER_ARM_DEPTH = 0.611
@@ -185,6 +193,20 @@ def use_assets(*paths: str | Path) -> AssetCatalog:
             current.append(str(Path(p).resolve()))
     os.environ[ASSETS_ENV] = os.pathsep.join(current)
     return load_catalog()
+
+
+def skip_unknown_assets(on: bool = True) -> None:
+    """Make house loading leave out child objects whose asset is unknown (this process and the worker
+    processes it starts; the CLI's ``--skip-unknown-assets``). Unknown top-level objects stay errors."""
+    if on:
+        os.environ[SKIP_UNKNOWN_ENV] = "1"
+    else:
+        os.environ.pop(SKIP_UNKNOWN_ENV, None)
+
+
+def skipping_unknown_assets() -> bool:
+    """Whether :func:`skip_unknown_assets` is on (``$ADAPTENV_SKIP_UNKNOWN_ASSETS`` is 1)."""
+    return os.environ.get(SKIP_UNKNOWN_ENV, "") == "1"
 
 
 @lru_cache(maxsize=8)
@@ -300,6 +322,27 @@ def object_role(object_type: str, bottom_height: float, is_child: bool) -> Objec
     if object_type in WALL_TYPES or bottom_height > WALL_MOUNT_MIN_BOTTOM:
         return "wall"
     return "floor"
+
+
+def object_label(object_id: str, object_type: str | None) -> str:
+    """How a person reads an object: its id, led by its type when the id does not name it (ProcTHOR-100K's
+    ``6|1|3`` is ``Chair 6|1|3``; ProcTHOR-10K's ``Chair|3|0|3`` stays as it is)."""
+    head = object_id.split("|", 1)[0].lower()
+    if not object_type or (head and (object_type.lower().startswith(head) or head.startswith(object_type.lower()))):
+        return object_id
+    return f"{object_type} {object_id}"
+
+
+def object_types(objects: Iterable[Any], catalog: AssetCatalog | None = None) -> dict[str, str | None]:
+    """Object id -> object type of objects with ``id`` and ``assetId`` (a house's objects, children and doors);
+    None for an object of an unknown asset."""
+    catalog = catalog or load_catalog()
+    return {obj.id: (a.object_type if (a := catalog.assets.get(obj.assetId)) is not None else None) for obj in objects}
+
+
+def object_labels(objects: Iterable[Any], catalog: AssetCatalog | None = None) -> dict[str, str]:
+    """Object id -> :func:`object_label` of objects with ``id`` and ``assetId`` (see :func:`object_types`)."""
+    return {oid: object_label(oid, t) for oid, t in object_types(objects, catalog).items()}
 
 
 def is_movable(object_type: str, role: ObjectRole) -> bool:

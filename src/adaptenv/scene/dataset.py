@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import gzip
 import json
+import logging
 import re
 import zlib
 from collections.abc import Iterator
@@ -25,8 +26,10 @@ from pathlib import Path
 from typing import IO, Any
 
 from adaptenv.errors import ConfigError, HouseError
-from adaptenv.scene.house import House, parse_house
-from adaptenv.scene.validate import validate_house
+from adaptenv.scene.house import House, load_house, parse_house
+from adaptenv.scene.validate import dropped_children_line, validate_read_house
+
+log = logging.getLogger(__name__)
 
 _SPEC = re.compile(r"^(?P<path>.*?\.jsonl(?:\.gz)?)(?::(?P<slice>.*))?$", re.IGNORECASE)
 
@@ -127,17 +130,56 @@ def dataset_documents(ds: DatasetSlice) -> Iterator[tuple[int, dict[str, Any]]]:
 
 
 def dataset_houses(ds: DatasetSlice, *, validate: bool = True, catalog: Any = None,
-                   ) -> Iterator[tuple[str, House | HouseError]]:
+                   skip_unknown: bool | None = None) -> Iterator[tuple[str, House | HouseError]]:
     """(name, House) per selected line; a line that is no valid house gives its HouseError in place of the house.
 
-    ``validate`` and ``catalog`` are :func:`~adaptenv.scene.house.load_house`'s.
+    ``validate``, ``catalog`` and ``skip_unknown`` are :func:`~adaptenv.scene.house.load_house`'s.
     """
     for index, doc in dataset_documents(ds):
         label = line_label(ds.path, index)
         try:
             house = parse_house(doc, label)
-            problems = validate_house(house, file=label, catalog=catalog) if validate else []
+            problems = validate_read_house(house, file=label, catalog=catalog, skip_unknown=skip_unknown,
+                                           validate=validate)
             item = HouseError(problems) if problems else house
         except HouseError as exc:
             item = exc
         yield house_name(index), item
+
+
+def load_one_house(spec: str | Path, *, validate: bool = True, catalog: Any = None,
+                   skip_unknown: bool | None = None, what: str = "house") -> tuple[str, House]:
+    """(name, house) of a HOUSE argument: a house JSON file (named by its stem) or a dataset slice that
+    selects one house, e.g. ``train.jsonl.gz:2:3`` (named ``house-000002``).
+
+    ``validate``, ``catalog`` and ``skip_unknown`` are :func:`~adaptenv.scene.house.load_house`'s; child
+    objects left out for unknown assets are logged in one line. ConfigError when the spec names no file or a
+    slice of several houses; HouseError when the house is invalid.
+    """
+    ds = parse_dataset_spec(spec)
+    if ds is None:
+        path = Path(spec)
+        if not path.is_file():
+            raise ConfigError(f"{spec}: no such {what} file; pass a house JSON file or one line of a dataset, "
+                              "e.g. FILE.jsonl.gz:2:3")
+        name, house = path.stem, load_house(path, validate=validate, catalog=catalog, skip_unknown=skip_unknown)
+    else:
+        name, house = _one_dataset_house(ds, validate=validate, catalog=catalog, skip_unknown=skip_unknown)
+    if line := dropped_children_line([house]):
+        log.warning("%s: %s", name, line)
+    return name, house
+
+
+def _one_dataset_house(ds: DatasetSlice, **load: Any) -> tuple[str, House]:
+    """The one house a dataset slice selects; ConfigError when it selects several."""
+    found: list[tuple[str, House | HouseError]] = []
+    for item in dataset_houses(ds, **load):
+        found.append(item)
+        if len(found) > 1:
+            first = int(found[0][0].rpartition("-")[2])
+            raise ConfigError(f"{ds.spec}: the slice selects more than one house, and this command takes one; "
+                              f"pick one line, e.g. {ds.path}:{first}:{first + 1}")
+    name, house = found[0]
+    if isinstance(house, HouseError):
+        raise house
+    return name, house

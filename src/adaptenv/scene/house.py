@@ -35,10 +35,11 @@ from adaptenv.scene.model import (
     set_door_openness,
     short,
 )
-from adaptenv.scene.validate import validate_house
+from adaptenv.scene.validate import validate_read_house
 
 
-def load_house(path: str | Path, *, validate: bool = True, catalog: Any = None) -> House:
+def load_house(path: str | Path, *, validate: bool = True, catalog: Any = None,
+               skip_unknown: bool | None = None) -> House:
     """Load a ProcTHOR house JSON file.
 
     Args:
@@ -47,16 +48,18 @@ def load_house(path: str | Path, *, validate: bool = True, catalog: Any = None) 
             (wall ids, door walls, asset ids, polygons, objects inside rooms).
         catalog: the AssetCatalog to check asset ids against (default ``load_catalog()``; e.g.
             ``load_catalog("my_assets.json")`` for a house of Objaverse assets).
+        skip_unknown: leave out child objects whose asset the catalog does not know (recorded in
+            ``House.dropped_children``); default: the process setting (``--skip-unknown-assets``).
 
     Raises:
         HouseError: with one sentence per problem naming the file and JSON path.
     """
     doc = read_house_document(path)
     house = parse_house(doc, str(path))
-    if validate:
-        problems = validate_house(house, file=str(path), catalog=catalog)
-        if problems:
-            raise HouseError(problems)
+    problems = validate_read_house(house, file=str(path), catalog=catalog, skip_unknown=skip_unknown,
+                                   validate=validate)
+    if problems:
+        raise HouseError(problems)
     return house
 
 

@@ -17,7 +17,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from pydantic import BaseModel, ConfigDict, Field, ValidationError
+from pydantic import BaseModel, ConfigDict, Field, PrivateAttr, ValidationError
 
 from adaptenv.errors import HouseError, Problem
 
@@ -123,6 +123,13 @@ class House(_Model):
     objects: list[HouseObject] = Field(default_factory=list)
     proceduralParameters: dict[str, Any] = Field(default_factory=dict)
     metadata: Metadata = Field(default_factory=Metadata)
+    _dropped_children: list[tuple[str, str]] = PrivateAttr(default_factory=list)
+
+    @property
+    def dropped_children(self) -> list[tuple[str, str]]:
+        """(object id, asset id) of the child objects of unknown assets left out when the house was read
+        (``--skip-unknown-assets``; see :func:`adaptenv.scene.validate.drop_unknown_children`)."""
+        return self._dropped_children
 
     def to_dict(self) -> dict[str, Any]:
         """The house as a JSON-ready dict, unknown keys included."""

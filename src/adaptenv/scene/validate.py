@@ -21,7 +21,13 @@ import shapely
 from shapely.geometry import Point, Polygon
 
 from adaptenv.errors import HouseError, Problem
-from adaptenv.scene.assets import ROOM_TYPES, AssetCatalog, load_catalog
+from adaptenv.scene.assets import (
+    ROOM_TYPES,
+    TABLE_HINT,
+    AssetCatalog,
+    load_catalog,
+    skipping_unknown_assets,
+)
 from adaptenv.scene.geometry import object_footprint, wall_floor_segment
 from adaptenv.scene.model import (
     House,
@@ -45,7 +51,8 @@ _NUM = r"-?\d+(?:\.\d+)?"
 WALL_ID = re.compile(rf"^wall\|(?:\d+|exterior)\|{_NUM}\|{_NUM}\|{_NUM}\|{_NUM}$")
 
 
-def validate_house(house: House, file: str | None = None, catalog: AssetCatalog | None = None) -> list[Problem]:
+def validate_house(house: House, file: str | None = None, catalog: AssetCatalog | None = None, *,
+                   skip_unknown: bool = False) -> list[Problem]:
     """Every semantic problem of a parsed house, grouped by check (empty when the house is valid); a
     house larger than any real one gets only those problems.
 
@@ -53,6 +60,8 @@ def validate_house(house: House, file: str | None = None, catalog: AssetCatalog 
         house: a house that passed structural parsing (:func:`~adaptenv.scene.house.parse_house`).
         file: the file name to put in each problem, if any.
         catalog: the asset catalog (default: the shipped ProcTHOR catalog).
+        skip_unknown: the house's unknown child objects were left out (:func:`drop_unknown_children`), so
+            an unknown top-level object is reported as one that cannot be left out.
     """
     catalog = catalog or load_catalog()
     if out := number_problems(house, file):  # a house edited in code may hold coordinates no file may
@@ -68,9 +77,46 @@ def validate_house(house: House, file: str | None = None, catalog: AssetCatalog 
         for i, op in enumerate(openings):
             _check_opening(house, op, (kind, i), wall_ids, room_ids, catalog, add)
     floor = shapely.union_all(list(room_polys.values())) if room_polys else None
-    _check_objects(house, floor, catalog, add)
+    _check_objects(house, floor, catalog, add, skip_unknown)
     _check_agent(house, floor, add)
     return out
+
+
+def drop_unknown_children(house: House, catalog: AssetCatalog | None = None) -> list[tuple[str, str]]:
+    """Leave out, in place, every child object whose asset the catalog does not know (a small object
+    resting on another: the agent never collides with it); returns (object id, asset id) of each."""
+    catalog = catalog or load_catalog()
+    dropped = []
+    for obj in house.objects:
+        unknown = [c for c in obj.children if c.assetId not in catalog.assets]
+        if unknown:
+            dropped += [(c.id, c.assetId) for c in unknown]
+            obj.children = [c for c in obj.children if c.assetId in catalog.assets]
+    return dropped
+
+
+def dropped_children_line(houses: list[House], of: int | None = None) -> str | None:
+    """One line counting the child objects of unknown assets left out of ``houses`` (None when none were);
+    ``of`` is the number of houses read, when it is a set (some may have failed to load)."""
+    dropped = [d for h in houses for d in h.dropped_children]
+    if not dropped:
+        return None
+    where = "" if of is None else f" in {sum(bool(h.dropped_children) for h in houses)} of {of} houses"
+    ids = len({a for _, a in dropped})
+    return (f"left out {len(dropped)} object{'s' if len(dropped) != 1 else ''} resting on others{where}, of "
+            f"{ids} unknown asset id{'s' if ids != 1 else ''} (--skip-unknown-assets; the agent never collides "
+            "with them, and targets are floor objects)")
+
+
+def validate_read_house(house: House, file: str | None = None, catalog: AssetCatalog | None = None, *,
+                        skip_unknown: bool | None = None, validate: bool = True) -> list[Problem]:
+    """The problems of a house just read (none when not ``validate``), after leaving out its child objects
+    of unknown assets when ``skip_unknown`` (default: :func:`~adaptenv.scene.assets.skipping_unknown_assets`);
+    the house records them in ``House.dropped_children``."""
+    skip = skipping_unknown_assets() if skip_unknown is None else skip_unknown
+    if skip:
+        house._dropped_children = [*house.dropped_children, *drop_unknown_children(house, catalog)]
+    return validate_house(house, file=file, catalog=catalog, skip_unknown=skip) if validate else []
 
 
 def validate_house_file(path: str | Path) -> list[Problem]:
@@ -80,7 +126,7 @@ def validate_house_file(path: str | Path) -> list[Problem]:
         house = parse_house(doc, str(path))
     except HouseError as err:
         return list(err.problems)
-    return validate_house(house, file=str(path))
+    return validate_read_house(house, file=str(path))
 
 
 def _distinct_vertices(points: list[tuple[float, float]]) -> list[tuple[float, float]]:
@@ -183,7 +229,7 @@ def _check_opening(house: House, op: Opening, loc: tuple, wall_ids: set[str], ro
             f"length 0..{length:.2f} m; move the hole onto the wall")
 
 
-def _check_objects(house: House, floor, catalog: AssetCatalog, add) -> None:
+def _check_objects(house: House, floor, catalog: AssetCatalog, add, skip_unknown: bool = False) -> None:
     """Asset ids, unique ids and placement of top-level objects and their children."""
     seen: dict[str, str] = {}
     tops: list[tuple[int, str, np.ndarray]] = []  # (index, role, true footprint outline)
@@ -197,12 +243,15 @@ def _check_objects(house: House, floor, catalog: AssetCatalog, add) -> None:
             if _check_object(child, ("objects", i, "children", j), seen, catalog, add, unknown,
                              is_child=True) is not None:
                 kids.append((i, j, found[1] if found is not None else None))
-    if unknown:
+    tops_unknown = [(i, o) for i, o in enumerate(house.objects) if o.assetId in unknown]
+    if skip_unknown and tops_unknown:
+        _unknown_top_level(tops_unknown, add)
+    elif unknown:
         first = ", ".join(repr(a) for a in list(unknown)[:3])
         add((*next(iter(unknown.values())), "assetId"),
             f"{len(unknown)} assetId{'s are' if len(unknown) > 1 else ' is'} in neither the ProcTHOR catalog nor an "
             f"--assets table (first: {first}); pass --assets FILE with a table of your assets (asset id -> "
-            "object type and bounding box, see docs/scene.md)")
+            f"object type and bounding box, see docs/scene.md); {TABLE_HINT}")
     if floor is None:
         return
     floor_tol = floor.buffer(PLACEMENT_TOLERANCE)
@@ -230,6 +279,19 @@ def _check_objects(house: House, floor, catalog: AssetCatalog, add) -> None:
         c = objs[i].children[j]
         add(("objects", i, "children", j, "position"), f"the object {c.id!r} ({c.assetId}) at (x={c.position.x:.2f}, "
             f"z={c.position.z:.2f}) is neither on its parent {objs[i].id!r} nor inside a room; move it onto its parent")
+
+
+def _unknown_top_level(tops: list[tuple[int, HouseObject]], add) -> None:
+    """One problem naming the top-level objects (index, object) of unknown assets, which --skip-unknown-assets
+    cannot leave out."""
+    objs = [o for _, o in tops]
+    first = ", ".join(f"{o.id!r} (assetId {o.assetId!r})" for o in objs[:3])
+    add(("objects", tops[0][0], "assetId"),
+        f"{len(objs)} top-level object{'s have assets' if len(objs) > 1 else ' has an asset'} in neither the "
+        f"ProcTHOR catalog nor an --assets table ({'first: ' if len(objs) > 3 else ''}{first}); "
+        "--skip-unknown-assets leaves out only objects resting on others, since an object of unknown size "
+        "standing in the house would block the agent unseen; build a table with `adaptenv assets from-objathor "
+        "ANNOTATIONS -o TABLE` and pass --assets TABLE")
 
 
 def _check_object(obj: HouseObject, loc: tuple, seen: dict[str, str], catalog: AssetCatalog,

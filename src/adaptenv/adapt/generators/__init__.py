@@ -31,6 +31,7 @@ from adaptenv.adapt.generators.base import (
     Generator,
     StepRecord,
     StepStatus,
+    house_object_types,
     keep_render,
     movable_ids,
     png_bytes,
@@ -57,4 +58,4 @@ def make_generator(name: str = "builtin", **kw: Any) -> Generator:
 
 
 __all__ = ["GENERATORS", "GenerationContext", "GenerationResult", "Generator", "StepRecord", "StepStatus",
-           "keep_render", "make_generator", "movable_ids", "png_bytes", "render_scene"]
+           "house_object_types", "keep_render", "make_generator", "movable_ids", "png_bytes", "render_scene"]

@@ -17,6 +17,7 @@ from adaptenv.adapt.edits import Edit, EditLog
 from adaptenv.adapt.llm.usage import Prices, Usage
 from adaptenv.adapt.placement import PlacementContext
 from adaptenv.render.topdown import png_bytes, render_house, save_render
+from adaptenv.scene.assets import object_types
 
 if TYPE_CHECKING:
     from PIL import Image
@@ -119,11 +120,20 @@ class GenerationResult:
         return [s.edit for s in self.steps if s.status == "applied" and s.edit is not None]
 
     def to_json_dict(self) -> dict[str, Any]:
-        """The log written next to a run: steps, every tried edit, usage, objective trace."""
-        return {"generator": self.generator, "llm": self.llm, "stopped": self.stopped,
-                "steps": [s.model_dump(mode="json") for s in self.steps],
-                "edit_log": self.edit_log.model_dump(mode="json")["edits"],
-                "usage": self.usage.to_dict(self.prices), "objective_trace": self.objective_trace}
+        """The log written next to a run: steps, every tried edit (its object's type beside its id, as
+        ProcTHOR-100K ids such as ``6|1|3`` do not name it), usage, objective trace."""
+        types = house_object_types(self.house)
+        steps = [s.model_dump(mode="json") for s in self.steps]
+        edits = self.edit_log.model_dump(mode="json")["edits"]
+        for edit in [s["edit"] for s in steps if s.get("edit")] + edits:
+            edit["object_type"] = types.get(edit["object_id"])
+        return {"generator": self.generator, "llm": self.llm, "stopped": self.stopped, "steps": steps,
+                "edit_log": edits, "usage": self.usage.to_dict(self.prices), "objective_trace": self.objective_trace}
+
+
+def house_object_types(house: House) -> dict[str, str | None]:
+    """Object id -> object type of a house's objects, children and doors (None for an unknown asset)."""
+    return object_types([*(o for o, _ in house.iter_objects()), *house.doors])
 
 
 @runtime_checkable
