@@ -42,7 +42,7 @@ from adaptenv.scene.objathor import type_for_name
 from adaptenv.sim.metrics import episode_metrics
 from adaptenv.sim.rollout import record_sight, target_fields
 from adaptenv.sim.spec import ROTATE_LARGE, ROTATE_SMALL, TARGET_TYPES
-from adaptenv.sim.trajectory import Pose, Step, Trajectory
+from adaptenv.sim.trajectory import Pose, Step, Trajectory, metres
 from adaptenv.sim.world import NavWorld
 
 _NAMES = {
@@ -202,7 +202,7 @@ def trajectory_from_ai2thor(records: Sequence[dict[str, Any]], world: NavWorld, 
         where = f"{source} line {lines[k]}"
         pose = _pose(rec, where)
         if floor.distance(shapely.Point(pose.x, pose.z)) > OUTSIDE_TOLERANCE:
-            raise AdaptenvError(f"{where}: the agent at ({pose.x:.2f}, {pose.z:.2f}) m is outside every room of house "
+            raise AdaptenvError(f"{where}: the agent at ({metres(pose.x)}, {metres(pose.z)}) m is outside every room of house "
                                 f"{world.name}; convert the log with the house the episode ran in")
         poses.append(pose)
     steps: list[Step] = []
