@@ -29,13 +29,7 @@ from adaptenv.scene.house import House
 from adaptenv.scene.procedural.presets import generate_preset
 from adaptenv.sim.trajectory import Trajectory
 from tests.conftest import REAL_HOUSE
-from tests.scene.test_fuzz import (
-    JSON,
-    ODD_NUMBERS,
-    assert_one_short_line,
-    mutate,
-    trajectory_document,
-)
+from tests.scene.test_fuzz import JSON, ODD_NUMBERS, mutate, trajectory_document
 
 FUZZ = settings(suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large,
                                        HealthCheck.function_scoped_fixture])
@@ -72,6 +66,12 @@ def document_or_bytes(data: st.DataObject, doc: Any) -> bytes:
     if kind == "garbled":
         return garble(data, json.dumps(doc).encode())
     return json.dumps(data.draw(JSON, label="document")).encode()
+
+
+def assert_one_short_line(message: str) -> None:
+    """A message a user can read: one line, no traceback, not a whole document."""
+    assert "\n" not in message and "Traceback" not in message, message
+    assert len(message) < 1000, message
 
 
 def expect_user_error(load, *args, **kwargs) -> Any:

@@ -11,6 +11,7 @@ from __future__ import annotations
 import dataclasses
 import difflib
 import json
+import re
 from functools import cache
 from pathlib import Path
 from typing import Any, TypeVar
@@ -118,6 +119,7 @@ def _shown(value: Any) -> str:
         text = json.dumps(value)
     except (TypeError, ValueError):
         text = repr(value)
+    text = re.sub(r"\d{16,}", lambda m: f"{float(m.group()):.3g}", text)  # 10**30 as 1e+30, not 31 digits
     return text if len(text) <= 60 else text[:57] + "..."
 
 

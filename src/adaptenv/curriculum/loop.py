@@ -494,7 +494,10 @@ def _open_run(cfg: LoopConfig, run_dir: Path, resume: bool, command: str
         check_resume_files(cfg, run_dir, state, records)
         info = run_dir / "run.json"
         if info.is_file():  # keep the command that started the run
-            command = RunInfo.model_validate_json(info.read_text(encoding="utf-8")).command or command
+            try:
+                command = RunInfo.model_validate_json(info.read_bytes()).command or command
+            except (OSError, ValueError) as exc:  # pydantic's ValidationError is a ValueError
+                raise ConfigError(f"{info}: not the run.json the loop wrote ({type(exc).__name__}); {STATE_FIX}") from None
         return state, records, command
     if run_dir.exists() and any(run_dir.iterdir()) and not resume:
         raise ConfigError(f"{run_dir}: the output folder is not empty; pass --resume to continue it or "
