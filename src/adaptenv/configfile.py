@@ -92,8 +92,14 @@ def field_path(loc: tuple[Any, ...]) -> str:
     """``('loop', 'iterations')`` -> ``loop.iterations``; ``('seeds', 0)`` -> ``seeds[0]``."""
     out = ""
     for part in loc:
-        out += f"[{part}]" if isinstance(part, int) else (f".{part}" if out else str(part))
+        part = part if isinstance(part, int) else printable(str(part))
+        out += f"[{part}]" if isinstance(part, int) else (f".{part}" if out else part)
     return out
+
+
+def printable(text: str) -> str:
+    """``text`` with line breaks and other control characters escaped (a key a user typed, kept on one line)."""
+    return text if text.isprintable() else text.encode("unicode_escape").decode("ascii")
 
 
 def field_names(kind: type) -> list[str]:
@@ -123,4 +129,4 @@ def _shown(value: Any) -> str:
     return text if len(text) <= 60 else text[:57] + "..."
 
 
-__all__ = ["STRICT", "describe", "field_names", "field_path", "parse_config", "read_json"]
+__all__ = ["STRICT", "describe", "field_names", "field_path", "parse_config", "printable", "read_json"]
