@@ -331,7 +331,7 @@ def edit_tensor(data: st.DataObject, t: torch.Tensor) -> Any:
         t[data.draw(st.integers(0, max(t.numel() - 1, 0)), label="index")] = math.nan if op == "nan" else -math.inf
         return t
     if op == "shape":
-        return torch.zeros(*data.draw(st.lists(st.integers(0, 3), max_size=3), label="shape"))
+        return torch.zeros(tuple(data.draw(st.lists(st.integers(0, 3), max_size=3), label="shape")))
     if op == "dtype":
         return t.to(data.draw(st.sampled_from([torch.float16, torch.float64, torch.int64, torch.bool,
                                                torch.complex64]), label="dtype"))

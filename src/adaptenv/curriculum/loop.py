@@ -53,7 +53,7 @@ from adaptenv.agents.ppo import learner_problem
 from adaptenv.agents.registry import resolve_policy
 from adaptenv.agents.teachers import TEACHERS
 from adaptenv.agents.train import check_precision, finetune
-from adaptenv.configfile import STRICT, parse_config, read_json
+from adaptenv.configfile import STRICT, parse_config, printable, read_json
 from adaptenv.curriculum import buffer as lb
 from adaptenv.curriculum.executor import Executor, InProcessExecutor
 from adaptenv.curriculum.jobs import (
@@ -485,7 +485,7 @@ def _open_run(cfg: LoopConfig, run_dir: Path, resume: bool, command: str
         old = saved["config"]  # a field added to LoopConfig since the run started counts as its default
         changed = run_changes({**asdict(LoopConfig()), **old, **_moved_match_run(old, cfg)}, asdict(cfg))
         if changed:
-            raise ConfigError(f"{run_dir}: --resume with other settings than the interrupted run: {', '.join(changed)}; "
+            raise ConfigError(f"{run_dir}: --resume with other settings than the interrupted run: {', '.join(map(printable, changed))}; "
                               "pass the same options (its run.json lists them) or a new output folder")
         state = parse_config(LoopState, saved.get("state"), str(state_path), prefix="state", fix=STATE_FIX)
         if state.buffer:

@@ -258,7 +258,11 @@ def convert_ai2thor_log(path: str | Path, world: NavWorld, *, target_type: str |
         raise AdaptenvError(f"{log.source}: no target type; put \"target_type\" in the log's header line or pass "
                             "--target")
     house, seed = log.header.get("house"), log.header.get("seed")
-    return trajectory_from_ai2thor(log.records, world, target, house=None if house is None else str(house),
+    conversion = trajectory_from_ai2thor(log.records, world, target, house=None if house is None else str(house),
                                    policy=str(log.header.get("policy", "ai2thor")),
                                    seed=seed if isinstance(seed, int) else None, source=log.source, lines=log.lines)
+    if (why := conversion.trajectory.problem()) is not None:
+        raise AdaptenvError(f"{log.source}: the converted episode is not one, at {why}; log at least one action "
+                            "that moves or turns the agent")
+    return conversion
 
