@@ -3,9 +3,11 @@
 from __future__ import annotations
 
 import json
+import os
 from pathlib import Path
 
 import pytest
+from hypothesis import HealthCheck, settings
 
 DATA = Path(__file__).parent / "data"
 REAL_HOUSE = DATA / "procthor-10k-train-1.json"
@@ -26,6 +28,16 @@ def objaverse_house_doc(*, floor: bool) -> dict:
     if floor:
         by_id["Fridge|2|1"]["assetId"] = FLOOR_ID
     return doc
+
+
+FUZZ_SLOW = [HealthCheck.too_slow, HealthCheck.data_too_large]
+settings.register_profile("ci", max_examples=100, deadline=None, derandomize=True, database=None,
+                          suppress_health_check=FUZZ_SLOW)
+settings.register_profile("long", max_examples=10_000, deadline=None, derandomize=False, database=None,
+                          suppress_health_check=FUZZ_SLOW)
+settings.load_profile(os.environ.get("ADAPTENV_FUZZ_PROFILE", "ci"))
+"""Hypothesis examples per property: ``ci`` (the default) runs 100, deterministically;
+``ADAPTENV_FUZZ_PROFILE=long`` runs 10,000 random ones (docs/scene.md, "Fuzzing the readers")."""
 
 
 @pytest.fixture(autouse=True, scope="session")

@@ -33,7 +33,7 @@ BAD_EXPERIMENTS = [
     ({"loop": {"focus_training": 1}}, "loop.focus_training should be true or false"),
     ({"loop": {"llm": {"timeout_s": "5"}}}, 'loop.llm.timeout_s should be a number, got "5"'),
     ({"loop": {"llm": {"modle": "m"}}}, "loop.llm.modle is not a known field; did you mean 'model'"),
-    ({"seeds": [-1]}, "seed must be >= 0"),
+    ({"seeds": [-1]}, "a seed is a whole number from 0 to"),
     ({"seeds": [1, 1]}, "seeds lists 1 twice"),
     ({"reference": "ourz"}, "reference 'ourz' is unknown"),
 ]

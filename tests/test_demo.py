@@ -53,7 +53,7 @@ def test_demo_compares_the_loop_with_dr_and_imports_none_of_the_dev_extras(tmp_p
     assert "paired over the 50 held-out episodes" in verdict  # 25 per house, 1 house, 2 sets
     steps = {m: records[-1]["env_steps"] for m, records in runs.items()}
     budget = next(line for line in printed if line.startswith("Environment steps: "))
-    assert f"ours {steps['ours']:,}, dr {steps['dr']:,};" in budget
+    assert f"ours {steps['ours']:,}" in budget and f"dr {steps['dr']:,}" in budget
     assert f"ours used {steps['ours'] / steps['dr']:.1f}x dr's" in budget and "unequal budgets" in budget
     index = out / "run" / "report" / "index.html"
     assert index.is_file() and f"report: {index}" in [line.strip() for line in printed]

@@ -30,7 +30,7 @@ SRC = Path(__file__).resolve().parents[1] / "src"
 
 #: Layer of each top-level name under ``adaptenv`` (module or package), lowest first.
 LAYERS: dict[str, int] = {
-    **dict.fromkeys(("errors", "progress", "configfile", "vocabulary", "_numba_cache"), 0),
+    **dict.fromkeys(("errors", "progress", "configfile", "vocabulary", "_numba_cache", "limits"), 0),
     "scene": 1, "sim": 2, "agents": 3, "render": 4, "adapt": 5, "curriculum": 6, "report": 7,
     "cli": 8, "bench": 8,
     "": 9, "_gym": 9,

@@ -11,6 +11,7 @@ from __future__ import annotations
 import dataclasses
 import difflib
 import json
+import re
 from functools import cache
 from pathlib import Path
 from typing import Any, TypeVar
@@ -91,8 +92,14 @@ def field_path(loc: tuple[Any, ...]) -> str:
     """``('loop', 'iterations')`` -> ``loop.iterations``; ``('seeds', 0)`` -> ``seeds[0]``."""
     out = ""
     for part in loc:
-        out += f"[{part}]" if isinstance(part, int) else (f".{part}" if out else str(part))
+        part = part if isinstance(part, int) else printable(str(part))
+        out += f"[{part}]" if isinstance(part, int) else (f".{part}" if out else part)
     return out
+
+
+def printable(text: str) -> str:
+    """``text`` with line breaks and other control characters escaped (a key a user typed, kept on one line)."""
+    return text if text.isprintable() else text.encode("unicode_escape").decode("ascii")
 
 
 def field_names(kind: type) -> list[str]:
@@ -118,7 +125,8 @@ def _shown(value: Any) -> str:
         text = json.dumps(value)
     except (TypeError, ValueError):
         text = repr(value)
+    text = re.sub(r"\d{16,}", lambda m: f"{float(m.group()):.3g}", text)  # 10**30 as 1e+30, not 31 digits
     return text if len(text) <= 60 else text[:57] + "..."
 
 
-__all__ = ["STRICT", "describe", "field_names", "field_path", "parse_config", "read_json"]
+__all__ = ["STRICT", "describe", "field_names", "field_path", "parse_config", "printable", "read_json"]

@@ -45,7 +45,7 @@ def test_replaying_the_log_reproduces_the_validator_scene(real_house):
     v = EditValidator(real_house)
     rng = np.random.default_rng(0)
     ids = [oid for oid, m in zip(v.ctx.ids, v.ctx.movable, strict=True) if m]
-    for _ in range(25):
+    for _ in range(40):
         yaw = float(rng.uniform(0, 360)) if rng.random() < 0.5 else None
         v.try_edit(ids[int(rng.integers(len(ids)))], *rng.uniform(-20, 20, 2), yaw, source="random")
     log = EditLog.from_json(v.log.to_json())

@@ -100,9 +100,9 @@ def test_every_zero_or_beyond_the_episode_acts_like_the_policy(tiny_set):
     assert actions(lambda p: WipeMemory(p, 5)) != plain
 
 
-def test_pretrained_policy_fails_when_wiped_every_step(tiny_set):
+def test_scan_only_policy_fails_when_wiped_every_step(tiny_set):
     """Measured: 1.0 never wiped, 0.0 wiped every step (it never becomes confident enough to end)."""
-    result = memory_check("pretrained", tiny_set, episodes=6, every=[1], seed=0, batch=6, max_steps=150)
+    result = memory_check("pretrained-scan", tiny_set, episodes=6, every=[1], seed=0, batch=6, max_steps=150)
     never, every_step = result["runs"]
     assert [never["every"], every_step["every"]] == [0, 1]
     assert never["success"] >= 0.5 and every_step["success"] == 0.0

@@ -19,7 +19,7 @@ from adaptenv.sim.vector import BatchSim
 
 @pytest.mark.slow
 def test_pi0_agrees_with_the_expert_on_expert_states_but_not_on_its_own():
-    net = load_checkpoint(init_checkpoint("pretrained")).net.eval()
+    net = load_checkpoint(init_checkpoint("pretrained-scan")).net.eval()
     worlds = load_house_set("preset:pretrain-train").worlds
     on_expert = label_agreement(net, worlds, beta=1.0, envs=32, steps=96)
     on_own = label_agreement(net, worlds, beta=0.0, envs=32, steps=96)

@@ -149,7 +149,7 @@ def test_loop_config_refuses_ppo_settings_that_do_not_apply():
 
 @pytest.mark.slow
 def test_the_loop_fine_tunes_by_anchored_ppo(tiny_policy, tmp_path, monkeypatch):
-    from adaptenv.agents import ppo
+    from adaptenv.agents import ppo, train
 
     cards = []
     real = ppo.train_ppo
@@ -160,6 +160,7 @@ def test_the_loop_fine_tunes_by_anchored_ppo(tiny_policy, tmp_path, monkeypatch)
         return result
 
     monkeypatch.setattr(ppo, "train_ppo", spy)
+    monkeypatch.setattr(train, "train_ppo", spy)  # the loop fine-tunes through agents.train
     cfg = tiny_config(tiny_policy, "dr", iterations=1, finetune_algo="ppo", finetune_frames=8192,
                       finetune_kl_coef=0.3, finetune_explore_bonus=0.002, finetune_max_steps=600,
                       finetune_freeze_encoder=True)
@@ -176,7 +177,7 @@ def test_the_loop_fine_tunes_by_anchored_ppo(tiny_policy, tmp_path, monkeypatch)
 def test_ppo_fine_tuning_continues_its_critic_across_iterations(tiny_policy, tmp_path, monkeypatch, keep):
     import torch
 
-    from adaptenv.agents import ppo
+    from adaptenv.agents import ppo, train
     from adaptenv.curriculum.loop import LEARNER_FILE
 
     given, real = [], ppo.train_ppo
@@ -186,6 +187,7 @@ def test_ppo_fine_tuning_continues_its_critic_across_iterations(tiny_policy, tmp
         return real(pc, **kw)
 
     monkeypatch.setattr(ppo, "train_ppo", spy)
+    monkeypatch.setattr(train, "train_ppo", spy)  # the loop fine-tunes through agents.train
     cfg = tiny_config(tiny_policy, "dr", iterations=2, finetune_algo="ppo", finetune_frames=4 * 16 * 128,
                       finetune_kl_coef=0.3, finetune_keep_learner=keep)
     run_loop(cfg, tmp_path / "r")

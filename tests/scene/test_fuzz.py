@@ -4,10 +4,10 @@ Random and mutated documents (NaN, infinity, huge, negative, wrong types, missin
 never raise anything but adaptenv's own errors, whose messages are one short line, and every house
 that parses round-trips (parse -> write -> parse gives the same house).
 
-The default run is small and deterministic. For a long run set ``ADAPTENV_FUZZ`` to the number of
-examples per property (random, not derandomized)::
+The default run (hypothesis profile ``ci``, tests/conftest.py) is 100 examples per property, deterministic.
+The long run is 10,000 random examples per property::
 
-    ADAPTENV_FUZZ=10000 pytest -q -p no:cacheprovider tests/scene/test_fuzz.py
+    ADAPTENV_FUZZ_PROFILE=long pytest -q -p no:cacheprovider tests/scene/test_fuzz.py tests/test_fuzz_readers.py
 """
 
 from __future__ import annotations
@@ -15,7 +15,6 @@ from __future__ import annotations
 import functools
 import json
 import math
-import os
 import re
 from pathlib import Path
 from typing import Any
@@ -31,9 +30,8 @@ from adaptenv.scene.validate import validate_house, validate_house_file
 from adaptenv.sim.trajectory import EpisodeMetrics, Pose, Step, Trajectory
 
 REAL_HOUSE = Path(__file__).parents[1] / "data" / "procthor-10k-train-1.json"
-FUZZ_EXAMPLES = int(os.environ.get("ADAPTENV_FUZZ", "0"))
-FUZZ = settings(max_examples=FUZZ_EXAMPLES or 100, deadline=None, derandomize=not FUZZ_EXAMPLES, database=None,
-                suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large])
+FUZZ = settings(suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large])
+"""The profile's example count and determinism (tests/conftest.py)."""
 
 ODD_NUMBERS = [math.nan, math.inf, -math.inf, 1e308, -1e308, 1e6, -1e6, -1.0, 0.0, 5e-324, 10**30, -(10**30)]
 """Numbers a user may type by mistake: not finite, huge, tiny, negative."""

@@ -26,7 +26,7 @@ from adaptenv.errors import ConfigError
 from adaptenv.render.topdown import png_bytes, render_house
 from adaptenv.scene.occupancy import LABEL_DOOR, LABEL_OBJECT0, LABEL_WINDOW
 from adaptenv.sim.spec import AGENT_RADIUS, MAX_STEPS, MOVE_STEP
-from adaptenv.sim.trajectory import Trajectory
+from adaptenv.sim.trajectory import Trajectory, metres
 from adaptenv.sim.world import NavWorld
 
 log = logging.getLogger(__name__)
@@ -207,7 +207,8 @@ def trajectory_mismatch(traj: Trajectory, world: NavWorld) -> str | None:
     for oid, (x, z) in zip(traj.target_ids, traj.target_positions, strict=False):
         hx, hz = have[oid]
         if math.hypot(hx - x, hz - z) > SAME_PLACE:
-            return f"{oid} stands at ({hx:.2f}, {hz:.2f}) m in the house but at ({x:.2f}, {z:.2f}) m in the trajectory"
+            return (f"{oid} stands at ({metres(hx)}, {metres(hz)}) m in the house but at ({metres(x)}, "
+                    f"{metres(z)}) m in the trajectory")
     return None
 
 
@@ -223,7 +224,7 @@ def pose_outside(traj: Trajectory, world: NavWorld) -> str | None:
     if inside.all():
         return None
     k = int(np.argmin(inside))
-    return f"{poses[k][0]} stands at ({xs[k]:.2f}, {zs[k]:.2f}) m, off the house's floor"
+    return f"{poses[k][0]} stands at ({metres(xs[k])}, {metres(zs[k])}) m, off the house's floor"
 
 
 def analyze_trajectory(traj: Trajectory, world: NavWorld) -> Analysis:

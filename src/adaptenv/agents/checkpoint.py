@@ -17,6 +17,7 @@ from typing import Any
 import torch
 
 from adaptenv.agents.network import END_THRESHOLD, NavNet, NetConfig, NeuralPolicy
+from adaptenv.configfile import printable
 from adaptenv.errors import ConfigError, TrainingDiverged
 from adaptenv.limits import WIDTH_MAX
 from adaptenv.sim.egomap import CROP, MAP_CHANNELS
@@ -146,7 +147,7 @@ def checked_state_dict(state: Any, config: NetConfig, path: Path) -> dict[str, t
     if not isinstance(state, dict) or set(state) != set(shapes):
         keys = set(state) if isinstance(state, dict) else set()
         wrong = sorted(set(shapes) ^ keys)[:3] if keys else ["(not a dict of tensors)"]
-        raise ConfigError(f"{path}: the weights do not fit the network of its net_config ({', '.join(map(str, wrong))} "
+        raise ConfigError(f"{path}: the weights do not fit the network of its net_config ({', '.join(printable(str(w)) for w in wrong)} "
                           f"missing or unknown); {fix}")
     for name, shape in shapes.items():
         t = state[name]

@@ -53,7 +53,7 @@ from adaptenv.agents.ppo import learner_problem
 from adaptenv.agents.registry import resolve_policy, weights_record
 from adaptenv.agents.teachers import TEACHERS
 from adaptenv.agents.train import check_precision, finetune
-from adaptenv.configfile import STRICT, parse_config, read_json
+from adaptenv.configfile import STRICT, parse_config, printable, read_json
 from adaptenv.curriculum import buffer as lb
 from adaptenv.curriculum.executor import Executor, InProcessExecutor
 from adaptenv.curriculum.jobs import (
@@ -497,7 +497,7 @@ def _open_run(cfg: LoopConfig, run_dir: Path, resume: bool, command: str
         old = saved["config"]  # a field added to LoopConfig since the run started counts as its default
         changed = run_changes({**asdict(LoopConfig()), **old, **_moved_match_run(old, cfg)}, asdict(cfg))
         if changed:
-            raise ConfigError(f"{run_dir}: --resume with other settings than the interrupted run: {', '.join(changed)}; "
+            raise ConfigError(f"{run_dir}: --resume with other settings than the interrupted run: {', '.join(map(printable, changed))}; "
                               "pass the same options (its run.json lists them) or a new output folder")
         state = parse_config(LoopState, saved.get("state"), str(state_path), prefix="state", fix=STATE_FIX)
         if state.buffer:
@@ -506,7 +506,10 @@ def _open_run(cfg: LoopConfig, run_dir: Path, resume: bool, command: str
         check_resume_files(cfg, run_dir, state, records)
         info = run_dir / "run.json"
         if info.is_file():  # keep the command that started the run
-            command = RunInfo.model_validate_json(info.read_text(encoding="utf-8")).command or command
+            try:
+                command = RunInfo.model_validate_json(info.read_bytes()).command or command
+            except (OSError, ValueError) as exc:  # pydantic's ValidationError is a ValueError
+                raise ConfigError(f"{info}: not the run.json the loop wrote ({type(exc).__name__}); {STATE_FIX}") from None
         return state, records, command
     if run_dir.exists() and any(run_dir.iterdir()) and not resume:
         raise ConfigError(f"{run_dir}: the output folder is not empty; pass --resume to continue it or "

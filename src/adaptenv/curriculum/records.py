@@ -28,6 +28,7 @@ from typing import Any
 
 from pydantic import BaseModel, Field, ValidationError, field_validator
 
+from adaptenv.configfile import field_path
 from adaptenv.errors import ConfigError
 from adaptenv.scene.house import House, load_house, save_house
 from adaptenv.sim.world import NavWorld, compile_world
@@ -166,7 +167,7 @@ def read_iterations(run_dir: Path) -> list[IterationRecord]:
             records.append(IterationRecord.model_validate_json(line))
         except ValidationError as exc:
             err = exc.errors()[0]
-            where = ".".join(map(str, err.get("loc", ()))) or "the line"
+            where = field_path(tuple(err.get("loc", ()))) or "the line"
             raise ConfigError(f"{p}: line {n} is not an iteration record the loop wrote (at {where}: {err['msg']}); "
                               "restore the file, or run again in a new folder") from None
     return records

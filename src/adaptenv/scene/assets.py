@@ -27,7 +27,7 @@ from typing import Annotated, Any, Literal
 
 from pydantic import BaseModel, ConfigDict, Field
 
-from adaptenv.configfile import parse_config, read_json
+from adaptenv.configfile import parse_config, printable, read_json
 from adaptenv.errors import ConfigError
 
 ROOM_TYPES = ("Kitchen", "LivingRoom", "Bedroom", "Bathroom")
@@ -265,7 +265,7 @@ def read_asset_table(path: str | Path, known_types: frozenset[str] | None = None
     if "assets" in doc:
         other = next((k for k in doc if k not in TABLE_METADATA), None)
         if other is not None:
-            raise ConfigError(f"--assets {p}: {other} is not a known field next to \"assets\" (allowed: "
+            raise ConfigError(f"--assets {p}: {printable(other)} is not a known field next to \"assets\" (allowed: "
                               f"{', '.join(sorted(TABLE_METADATA))}); remove it")
     known = known_types if known_types is not None else frozenset(_shipped_catalog().types)
     return {aid: _user_asset(p, aid, entry, known) for aid, entry in table.items()}

@@ -168,7 +168,8 @@ def annotation_size(entry: dict[str, Any]) -> tuple[float, float, float] | None:
         return None
     if size is None or not all(math.isfinite(v) and 0 < v <= MAX_SIZE for v in size):
         return None  # NaN, Infinity, nothing or more than a house
-    return (round(size[0], 4), round(size[1], 4), round(size[2], 4))
+    rounded = (round(size[0], 4), round(size[1], 4), round(size[2], 4))
+    return rounded if all(v > 0 for v in rounded) else None  # under 0.05 mm: no size a table may hold
 
 
 def _field(node: Any, key: str) -> Any:

@@ -42,7 +42,7 @@ from adaptenv.scene.objathor import type_for_name
 from adaptenv.sim.metrics import episode_metrics
 from adaptenv.sim.rollout import record_sight, target_fields
 from adaptenv.sim.spec import ROTATE_LARGE, ROTATE_SMALL, TARGET_TYPES
-from adaptenv.sim.trajectory import Pose, Step, Trajectory
+from adaptenv.sim.trajectory import Pose, Step, Trajectory, metres
 from adaptenv.sim.world import NavWorld
 
 _NAMES = {
@@ -202,7 +202,7 @@ def trajectory_from_ai2thor(records: Sequence[dict[str, Any]], world: NavWorld, 
         where = f"{source} line {lines[k]}"
         pose = _pose(rec, where)
         if floor.distance(shapely.Point(pose.x, pose.z)) > OUTSIDE_TOLERANCE:
-            raise AdaptenvError(f"{where}: the agent at ({pose.x:.2f}, {pose.z:.2f}) m is outside every room of house "
+            raise AdaptenvError(f"{where}: the agent at ({metres(pose.x)}, {metres(pose.z)}) m is outside every room of house "
                                 f"{world.name}; convert the log with the house the episode ran in")
         poses.append(pose)
     steps: list[Step] = []
@@ -258,7 +258,11 @@ def convert_ai2thor_log(path: str | Path, world: NavWorld, *, target_type: str |
         raise AdaptenvError(f"{log.source}: no target type; put \"target_type\" in the log's header line or pass "
                             "--target")
     house, seed = log.header.get("house"), log.header.get("seed")
-    return trajectory_from_ai2thor(log.records, world, target, house=None if house is None else str(house),
+    conversion = trajectory_from_ai2thor(log.records, world, target, house=None if house is None else str(house),
                                    policy=str(log.header.get("policy", "ai2thor")),
                                    seed=seed if isinstance(seed, int) else None, source=log.source, lines=log.lines)
+    if (why := conversion.trajectory.problem()) is not None:
+        raise AdaptenvError(f"{log.source}: the converted episode is not one, at {why}; log at least one action "
+                            "that moves or turns the agent")
+    return conversion
 

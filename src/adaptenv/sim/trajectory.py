@@ -140,3 +140,8 @@ class Trajectory(BaseModel):
         if self.metrics is not None:
             yield from ((f"metrics.{k}", v) for k, v in self.metrics.model_dump().items()
                         if isinstance(v, float))
+
+
+def metres(v: float) -> str:
+    """A coordinate for a message: to the centimetre, or three digits when it is huge (never 300 digits)."""
+    return f"{v:.2f}" if abs(v) < 1e6 else f"{v:.3g}"

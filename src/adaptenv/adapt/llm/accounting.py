@@ -52,7 +52,10 @@ def run_changes(saved: dict[str, Any], current: dict[str, Any]) -> list[str]:
     from adaptenv.agents.config import changed_settings
 
     def spread(cfg: dict[str, Any]) -> dict[str, Any]:
-        llm = {f"llm.{k}": v for k, v in (cfg.get("llm") or {}).items() if k not in RESUMABLE_LLM_FIELDS}
+        if not isinstance(cfg, dict):  # a tampered state: every setting differs
+            return {"config": cfg}
+        section = cfg.get("llm") if isinstance(cfg.get("llm"), dict) else {}  # a tampered state: compared as it is
+        llm = {f"llm.{k}": v for k, v in section.items() if k not in RESUMABLE_LLM_FIELDS}
         return {**{k: v for k, v in cfg.items() if k != "llm"}, **llm}
 
     return changed_settings(spread(saved), spread(current))
