@@ -361,13 +361,9 @@ def check_move(ref: PlausibilityReference, fp: Footprint, current: Mapping[str, 
     if oid in ref.anchored and not ref.walls.against(fp):
         out.append(Violation("edge_off_wall", oid, f"{oid} ({fp.object_type}) no longer stands with its back to a "
                              "wall facing the room; its type stands only along walls"))
-    for z in ref.zones:
-        if not z.zone.intersects(fp.polygon):
-            continue
-        grew = z.zone.intersection(fp.polygon).area - ref.zone_area.get((z.door_id, oid), 0.0)
-        if grew > ZONE_EPS:
-            out.append(Violation("door_approach", oid, f"{oid} moves {grew:.2f} m^2 further into the "
-                                 f"{DOOR_CLEARANCE:g} m clearance in front of doorway {z.door_id}", (z.door_id,)))
+    for door_id, grew in _zone_growth(ref.zones, ref.zone_area, fp):
+        out.append(Violation("door_approach", oid, f"{oid} moves {grew:.2f} m^2 further into the "
+                             f"{DOOR_CLEARANCE:g} m clearance in front of doorway {door_id}", (door_id,)))
     for a, m, name, d0 in ref.groups:
         if oid not in (a, m) or a not in now or m not in now:
             continue
@@ -389,6 +385,17 @@ def check_move(ref: PlausibilityReference, fp: Footprint, current: Mapping[str, 
     return out
 
 
+def _zone_growth(zones, before: Mapping[tuple[str, str], float], fp: Footprint) -> list[tuple[str, float]]:
+    """(door id, m^2) for each zone ``fp`` now covers more of than the object did in the reference house."""
+    out = []
+    for z in zones:
+        if z.zone.intersects(fp.polygon):
+            grew = z.zone.intersection(fp.polygon).area - before.get((z.door_id, fp.object_id), 0.0)
+            if grew > ZONE_EPS:
+                out.append((z.door_id, grew))
+    return out
+
+
 def _person_rules(ref: PlausibilityReference, fp: Footprint, now: Mapping[str, Footprint]) -> list[Violation]:
     """What a person sees at once: an overhang past a wall's end, furniture in an open connection, a group left
     behind by its anchor, a tall object in front of a window."""
@@ -398,14 +405,10 @@ def _person_rules(ref: PlausibilityReference, fp: Footprint, now: Mapping[str, F
     if over > OVERHANG and over > ref.overhang.get(oid, 0.0) + 0.05:
         out.append(Violation("wall_overhang", oid, f"{oid} ({fp.object_type}) runs {over:.2f} m past the end of the "
                              "wall it stands along; keep it along the wall"))
-    for z in ref.openings:
-        if not z.zone.intersects(fp.polygon):
-            continue
-        grew = z.zone.intersection(fp.polygon).area - ref.opening_area.get((z.door_id, oid), 0.0)
-        if grew > ZONE_EPS:
-            out.append(Violation("in_opening", oid, f"{oid} ({fp.object_type}) moves {grew:.2f} m^2 further into the "
-                                 f"open connection {z.door_id} between two rooms ({OPENING_CLEARANCE:g} m each side)",
-                                 (z.door_id,)))
+    for door_id, grew in _zone_growth(ref.openings, ref.opening_area, fp):
+        out.append(Violation("in_opening", oid, f"{oid} ({fp.object_type}) moves {grew:.2f} m^2 further into the "
+                             f"open connection {door_id} between two rooms ({OPENING_CLEARANCE:g} m each side)",
+                             (door_id,)))
     for a, m, name, _ in ref.groups:
         if oid not in (a, m) or a not in now or m not in now or not ref.moved(now[a]):
             continue
