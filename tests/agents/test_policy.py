@@ -122,6 +122,20 @@ def test_bad_checkpoint_is_one_clear_error(tmp_path):
         resolve_policy(str(tmp_path / "missing.pt"))
 
 
+@pytest.mark.parametrize("edit, text", [
+    (lambda doc: doc["net_config"].__setitem__("fea\nure_dim", 1), "net_config holds fea\\nure_dim"),
+    (lambda doc: doc["state_dict"].__setitem__("head.2.bias", doc["state_dict"]["head.2.bias"].to(torch.complex64)),
+     "weight head.2.bias is of type torch.complex64, not floating point"),
+], ids=["line-break-in-a-field-name", "complex-weights"])
+def test_a_tampered_checkpoint_is_refused_in_one_line(edit, text, tmp_path):
+    doc = torch.load(save_checkpoint(tmp_path / "p.pt", small_net(seed=1)), weights_only=True)
+    edit(doc)
+    torch.save(doc, tmp_path / "bad.pt")
+    with pytest.raises(ConfigError) as err:
+        load_checkpoint(tmp_path / "bad.pt")
+    assert "\n" not in str(err.value) and text in str(err.value)
+
+
 def test_registry_builtins_and_unknown():
     assert isinstance(resolve_policy("random"), RandomPolicy)
     assert resolve_policy("random:7").seed == 7

@@ -120,7 +120,8 @@ def checked_net_config(raw: Any, path: Path) -> NetConfig:
     fix = "re-create the checkpoint with `adaptenv train`"
     names = [f.name for f in fields(NetConfig)]
     if not isinstance(raw, dict) or set(raw) - set(names):
-        got = ", ".join(map(str, sorted(set(raw) - set(names)))) if isinstance(raw, dict) else type(raw).__name__
+        got = (", ".join(printable(str(k)) for k in sorted(map(str, set(raw) - set(names))))
+               if isinstance(raw, dict) else type(raw).__name__)
         raise ConfigError(f"{path}: net_config holds {got}, not only the fields {', '.join(names)}; {fix}")
     raw = {**asdict(NetConfig()), **raw}  # checkpoints from before a field existed have its default
     expected = {**NET_FIXED, "n_classes": n_classes(), "map_crop": CROP}
@@ -154,7 +155,9 @@ def checked_state_dict(state: Any, config: NetConfig, path: Path) -> dict[str, t
         if not isinstance(t, torch.Tensor) or tuple(t.shape) != shape:
             got = tuple(t.shape) if isinstance(t, torch.Tensor) else type(t).__name__
             raise ConfigError(f"{path}: weight {name} has shape {got}, its net_config's network needs {shape}; {fix}")
-        if t.is_floating_point() and not bool(torch.isfinite(t).all()):
+        if not t.is_floating_point():
+            raise ConfigError(f"{path}: weight {name} is of type {t.dtype}, not floating point; {fix}")
+        if not bool(torch.isfinite(t).all()):
             raise ConfigError(f"{path}: weight {name} holds NaN or infinite values (training diverged); retrain with a "
                               "lower --learning-rate")
     return state
