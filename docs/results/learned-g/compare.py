@@ -1,0 +1,128 @@
+"""Learned, built-in and random G at the same edit budget on held-out houses (see DECLARED.md in this folder).
+
+    python compare.py run OUT [--agent NAME] [--workers N]   # resumable: OUT/rows-AGENT.jsonl, one row per (job, G)
+    python compare.py table OUT [--agent NAME]               # the declared table, with paired 95% intervals
+
+Jobs: the first ``HOUSES`` houses of ``preset:pretrain-unseen`` (procedural houses no G was built or trained on) and
+the real-format ProcTHOR house of tests/data on ``REAL_SEEDS`` episode seeds. Per job: an episode the agent solves
+(10 draws at most, seed ``[SEED, job]``), then ``STEPS`` edits by each G (seed ``[SEED, job, 1]``), then the agent
+again on that episode and on ``PAIRED`` other episodes of the same target in the same house (seed ``[SEED, job, 2]``,
+the same before and after). Each house G writes is audited against the original.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import time
+from concurrent.futures import ProcessPoolExecutor
+from pathlib import Path
+
+import numpy as np
+
+HOUSES, REAL_SEEDS, STEPS, SEED, PAIRED = 40, 4, 3, 0, 8
+GENERATORS = ("learned", "builtin", "random")
+REAL = Path(__file__).resolve().parents[3] / "tests" / "data" / "procthor-10k-train-1.json"
+
+
+def jobs() -> list[tuple[str, object]]:
+    """(job name, house) for every job, in a fixed order."""
+    from adaptenv.agents.houses import load_house_set
+    from adaptenv.scene.house import load_house
+
+    out = [(f"unseen-{k:02d}", h) for k, h in enumerate(list(load_house_set("preset:pretrain-unseen").houses)[:HOUSES])]
+    real = load_house(REAL, validate=False)
+    return out + [(f"real-seed{s}", real) for s in range(REAL_SEEDS)]
+
+
+def one_job(args: tuple[int, str, str]) -> list[dict]:
+    """Every G's row for job ``n`` with agent ``agent``."""
+    n, name, agent_name = args
+    from adaptenv.adapt.analysis import BuiltinAnalyzer
+    from adaptenv.adapt.generators import make_generator
+    from adaptenv.adapt.plausibility import audit
+    from adaptenv.adapt.step import adapt_scene
+    from adaptenv.agents.registry import resolve_policy
+    from adaptenv.agents.rollout import draw_episode, find_solved_episode, rollout
+    from adaptenv.sim.world import compile_world
+
+    house = dict(jobs())[name]
+    agent, analyzer = resolve_policy(agent_name, seed=SEED), BuiltinAnalyzer()
+    world = compile_world(house, name)
+    found = find_solved_episode(world, agent, np.random.default_rng([SEED, n]), tries=10)
+    if found is None:
+        return [{"job": name, "agent": agent_name, "solved": False}]
+    episode, before = found
+    rng = np.random.default_rng([SEED, n, 2])
+    paired = [draw_episode(world, rng, episode.target_type) for _ in range(PAIRED)]
+    paired_before = [rollout(world, ep, agent).metrics.success for ep in paired]
+    rows = []
+    for gen in GENERATORS:
+        t0 = time.perf_counter()
+        res = adapt_scene(house, episode, policy=agent, analyzer=analyzer, generator=make_generator(gen), steps=STEPS,
+                          rng=np.random.default_rng([SEED, n, 1]), before=before, name=name)
+        seconds = time.perf_counter() - t0
+        paired_after = [rollout(res.world, ep, agent).metrics.success for ep in paired]
+        violations = [str(v) for v in audit(house, res.house).violations]
+        rows.append({"job": name, "agent": agent_name, "solved": True, "generator": gen, "target": episode.target_type,
+                     "success_after": bool(res.after.metrics.success), "spl_before": float(before.metrics.spl),
+                     "spl_after": float(res.after.metrics.spl), "edits": int(res.edits_applied),
+                     "paired_before": float(np.mean(paired_before)), "paired_after": float(np.mean(paired_after)),
+                     "seconds": round(seconds, 3), "violations": violations, "problems": res.problems})
+    return rows
+
+
+def run(out: Path, agent: str, workers: int) -> None:
+    """Run every job not yet in ``OUT/rows-AGENT.jsonl`` (append-only, so a stopped run resumes)."""
+    out.mkdir(parents=True, exist_ok=True)
+    path = out / f"rows-{agent}.jsonl"
+    done = {json.loads(line)["job"] for line in path.open()} if path.exists() else set()
+    todo = [(n, name, agent) for n, (name, _) in enumerate(jobs()) if name not in done]
+    with ProcessPoolExecutor(workers) as pool, path.open("a") as f:
+        for rows in pool.map(one_job, todo):
+            f.write("".join(json.dumps(r) + "\n" for r in rows))
+            f.flush()
+            print(rows[0]["job"], flush=True)
+
+
+def paired_interval(diff: np.ndarray, seed: int = 0, n: int = 10_000) -> tuple[float, float]:
+    """95% bootstrap interval of the mean of ``diff`` (paired over jobs)."""
+    rng = np.random.default_rng(seed)
+    means = diff[rng.integers(0, len(diff), (n, len(diff)))].mean(axis=1)
+    return float(np.percentile(means, 2.5)), float(np.percentile(means, 97.5))
+
+
+def table(out: Path, agent: str) -> None:
+    """Print the declared table for ``agent``'s rows."""
+    rows = [json.loads(line) for line in (out / f"rows-{agent}.jsonl").open()]
+    solved = sorted({r["job"] for r in rows if r["solved"]})
+    print(f"agent {agent}: {len(solved)} of {len({r['job'] for r in rows})} jobs with a solved episode; "
+          f"{STEPS} edits per G")
+    print("| G | runs | edits accepted | success after | drop (points) | drop per edit | paired drop (points) | "
+          "audit violations | s per accepted edit |")
+    print("|---|---|---|---|---|---|---|---|---|")
+    by = {g: {r["job"]: r for r in rows if r.get("generator") == g} for g in GENERATORS}
+    for g in GENERATORS:
+        mine = [by[g][j] for j in solved]
+        edits = sum(r["edits"] for r in mine)
+        drop = 100 * (1 - np.mean([r["success_after"] for r in mine]))
+        paired = 100 * np.mean([r["paired_before"] - r["paired_after"] for r in mine])
+        secs = sum(r["seconds"] for r in mine) / max(edits, 1)
+        print(f"| {g} | {len(mine)} | {edits} | {1 - drop / 100:.3f} | {drop:.1f} | {drop / max(edits / len(mine), 1e-9):.1f} "
+              f"| {paired:.1f} | {sum(len(r['violations']) for r in mine)} | {secs:.2f} |")
+    for other in GENERATORS[1:]:
+        d = np.array([float(by[other][j]["success_after"]) - float(by["learned"][j]["success_after"]) for j in solved])
+        lo, hi = paired_interval(d)
+        print(f"learned - {other} drop: {100 * d.mean():+.1f} points, 95% interval [{100 * lo:+.1f}, {100 * hi:+.1f}] "
+              f"over {len(d)} paired runs")
+
+
+if __name__ == "__main__":
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("step", choices=("run", "table"))
+    ap.add_argument("out", type=Path)
+    ap.add_argument("--agent", default="pretrained")
+    ap.add_argument("--workers", type=int, default=os.cpu_count() or 1)
+    a = ap.parse_args()
+    run(a.out, a.agent, a.workers) if a.step == "run" else table(a.out, a.agent)
