@@ -41,6 +41,7 @@ def one_job(args: tuple[int, str, str]) -> list[dict]:
     n, name, agent_name = args
     from adaptenv.adapt.analysis import BuiltinAnalyzer
     from adaptenv.adapt.generators import make_generator
+    from adaptenv.adapt.generators.random_perturbation import random_single_edits
     from adaptenv.adapt.plausibility import audit
     from adaptenv.adapt.step import adapt_scene
     from adaptenv.agents.registry import resolve_policy
@@ -60,16 +61,25 @@ def one_job(args: tuple[int, str, str]) -> list[dict]:
     rows = []
     for gen in GENERATORS:
         t0 = time.perf_counter()
-        res = adapt_scene(house, episode, policy=agent, analyzer=analyzer, generator=make_generator(gen), steps=STEPS,
-                          rng=np.random.default_rng([SEED, n, 1]), before=before, name=name)
+        rng = np.random.default_rng([SEED, n, 1])
+        if gen == "random":  # STEPS accepted random single-object edits (ACCEL's editor), validated, not audited
+            new, log = random_single_edits(house, STEPS, rng, episode_targets=[episode.target_type],
+                                           start=episode.start[:2])
+            edits, problems = sum(e.accepted and e.changed for e in log.edits), []
+            new_world = compile_world(new, name)
+            after = rollout(new_world, episode, agent)  # timed, as adapt_scene's own rollout after G is
+        else:
+            res = adapt_scene(house, episode, policy=agent, analyzer=analyzer, generator=make_generator(gen),
+                              steps=STEPS, rng=rng, before=before, name=name)
+            new, edits, problems, new_world, after = res.house, int(res.edits_applied), res.problems, res.world, res.after
         seconds = time.perf_counter() - t0
-        paired_after = [rollout(res.world, ep, agent).metrics.success for ep in paired]
-        violations = [str(v) for v in audit(house, res.house).violations]
+        paired_after = [rollout(new_world, ep, agent).metrics.success for ep in paired]
+        violations = [str(v) for v in audit(house, new).violations]
         rows.append({"job": name, "agent": agent_name, "solved": True, "generator": gen, "target": episode.target_type,
-                     "success_after": bool(res.after.metrics.success), "spl_before": float(before.metrics.spl),
-                     "spl_after": float(res.after.metrics.spl), "edits": int(res.edits_applied),
+                     "success_after": bool(after.metrics.success), "spl_before": float(before.metrics.spl),
+                     "spl_after": float(after.metrics.spl), "edits": edits,
                      "paired_before": float(np.mean(paired_before)), "paired_after": float(np.mean(paired_after)),
-                     "seconds": round(seconds, 3), "violations": violations, "problems": res.problems})
+                     "seconds": round(seconds, 3), "violations": violations, "problems": problems})
     return rows
 
 
