@@ -4,7 +4,8 @@ Each module in this package owns one group of commands and exposes ``register(ap
 they are discovered here, so adding a command never means editing this file. Commands keep heavy
 imports inside their functions so that ``adaptenv --help`` stays fast. Errors adaptenv raises on
 purpose (:class:`~adaptenv.errors.AdaptenvError`), and as a last resort file-system errors (``OSError``),
-are printed as one line, without a traceback.
+are printed as one line, without a traceback; so are click's usage errors (a number out of an option's range, an
+unknown option), by :class:`_Root` (exit code 2).
 Global options (``--assets``, ``--skip-unknown-assets``) are accepted before the command and after it:
 :class:`_Root` gives every command a copy of them.
 """
@@ -22,6 +23,7 @@ from rich.console import Console
 from rich.markup import escape
 from typer.core import TyperGroup
 
+from adaptenv.cli._usage import typed_command, usage_in_one_line
 from adaptenv.errors import AdaptenvError
 
 HELP_STYLE = {"rich_markup_mode": None}
@@ -73,6 +75,17 @@ class _Root(TyperGroup):
                     groups.append(command)
                 else:
                     command.params += [assets, skip]
+
+    def make_context(self, info_name, args, parent=None, **extra):
+        """Parse the global options; a usage error becomes one line (:mod:`adaptenv.cli._usage`)."""
+        with usage_in_one_line():
+            return super().make_context(info_name, args, parent, **extra)
+
+    def invoke(self, ctx):
+        """Run the command; a usage error any command raises (parsing its options, or later) becomes one line."""
+        words = [*getattr(ctx, "_protected_args", getattr(ctx, "protected_args", [])), *ctx.args]
+        with usage_in_one_line(typed_command(self, words)):
+            return super().invoke(ctx)
 
 
 app = typer.Typer(
