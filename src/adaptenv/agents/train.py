@@ -273,9 +273,6 @@ def _train(cfg: TrainConfig, worlds: Sequence[NavWorld] | None, init_net: NavNet
     run_dir = default_run_dir(cfg)
     state_path = run_dir / "state.pt" if run_dir else None
     saved = load_resume_state(cfg, state_path) if cfg.resume else None  # checked before anything is written
-    if run_dir:
-        run_dir.mkdir(parents=True, exist_ok=True)
-        (run_dir / "config.json").write_text(json.dumps(asdict(cfg), indent=1) + "\n", encoding="utf-8")
 
     # seeding: one root seed for torch, the data generator and the episode sampler
     torch.manual_seed(cfg.seed)
@@ -291,6 +288,9 @@ def _train(cfg: TrainConfig, worlds: Sequence[NavWorld] | None, init_net: NavNet
         net = load_checkpoint(init_checkpoint(cfg.init)).net
     else:
         net = NavNet(NetConfig.of(cfg))
+    if run_dir:  # the houses and the --init checkpoint loaded: the run starts
+        run_dir.mkdir(parents=True, exist_ok=True)
+        (run_dir / "config.json").write_text(json.dumps(asdict(cfg), indent=1) + "\n", encoding="utf-8")
     hidden = net.config.hidden
     optimizer = torch.optim.Adam(net.parameters(), lr=cfg.learning_rate, eps=1e-5)
     class_weight = torch.ones(net.config.n_actions)

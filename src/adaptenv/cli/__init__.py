@@ -101,7 +101,8 @@ bench = typer.Typer(help="Benchmarks: each prints a table, or one JSON object wi
                     no_args_is_help=True, **HELP_STYLE)
 app.add_typer(bench, name="bench")
 
-err_console = Console(stderr=True)
+err_console = Console(stderr=True, emoji=False)
+"""Where the one-line errors go; no emoji codes, so a path such as ``d.jsonl:a:b`` prints as typed."""
 
 
 @app.callback()

@@ -76,6 +76,18 @@ def check_house_sets(specs: list[str], strict: bool, say) -> dict[str, int]:
     return counts
 
 
+def check_start_policy(spec: str) -> None:
+    """Refuse a ``--policy`` the loop cannot fine-tune (no network, no such file, a checkpoint that does not load)
+    before any work; the loop loads it again when it starts."""
+    from adaptenv.agents.checkpoint import load_checkpoint
+    from adaptenv.agents.registry import init_checkpoint
+
+    path = init_checkpoint(spec, flag="--policy")
+    if not path.is_file():
+        raise ConfigError(f"--policy {spec}: no such checkpoint file; pass pretrained or the path of a .pt checkpoint")
+    load_checkpoint(path)
+
+
 def check_resumable(out: Path) -> None:
     """Refuse ``--resume`` unless ``out`` holds a loop run (its state.json, or run.json of a run cut short before)."""
     from adaptenv.curriculum.records import RUN_INFO, STATE
@@ -176,6 +188,8 @@ def loop(
                            legacy=lambda p: (p / STATE).is_file() or (p / RUN_INFO).is_file())
     if resume:
         check_resumable(out)
+    else:
+        check_start_policy(policy)
     console = Console()
     llm = loop_llm_section(llm_config_file, model=model, base_url=base_url, api=api, api_key_env=api_key_env,
                            cache_dir=str(llm_cache) if llm_cache else None, prompts=prompts, price_in=price_in,
