@@ -2,8 +2,8 @@
 
 Each case runs the real console entry point in-process and must end in its exit code (1 for adaptenv's own
 refusals, 2 for click's usage errors) and exactly ONE line on stderr, ``error: ...``, that names the flag, file
-or field; no file anywhere in the case's folders may change (every file is compared, bytes and modification
-time, before and after). The expensive part of each command is replaced by a stand-in that raises, so a case
+or field; no file anywhere in the case's folders may change (every file and folder is compared, modification time,
+size and inode, before and after). The expensive part of each command is replaced by a stand-in that raises, so a case
 the checks let through fails at once instead of running for minutes.
 
 The tables are built once: numbers from the command tree itself (every numeric option of every command), and
@@ -20,6 +20,7 @@ import json
 import math
 import os
 import sys
+import warnings
 from dataclasses import dataclass
 from functools import cache
 from pathlib import Path
@@ -207,7 +208,7 @@ def user_files(folder: Path) -> Path:
         "empty.jsonl": "", "d.jsonl.gz": gzip.compress((json.dumps(doc) + "\n").encode()),
         "trunc.jsonl.gz": gzip.compress((json.dumps(doc) + "\n").encode())[:3000],
         "junk.jsonl.gz": b"\x00\xff\xfe not gzip, not text \x80" * 10,
-        "junk.pt": b"not a torch file", "empty.pt": b"", "list.pt": b"", "house.pt": text,
+        "junk.pt": b"not a torch file", "pickle.pt": b"\x80\x04 a pickle header, then junk", "empty.pt": b"", "list.pt": b"", "house.pt": text,
         "t-empty.json": "", "t-text.json": "not a trajectory", "t-list.json": "[]", "t-obj.json": "{}",
         "t-steps.json": json.dumps({"house": "h", "steps": "many"}),
         "exp-empty.json": "", "exp-text.json": "{methods: none}", "exp-list.json": "[]",
@@ -285,7 +286,7 @@ SET_READERS = {"evaluate": "evaluate --houses {houses} -n 1 -o {out}/ev",
 SET_CASES = [case(f"{reader} --houses {sid}", fill(line, houses=arg), name)
              for reader, line in SET_READERS.items() for sid, name, arg in HOUSE_SETS]
 
-POLICIES = [("junk", "junk.pt"), ("empty", "empty.pt"), ("truncated", "trunc.pt"), ("list", "list.pt"),
+POLICIES = [("junk", "junk.pt"), ("pickle-header", "pickle.pt"), ("empty", "empty.pt"), ("truncated", "trunc.pt"), ("list", "list.pt"),
             ("house-as-policy", "house.json"), ("text-as-checkpoint", "house.pt"), ("missing", "nope.pt")]
 POLICY_READERS = {"evaluate": "evaluate --houses preset:tiny -n 1 -o {out}/ev --policy {p}",
                   "rollout": "rollout " + H + " -o {out}/t.json --policy {p}",
@@ -413,10 +414,11 @@ USERS_OWN_CODE: dict[str, str] = {}
 
 # -- running a case ----------------------------------------------------------------------------------------
 
-def snapshot(*folders: Path) -> dict[str, tuple[int, bytes]]:
-    """Every file under ``folders``: (modification time in ns, bytes)."""
-    return {str(p): (p.stat().st_mtime_ns, p.read_bytes()) for folder in folders
-            for p in sorted(folder.rglob("*")) if p.is_file()}
+def snapshot(*folders: Path) -> dict[str, tuple[int, int, int]]:
+    """Every file and folder under ``folders``: (modification time in ns, size, inode); a write, a replacement or a
+    new entry changes it."""
+    return {str(p): (s.st_mtime_ns, s.st_size, s.st_ino) for folder in folders
+            for p in sorted(folder.rglob("*")) if (s := p.stat())}
 
 
 _GET_COMMAND = typer.main.get_command
@@ -432,6 +434,14 @@ def _get_command(typer_app):
     return _command() if typer_app is app else _GET_COMMAND(typer_app)
 
 
+def _console_warning_filters() -> None:
+    """The warnings a fresh ``adaptenv`` process prints (Python's default filters; pytest's are replaced)."""
+    warnings.resetwarnings()
+    warnings.simplefilter("always")
+    for category in (DeprecationWarning, PendingDeprecationWarning, ImportWarning, ResourceWarning):
+        warnings.filterwarnings("ignore", category=category)
+
+
 def run_case(c: Case, inputs: Path, root: Path) -> Outcome:
     """Run one case through the console entry point, in a fresh folder under ``root``."""
     work = root / f"case-{abs(hash(c.id))}"
@@ -445,7 +455,8 @@ def run_case(c: Case, inputs: Path, root: Path) -> Outcome:
         m.setattr(typer.main, "get_command", _get_command)
         for target in WORK:
             m.setattr(target, refuse_work, raising=False)
-        with contextlib.redirect_stderr(err), contextlib.redirect_stdout(out):
+        with contextlib.redirect_stderr(err), contextlib.redirect_stdout(out), warnings.catch_warnings(record=True) as shown:
+            _console_warning_filters()
             try:
                 main()
                 code = 0
@@ -453,6 +464,7 @@ def run_case(c: Case, inputs: Path, root: Path) -> Outcome:
                 code = exc.code if isinstance(exc.code, int) else 1
             except BaseException as exc:  # noqa: BLE001  (a traceback, or work that started: the case fails)
                 escaped = f"{type(exc).__name__}: {exc}"
+    err.write("".join(f"{w.category.__name__}: {w.message}\n" for w in shown))  # a console prints them on stderr
     after = snapshot(inputs, work)
     touched = tuple(sorted(k for k in before.keys() | after.keys() if before.get(k) != after.get(k)))
     return Outcome(code, tuple(err.getvalue().splitlines()), touched, escaped, tuple(out.getvalue().splitlines()))

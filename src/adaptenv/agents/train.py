@@ -56,6 +56,7 @@ import torch.nn.functional as F
 from adaptenv.agents.checkpoint import (
     atomic_torch_save,
     load_checkpoint,
+    load_tensors,
     save_checkpoint,
 )
 from adaptenv.agents.config import (
@@ -218,7 +219,7 @@ def load_resume_state(cfg: TrainConfig, state_path: Path | None) -> dict[str, An
         raise ConfigError(f"--resume: no saved state at {state_path}; start without --resume or pass the "
                           "--run-dir of the interrupted run")
     try:
-        saved = torch.load(state_path, map_location="cpu", weights_only=True)
+        saved = load_tensors(state_path)
     except Exception as exc:  # torch raises many types for corrupt or foreign files
         raise ConfigError(f"{state_path}: not a resume state adaptenv train wrote ({type(exc).__name__}); start "
                           "the run again without --resume, in a new --run-dir") from None
