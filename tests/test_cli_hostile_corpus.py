@@ -20,6 +20,7 @@ import json
 import math
 import os
 import sys
+import tempfile
 import warnings
 from dataclasses import dataclass
 from functools import cache
@@ -240,6 +241,7 @@ def user_files(folder: Path) -> Path:
     (folder / "trunc.pt").write_bytes(ckpt[: len(ckpt) // 2])
     torch.save([1, 2, 3], folder / "list.pt")
     (folder / "dir.json").mkdir()
+    (folder / "loop.json").symlink_to(folder / "loop.json")
     (folder / "run-empty").mkdir()
     return folder
 
@@ -405,8 +407,32 @@ USAGE_CASES = [
     case("generator unknown", "adapt " + H + " --generator magic -o {out}/a", "magic"),
 ]
 
+ODD_TEXT = [
+    Case("render house with a line break", ("render", "{in}/no\nsuch.json", "-o", "{out}/m.png"), ("no\\nsuch.json",)),
+    Case("render house named empty", ("render", "", "-o", "{out}/m.png"), ("no such house file",)),
+    Case("render -o empty", ("render", H, "-o", ""), ("-o",)),
+    Case("render house /dev/null", ("render", "/dev/null", "-o", "{out}/m.png"), ("/dev/null",)),
+    Case("render house symlink loop", ("render", "{in}/loop.json", "-o", "{out}/m.png"), ("loop.json",)),
+    Case("rollout policy with a line break", ("rollout", H, "--policy", "my\npolicy", "-o", "{out}/t.json"),
+         ("my\\npolicy",)),
+    Case("rollout policy named empty", ("rollout", H, "--policy", "", "-o", "{out}/t.json"), ("--policy",)),
+    Case("rollout target with a tab", ("rollout", H, "--target", "Be\td", "-o", "{out}/t.json"), ("Be\\td",)),
+    Case("evaluate houses with a line break", ("evaluate", "--houses", "{in}/a\nb", "-n", "1"), ("a\\nb",)),
+    Case("evaluate houses empty", ("evaluate", "--houses", "", "-n", "1"), ("--houses",)),
+    Case("evaluate policy control character", ("evaluate", "--houses", "preset:tiny", "-n", "1", "--policy",
+                                               "p\x1b[31m.pt"), ("\\x1b",)),
+    Case("validate path with a line break", ("validate", "{in}/x\ny.json"), ("x\\ny.json",), report=True),
+    Case("assets table /dev/null", ("--assets", "/dev/null", "validate", H), ("/dev/null",)),
+    Case("seed in hex", ("rollout", H, "--seed", "0x10", "-o", "{out}/t.json"), ("--seed 0x10",), 2),
+    Case("seed empty", ("rollout", H, "--seed", "", "-o", "{out}/t.json"), ("--seed",), 2),
+    Case("episodes in e-notation", ("evaluate", "--houses", "preset:tiny", "-n", "1e3"), ("--episodes 1e3",), 2),
+    Case("size with a unit", ("render", H, "--size", "512px"), ("--size 512px",), 2),
+    Case("every with text", ("memory-check", "--houses", "preset:tiny", "--every", "often"), ("--every often",), 2),
+]
+"""Text no one means to type: line breaks, control characters, empty values, special files."""
+
 FILES = (HOUSE_CASES + SET_CASES + POLICY_CASES + TRAJ_CASES + CONFIG_CASES + LLM_CASES + ASSET_CASES + LOG_CASES
-         + ANNOTATION_CASES + REPORT_CASES + VALIDATE_CASES + OUTPUT_CASES + USAGE_CASES)
+         + ANNOTATION_CASES + REPORT_CASES + VALIDATE_CASES + OUTPUT_CASES + USAGE_CASES + ODD_TEXT)
 CORPUS = NUMBERS + FILES
 USERS_OWN_CODE: dict[str, str] = {}
 """Cases that cannot be one line because the user's own code raised (case id -> why); none in this corpus."""
@@ -418,7 +444,7 @@ def snapshot(*folders: Path) -> dict[str, tuple[int, int, int]]:
     """Every file and folder under ``folders``: (modification time in ns, size, inode); a write, a replacement or a
     new entry changes it."""
     return {str(p): (s.st_mtime_ns, s.st_size, s.st_ino) for folder in folders
-            for p in sorted(folder.rglob("*")) if (s := p.stat())}
+            for p in sorted(folder.rglob("*")) if (s := p.lstat())}
 
 
 _GET_COMMAND = typer.main.get_command
@@ -444,8 +470,7 @@ def _console_warning_filters() -> None:
 
 def run_case(c: Case, inputs: Path, root: Path) -> Outcome:
     """Run one case through the console entry point, in a fresh folder under ``root``."""
-    work = root / f"case-{abs(hash(c.id))}"
-    work.mkdir()
+    work = Path(tempfile.mkdtemp(prefix="case-", dir=root))
     args = [a.replace("{in}", str(inputs)).replace("{out}", str(work)) for a in c.args]
     before = snapshot(inputs, work)
     err, out, code, escaped = io.StringIO(), io.StringIO(), None, ""

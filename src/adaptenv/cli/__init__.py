@@ -23,7 +23,7 @@ from rich.console import Console
 from rich.markup import escape
 from typer.core import TyperGroup
 
-from adaptenv.cli._usage import typed_command, usage_in_one_line
+from adaptenv.cli._usage import on_one_line, typed_command, usage_in_one_line
 from adaptenv.errors import AdaptenvError
 
 HELP_STYLE = {"rich_markup_mode": None}
@@ -127,13 +127,14 @@ def main() -> None:
     try:
         app()
     except AdaptenvError as exc:
-        err_console.print(f"[bold red]error:[/] {escape(str(exc))}", highlight=False, soft_wrap=True)
+        err_console.print(f"[bold red]error:[/] {escape(on_one_line(str(exc)))}", highlight=False, soft_wrap=True)
         sys.exit(1)
     except KeyboardInterrupt:
         err_console.print("[yellow]interrupted[/]")
         sys.exit(130)
     except OSError as exc:  # a last resort: the commands check their output paths before any work
-        err_console.print(f"[bold red]error:[/] {escape(os_error_text(exc))}", highlight=False, soft_wrap=True)
+        err_console.print(f"[bold red]error:[/] {escape(on_one_line(os_error_text(exc)))}", highlight=False,
+                          soft_wrap=True)
         sys.exit(1)
 
 

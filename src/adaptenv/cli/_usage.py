@@ -27,12 +27,18 @@ _NUMBER_ERRORS = {"int_parsing": "whole number", "int_from_float": "whole number
 _BOUND_ERRORS = ("greater_than_equal", "greater_than", "less_than_equal", "less_than")
 
 
+def on_one_line(text: str) -> str:
+    """``text`` with its line breaks and other control characters escaped (a path a user typed may hold them)."""
+    return "".join(c if c.isprintable() or c == " " else c.encode("unicode_escape").decode("ascii") for c in text)
+
+
 class UsageLine(UsageError):
     """A usage error already worded as one line; shown as ``error: LINE``."""
 
     def show(self, file=None) -> None:
         """Print the one line to stderr."""
-        typer.echo(f"{typer.style('error:', fg='red', bold=True)} {self.message}", file=file, err=file is None)
+        typer.echo(f"{typer.style('error:', fg='red', bold=True)} {on_one_line(self.message)}", file=file,
+                   err=file is None)
 
 
 def flag_of(param) -> str:
