@@ -410,7 +410,7 @@ USAGE_CASES = [
 
 ODD_TEXT = [
     Case("render house with a line break", ("render", "{in}/no\nsuch.json", "-o", "{out}/m.png"), ("no\\nsuch.json",)),
-    Case("render house named empty", ("render", "", "-o", "{out}/m.png"), ("no such house file",)),
+    Case("render house named empty", ("render", "", "-o", "{out}/m.png"), ("is a folder, not a house file",)),
     Case("render -o empty", ("render", H, "-o", ""), ("-o",)),
     Case("render house /dev/null", ("render", "/dev/null", "-o", "{out}/m.png"), ("/dev/null",)),
     Case("render house symlink loop", ("render", "{in}/loop.json", "-o", "{out}/m.png"), ("loop.json",)),
