@@ -207,10 +207,12 @@ def loop(
                      finetune_beta=finetune_beta, finetune_max_steps=finetune_max_steps,
                      relocate_targets=relocate_targets, door_edits=door_edits, focus_training=focus_training,
                      heldout_episodes=heldout_episodes, llm=llm, **({"heldout": h} if (h := _heldout(heldout)) else {}))
+    cfg.check("adaptenv loop")
+    options = ExecutorOptions(executor, workers, address).check()
     check_house_sets([cfg.houses, *cfg.heldout.values()], strict, console.print)
     command = shlex.join(["adaptenv", *sys.argv[1:]])
     try:
-        with folder, ExecutorOptions(executor, workers, address).make() as ex:
+        with folder, options.make() as ex:
             records = run_loop(cfg, out, resume=resume, executor=ex, progress=lambda text: console.print(f"[dim]{text}[/]"),
                                command=command)
     except KeyboardInterrupt:
@@ -247,11 +249,12 @@ def experiment(
     """
     from rich.console import Console
 
-    from adaptenv.curriculum.executor import make_executor
+    from adaptenv.curriculum.executor import check_executor, make_executor
     from adaptenv.curriculum.experiment import ExperimentConfig, run_experiment
 
     console = Console()
     cfg = ExperimentConfig.load(config)
+    check_executor(executor, workers, address)
     out = out or Path("runs") / config.stem
     folder = output_folder(out, "-o", "experiment", inputs=[config], keep=True, force_flag=None,
                            legacy=lambda p: (p / "experiment.json").is_file())
