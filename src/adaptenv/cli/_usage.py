@@ -22,9 +22,10 @@ UsageError = _exc.UsageError
 _HELP_SCREEN = getattr(_exc, "NoArgsIsHelpError", ())
 """A group called without a command: click shows its help (older clicks print it without raising)."""
 
-_NUMBER_ERRORS = {"int_parsing": "whole number", "int_from_float": "whole number", "float_parsing": "number",
-                  "finite_number": "number"}
+_NUMBER_ERRORS = ("int_parsing", "int_from_float", "float_parsing", "finite_number")
+"""Pydantic's error types (typer validates with pydantic) of text that is not the number an option takes."""
 _BOUND_ERRORS = ("greater_than_equal", "greater_than", "less_than_equal", "less_than")
+"""Pydantic's error types of a number outside an option's ``min`` and ``max``."""
 
 
 def on_one_line(text: str) -> str:
