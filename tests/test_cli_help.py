@@ -66,3 +66,16 @@ def test_houses_generate_help_names_every_preset():
     assert result.exit_code == 0, result.output
     listed = set(re.findall(r"[\w-]+", result.output))
     assert set(PRESETS) <= listed, sorted(set(PRESETS) - listed)
+
+
+def test_a_group_without_its_command_still_prints_its_help():
+    result = runner.invoke(app, ["houses"], env={"COLUMNS": "80"})
+    lines = result.output.splitlines()
+    assert lines[0] == "Usage: adaptenv houses [OPTIONS] COMMAND [ARGS]..." and "generate" in result.output, result.output
+
+
+def test_a_usage_error_is_one_line_naming_the_flag_not_the_usage():
+    result = runner.invoke(app, ["render", "--size", "12"])
+    assert result.exit_code == 2
+    assert result.stderr.splitlines() == ["error: --size 12: must be a whole number from 256 to 8192; pass a number in "
+                                          "that range"], result.stderr

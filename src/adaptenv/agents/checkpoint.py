@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import os
 import tempfile
+import warnings
 from dataclasses import asdict, dataclass, field, fields
 from pathlib import Path
 from typing import Any
@@ -80,13 +81,21 @@ def save_checkpoint(path: str | Path, net: NavNet, meta: dict[str, Any] | None =
     }, path)
 
 
+def load_tensors(path: str | Path) -> Any:
+    """``torch.load`` of tensors and plain data only (``weights_only``: never code), on the CPU, without torch's
+    warning about a foreign pickle protocol (a damaged file then fails in one line, not under a warning)."""
+    with warnings.catch_warnings():
+        warnings.filterwarnings("ignore", message="Detected pickle protocol", category=UserWarning)
+        return torch.load(path, map_location="cpu", weights_only=True)
+
+
 def load_checkpoint(path: str | Path) -> Checkpoint:
     """Read a checkpoint written by :func:`save_checkpoint`; problems raise one clear ConfigError."""
     p = Path(path)
     if not p.is_file():
         raise ConfigError(f"{p}: no such checkpoint; train one with `adaptenv train ... -o {p}`")
     try:
-        doc = torch.load(p, map_location="cpu", weights_only=True)
+        doc = load_tensors(p)
     except Exception as exc:  # torch raises many types for corrupt files
         raise ConfigError(f"{p}: not a readable torch checkpoint ({type(exc).__name__}); "
                           "re-create it with `adaptenv train`") from None

@@ -106,7 +106,8 @@ def usable_houses(houses: Sequence[House | NavWorld | BaseException], names: Seq
     """Compile houses and keep those with at least one episode: (houses, worlds, skipped).
 
     An entry of ``houses`` may be an exception (a load error), which is skipped with its message.
-    Each skip logs one warning line; ``strict`` raises ConfigError on the first one instead.
+    Each skip logs one warning line once some house is kept (when none is, the one error names the first);
+    ``strict`` raises ConfigError on the first one instead.
     """
     kept_h, kept_w, skipped = [], [], []
     for house, name in zip(houses, names, strict=True):
@@ -126,7 +127,6 @@ def usable_houses(houses: Sequence[House | NavWorld | BaseException], names: Seq
         if strict:
             raise ConfigError(f"--houses {spec}: house {name} cannot be used: {reason} "
                               "(drop --strict to skip such houses with a warning)")
-        log.warning("skipping house %s: %s", name, reason)
         skipped.append(SkippedHouse(name, reason))
     if not kept_w and not skipped:
         raise ConfigError(f"--houses {spec}: the set holds no house")
@@ -134,6 +134,8 @@ def usable_houses(houses: Sequence[House | NavWorld | BaseException], names: Seq
         first = f"; the first, {skipped[0].name}: {skipped[0].reason}" if skipped else ""
         raise ConfigError(f"--houses {spec}: none of the {len(skipped)} houses can be used for ObjectNav "
                           f"episodes{first}")
+    for s in skipped:
+        log.warning("skipping house %s: %s", s.name, s.reason)
     return kept_h, kept_w, skipped
 
 

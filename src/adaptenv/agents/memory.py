@@ -130,10 +130,14 @@ class WipeMemory:
 
 
 def wipe_intervals(every: Sequence[int], flag: str = "every") -> list[int]:
-    """0 (the baseline) then the distinct positive intervals of ``every`` in the given order; negatives raise."""
+    """0 (the baseline) then the distinct positive intervals of ``every`` in the given order; negatives, or no
+    positive interval to compare with the baseline, raise."""
     bad = [k for k in every if k < 0]
     if bad:
         raise ConfigError(f"{flag} {bad[0]}: wipe intervals must be >= 0 steps (0: never)")
+    if not any(k > 0 for k in every):
+        raise ConfigError(f"{flag} {', '.join(map(str, every)) or '(none)'}: no interval of 1 step or more to compare "
+                          f"with never wiping (0, which always runs); pass {flag} K with K >= 1")
     return [0, *dict.fromkeys(int(k) for k in every if k > 0)]
 
 

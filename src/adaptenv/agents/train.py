@@ -56,6 +56,7 @@ import torch.nn.functional as F
 from adaptenv.agents.checkpoint import (
     atomic_torch_save,
     load_checkpoint,
+    load_tensors,
     save_checkpoint,
 )
 from adaptenv.agents.config import (
@@ -218,7 +219,7 @@ def load_resume_state(cfg: TrainConfig, state_path: Path | None) -> dict[str, An
         raise ConfigError(f"--resume: no saved state at {state_path}; start without --resume or pass the "
                           "--run-dir of the interrupted run")
     try:
-        saved = torch.load(state_path, map_location="cpu", weights_only=True)
+        saved = load_tensors(state_path)
     except Exception as exc:  # torch raises many types for corrupt or foreign files
         raise ConfigError(f"{state_path}: not a resume state adaptenv train wrote ({type(exc).__name__}); start "
                           "the run again without --resume, in a new --run-dir") from None
@@ -273,9 +274,6 @@ def _train(cfg: TrainConfig, worlds: Sequence[NavWorld] | None, init_net: NavNet
     run_dir = default_run_dir(cfg)
     state_path = run_dir / "state.pt" if run_dir else None
     saved = load_resume_state(cfg, state_path) if cfg.resume else None  # checked before anything is written
-    if run_dir:
-        run_dir.mkdir(parents=True, exist_ok=True)
-        (run_dir / "config.json").write_text(json.dumps(asdict(cfg), indent=1) + "\n", encoding="utf-8")
 
     # seeding: one root seed for torch, the data generator and the episode sampler
     torch.manual_seed(cfg.seed)
@@ -291,6 +289,9 @@ def _train(cfg: TrainConfig, worlds: Sequence[NavWorld] | None, init_net: NavNet
         net = load_checkpoint(init_checkpoint(cfg.init)).net
     else:
         net = NavNet(NetConfig.of(cfg))
+    if run_dir:  # the houses and the --init checkpoint loaded: the run starts
+        run_dir.mkdir(parents=True, exist_ok=True)
+        (run_dir / "config.json").write_text(json.dumps(asdict(cfg), indent=1) + "\n", encoding="utf-8")
     hidden = net.config.hidden
     optimizer = torch.optim.Adam(net.parameters(), lr=cfg.learning_rate, eps=1e-5)
     class_weight = torch.ones(net.config.n_actions)

@@ -4,7 +4,8 @@ Each module in this package owns one group of commands and exposes ``register(ap
 they are discovered here, so adding a command never means editing this file. Commands keep heavy
 imports inside their functions so that ``adaptenv --help`` stays fast. Errors adaptenv raises on
 purpose (:class:`~adaptenv.errors.AdaptenvError`), and as a last resort file-system errors (``OSError``),
-are printed as one line, without a traceback.
+are printed as one line, without a traceback; so are click's usage errors (a number out of an option's range, an
+unknown option), by :class:`_Root` (exit code 2).
 Global options (``--assets``, ``--skip-unknown-assets``) are accepted before the command and after it:
 :class:`_Root` gives every command a copy of them.
 """
@@ -22,6 +23,7 @@ from rich.console import Console
 from rich.markup import escape
 from typer.core import TyperGroup
 
+from adaptenv.cli._usage import on_one_line, typed_command, usage_in_one_line
 from adaptenv.errors import AdaptenvError
 
 HELP_STYLE = {"rich_markup_mode": None}
@@ -74,6 +76,17 @@ class _Root(TyperGroup):
                 else:
                     command.params += [assets, skip]
 
+    def make_context(self, info_name, args, parent=None, **extra):
+        """Parse the global options; a usage error becomes one line (:mod:`adaptenv.cli._usage`)."""
+        with usage_in_one_line():
+            return super().make_context(info_name, args, parent, **extra)
+
+    def invoke(self, ctx):
+        """Run the command; a usage error any command raises (parsing its options, or later) becomes one line."""
+        words = [*getattr(ctx, "_protected_args", getattr(ctx, "protected_args", [])), *ctx.args]
+        with usage_in_one_line(typed_command(self, words)):
+            return super().invoke(ctx)
+
 
 app = typer.Typer(
     name="adaptenv",
@@ -88,7 +101,8 @@ bench = typer.Typer(help="Benchmarks: each prints a table, or one JSON object wi
                     no_args_is_help=True, **HELP_STYLE)
 app.add_typer(bench, name="bench")
 
-err_console = Console(stderr=True)
+err_console = Console(stderr=True, emoji=False)
+"""Where the one-line errors go; no emoji codes, so a path such as ``d.jsonl:a:b`` prints as typed."""
 
 
 @app.callback()
@@ -113,13 +127,14 @@ def main() -> None:
     try:
         app()
     except AdaptenvError as exc:
-        err_console.print(f"[bold red]error:[/] {escape(str(exc))}", highlight=False, soft_wrap=True)
+        err_console.print(f"[bold red]error:[/] {escape(on_one_line(str(exc)))}", highlight=False, soft_wrap=True)
         sys.exit(1)
     except KeyboardInterrupt:
         err_console.print("[yellow]interrupted[/]")
         sys.exit(130)
     except OSError as exc:  # a last resort: the commands check their output paths before any work
-        err_console.print(f"[bold red]error:[/] {escape(os_error_text(exc))}", highlight=False, soft_wrap=True)
+        err_console.print(f"[bold red]error:[/] {escape(on_one_line(os_error_text(exc)))}", highlight=False,
+                          soft_wrap=True)
         sys.exit(1)
 
 

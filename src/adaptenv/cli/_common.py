@@ -65,7 +65,7 @@ def interrupted(how: str = "") -> NoReturn:
     if how:
         from rich.console import Console
 
-        Console(stderr=True).print(f"interrupted; {how}", highlight=False, soft_wrap=True)
+        Console(stderr=True, emoji=False).print(f"interrupted; {how}", highlight=False, soft_wrap=True)
     raise typer.Exit(130)
 
 

@@ -35,5 +35,5 @@ def finite(ctx, param, value):
     """Callback: a finite number (not inf: click's ranges refuse nan but take inf), at least the option's ``min``."""
     if value is None:
         return value
-    lo = getattr(getattr(param, "type", None), "min", None)
+    lo = getattr(param, "min", getattr(getattr(param, "type", None), "min", None))
     return check_float(value, _flag(param), lo=-math.inf if lo is None else lo)

@@ -94,6 +94,14 @@ def llm_config(model: str | None, base_url: str | None, cache_dir: Path | None, 
     return cfg
 
 
+def check_llm_config(config_file: Path | None) -> None:
+    """Read ``--llm-config`` whenever it is given, so a broken file is one line even where no LLM runs."""
+    if config_file is not None:
+        from adaptenv.adapt.llm import load_llm_config
+
+        load_llm_config(config_file)
+
+
 def llm_backend(model: str | None, base_url: str | None, cache_dir: Path | None, what: str, **kw):
     """An LLM backend for ``what`` (e.g. '--generator llm'); see :func:`llm_config` for the options."""
     from adaptenv.adapt.llm import make_backend
@@ -128,6 +136,7 @@ def analyze(
     from adaptenv.adapt.analysis import BuiltinAnalyzer, LLMAnalyzer
     from adaptenv.sim.world import compile_world
 
+    check_llm_config(llm_config_file)
     name, h = load_house_argument(house)
     world = compile_world(h, name)
     traj = load_trajectory_in(trajectory, world, house)
@@ -196,6 +205,7 @@ def adapt(
                           f"failure-modes or drop --door-edits (got --generator {generator})")
     if analyzer not in ("builtin", "llm"):
         raise ConfigError(f"--analyzer {analyzer!r}: unknown analyzer; use builtin or llm")
+    check_llm_config(llm_config_file)
     folder = output_folder(out, "-o", "adapt", force=force, inputs=[house, trajectory, policy])
     many = _is_house_set(house, one=trajectory is not None)
     if trajectory is not None and (many or diagnose):

@@ -76,6 +76,18 @@ def check_house_sets(specs: list[str], strict: bool, say) -> dict[str, int]:
     return counts
 
 
+def check_start_policy(spec: str) -> None:
+    """Refuse a ``--policy`` the loop cannot fine-tune (no network, no such file, a checkpoint that does not load)
+    before any work; the loop loads it again when it starts."""
+    from adaptenv.agents.checkpoint import load_checkpoint
+    from adaptenv.agents.registry import init_checkpoint
+
+    path = init_checkpoint(spec, flag="--policy")
+    if not path.is_file():
+        raise ConfigError(f"--policy {spec}: no such checkpoint file; pass pretrained or the path of a .pt checkpoint")
+    load_checkpoint(path)
+
+
 def check_resumable(out: Path) -> None:
     """Refuse ``--resume`` unless ``out`` holds a loop run (its state.json, or run.json of a run cut short before)."""
     from adaptenv.curriculum.records import RUN_INFO, STATE
@@ -176,6 +188,8 @@ def loop(
                            legacy=lambda p: (p / STATE).is_file() or (p / RUN_INFO).is_file())
     if resume:
         check_resumable(out)
+    else:
+        check_start_policy(policy)
     console = Console()
     llm = loop_llm_section(llm_config_file, model=model, base_url=base_url, api=api, api_key_env=api_key_env,
                            cache_dir=str(llm_cache) if llm_cache else None, prompts=prompts, price_in=price_in,
@@ -193,10 +207,12 @@ def loop(
                      finetune_beta=finetune_beta, finetune_max_steps=finetune_max_steps,
                      relocate_targets=relocate_targets, door_edits=door_edits, focus_training=focus_training,
                      heldout_episodes=heldout_episodes, llm=llm, **({"heldout": h} if (h := _heldout(heldout)) else {}))
+    cfg.check("adaptenv loop")
+    options = ExecutorOptions(executor, workers, address).check()
     check_house_sets([cfg.houses, *cfg.heldout.values()], strict, console.print)
     command = shlex.join(["adaptenv", *sys.argv[1:]])
     try:
-        with folder, ExecutorOptions(executor, workers, address).make() as ex:
+        with folder, options.make() as ex:
             records = run_loop(cfg, out, resume=resume, executor=ex, progress=lambda text: console.print(f"[dim]{text}[/]"),
                                command=command)
     except KeyboardInterrupt:
@@ -233,11 +249,12 @@ def experiment(
     """
     from rich.console import Console
 
-    from adaptenv.curriculum.executor import make_executor
+    from adaptenv.curriculum.executor import check_executor, make_executor
     from adaptenv.curriculum.experiment import ExperimentConfig, run_experiment
 
     console = Console()
     cfg = ExperimentConfig.load(config)
+    check_executor(executor, workers, address)
     out = out or Path("runs") / config.stem
     folder = output_folder(out, "-o", "experiment", inputs=[config], keep=True, force_flag=None,
                            legacy=lambda p: (p / "experiment.json").is_file())

@@ -12,6 +12,7 @@ from pathlib import Path
 import typer
 
 from adaptenv.cli._common import JSON_OPTION
+from adaptenv.cli._usage import on_one_line
 
 HOUSES_ARGUMENT = typer.Argument(..., metavar="HOUSE.json", help="House files to check, or house datasets "
                                  "FILE.jsonl[.gz][:START:STOP] (every selected line is checked).", show_default=False)
@@ -37,7 +38,7 @@ def validate(
         typer.echo(json.dumps(doc, indent=1))
     else:
         for p in problems:
-            typer.echo(str(p))
+            typer.echo(on_one_line(str(p)))
         n = len(checked)
         if problems:
             typer.echo(f"{len(problems)} problem{'s' if len(problems) != 1 else ''} in {bad_files} of {n} "

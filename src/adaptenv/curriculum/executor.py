@@ -423,6 +423,18 @@ def _check_workers(workers: int, kind: str) -> int:
     return workers
 
 
+def check_executor(kind: str, workers: int | None = None, address: str | None = None) -> None:
+    """Raise one ConfigError when ``--executor/--workers/--address`` do not go together (see :func:`make_executor`);
+    commands call it before any work."""
+    if kind not in KINDS:
+        raise ConfigError(f"--executor: expected one of {', '.join(KINDS)}, got {kind!r}")
+    if address is not None and kind != "ray":
+        raise ConfigError(f"--address is only used by --executor ray, got --executor {kind}; drop --address "
+                          "or add --executor ray")
+    if kind == "inprocess" and workers is not None and _check_workers(workers, kind) != 1:
+        raise ConfigError(f"--workers {workers} needs --executor process or ray; inprocess runs one item at a time")
+
+
 def make_executor(kind: ExecutorKind = "inprocess", workers: int | None = None,
                   address: str | None = None, *, chunksize: int | None = None) -> Executor:
     """Build the executor the ``--executor/--workers/--address`` options ask for.
@@ -434,14 +446,8 @@ def make_executor(kind: ExecutorKind = "inprocess", workers: int | None = None,
         ConfigError: for an unknown kind, a non-positive worker count, ``--workers`` above 1 with
             ``inprocess``, or ``--address`` without ``ray``.
     """
-    if kind not in KINDS:
-        raise ConfigError(f"--executor: expected one of {', '.join(KINDS)}, got {kind!r}")
-    if address is not None and kind != "ray":
-        raise ConfigError(f"--address is only used by --executor ray, got --executor {kind}; drop --address "
-                          "or add --executor ray")
+    check_executor(kind, workers, address)
     if kind == "inprocess":
-        if workers is not None and _check_workers(workers, kind) != 1:
-            raise ConfigError(f"--workers {workers} needs --executor process or ray; inprocess runs one item at a time")
         return InProcessExecutor()
     if kind == "process":
         return ProcessExecutor(workers, chunksize=chunksize)
@@ -476,6 +482,11 @@ class ExecutorOptions:
     address: str | None = None
     """Ray cluster address (None: a local Ray instance)."""
 
+    def check(self) -> ExecutorOptions:
+        """Return self, or raise one ConfigError when the options do not go together (before any work)."""
+        check_executor(self.kind, self.workers, self.address)
+        return self
+
     def make(self) -> Executor:
         """The executor (see :func:`make_executor`)."""
         return make_executor(self.kind, self.workers, self.address)
@@ -483,5 +494,6 @@ class ExecutorOptions:
 
 __all__ = [
     "ADDRESS_OPTION", "EXECUTOR_OPTION", "KINDS", "THREAD_ENV", "WORKERS_OPTION", "Executor", "ExecutorError",
-    "ExecutorKind", "ExecutorOptions", "InProcessExecutor", "ProcessExecutor", "RayExecutor", "make_executor",
+    "ExecutorKind", "ExecutorOptions", "InProcessExecutor", "ProcessExecutor", "RayExecutor", "check_executor",
+    "make_executor",
 ]

@@ -44,7 +44,7 @@ import numpy as np
 import torch
 
 from adaptenv.adapt.llm.accounting import check_llm_section, run_changes, scenes_usage
-from adaptenv.agents.checkpoint import load_checkpoint, save_checkpoint
+from adaptenv.agents.checkpoint import load_checkpoint, load_tensors, save_checkpoint
 from adaptenv.agents.config import FinetuneConfig
 from adaptenv.agents.evaluate import EpisodeResult, EvalReport, mean_se, summarize, write_report
 from adaptenv.agents.houses import load_house_set
@@ -433,7 +433,7 @@ def _load_learner(folder: Path, net: NavNet | None = None, freeze_encoder: bool 
     if not path.is_file():
         return None
     try:
-        learner = torch.load(path, map_location="cpu", weights_only=True)
+        learner = load_tensors(path)
     except Exception as exc:  # torch raises many types for corrupt or foreign files
         raise ConfigError(f"{path}: not a learner state the loop wrote ({type(exc).__name__}); {STATE_FIX}") from None
     if net is not None and (why := learner_problem(learner, net, freeze_encoder)) is not None:

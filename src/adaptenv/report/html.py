@@ -822,7 +822,11 @@ def build_report(path: Path, out: Path | None = None) -> Path:
     path = Path(path)
     kind = detect(path)
     out = Path(out) if out is not None else path / "report"
+    run = load_run(path) if kind == "run" else None
+    if run is not None and run.info is None and not run.iterations:
+        raise AdaptenvError(f"{path}: nothing of the run is readable ({'; '.join(run.warnings)}); pass the folder a "
+                            "closed-loop run wrote")
     _prepare_out(out, path)
-    if kind == "run":
-        return write_run_report(load_run(path), out)
+    if run is not None:
+        return write_run_report(run, out)
     return write_experiment_report(load_experiment(path), out)

@@ -108,6 +108,8 @@ def dataset_lines(ds: DatasetSlice) -> Iterator[tuple[int, str]]:
     except (OSError, EOFError, UnicodeDecodeError, zlib.error) as exc:
         raise ConfigError(f"{line_label(ds.path, total)}: cannot read the dataset there ({exc}); the file must be "
                           "UTF-8 JSON lines, gzip-compressed or not, and complete") from None
+    if not found and total == 0:
+        raise ConfigError(f"{ds.spec}: the dataset is empty (no lines); pass a dataset with one house JSON a line")
     if not found and total > ds.start:
         raise ConfigError(f"{ds.spec}: the slice selects only blank lines; pick lines that hold houses")
     if not found:
@@ -160,7 +162,8 @@ def load_one_house(spec: str | Path, *, validate: bool = True, catalog: Any = No
     if ds is None:
         path = Path(spec)
         if not path.is_file():
-            raise ConfigError(f"{spec}: no such {what} file; pass a house JSON file or one line of a dataset, "
+            why = "is a folder, not a" if path.is_dir() else "no such"
+            raise ConfigError(f"{spec}: {why} {what} file; pass a house JSON file or one line of a dataset, "
                               "e.g. FILE.jsonl.gz:2:3")
         name, house = path.stem, load_house(path, validate=validate, catalog=catalog, skip_unknown=skip_unknown)
     else:
