@@ -5,7 +5,7 @@
 For every G of ``GENERATORS``, every P of ``TARGETS`` and the first ``HOUSES`` houses of ``preset:validation``
 (held out from training), :func:`adaptenv.adapt.target.adapt_to_success` edits the house for the ``pretrained``
 agent, measured on ``EPISODES`` seeded episodes, until its success is within ``TOLERANCE`` of P or ``STEPS``
-edits are kept. One JSON row per run is appended to OUT.jsonl (a rerun skips the runs already there); the
+edits are kept or ``PATIENCE`` rounds in a row keep none. One JSON row per run is appended to OUT.jsonl (a rerun skips the runs already there); the
 table per (G, P) is printed at the end: houses within 10 points of P, mean edits kept, mean final gap.
 """
 
@@ -20,7 +20,7 @@ import numpy as np
 
 GENERATORS = ("builtin", "random", "failure-modes")
 TARGETS = (0.25, 0.5, 0.75)
-EPISODES, TOLERANCE, SEED, POLICY = 20, 0.10, 0, "pretrained"
+EPISODES, TOLERANCE, PATIENCE, SEED, POLICY = 20, 0.10, 3, 0, "pretrained"
 
 
 def run(out: Path, houses: int, steps: int) -> None:
@@ -42,8 +42,8 @@ def run(out: Path, houses: int, steps: int) -> None:
                     continue
                 t0 = time.perf_counter()
                 res = adapt_to_success(house, policy, make_generator(g), p, tolerance=TOLERANCE, episodes=EPISODES,
-                                       max_edits=steps, seed=SEED, name=name)
-                row = {"generator": g, "target": p, "house": name, "steps": steps, "seconds": time.perf_counter() - t0,
+                                       max_edits=steps, patience=PATIENCE, seed=SEED, name=name)
+                row = {"generator": g, "target": p, "house": name, "steps": steps, "patience": PATIENCE, "seconds": time.perf_counter() - t0,
                        **{k: v for k, v in res.to_dict().items() if k != "trace"}}
                 with out.open("a", encoding="utf-8") as f:
                     f.write(json.dumps(row) + "\n")
