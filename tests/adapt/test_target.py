@@ -10,7 +10,7 @@ import pytest
 
 from adaptenv.adapt.edits import replay
 from adaptenv.adapt.generators import GenerationResult, StepRecord
-from adaptenv.adapt.target import adapt_to_success, check_target, closer, focus_order, Measurement
+from adaptenv.adapt.target import Measurement, adapt_to_success, check_target, closer, focus_order
 from adaptenv.adapt.validation import EditValidator
 from adaptenv.agents.houses import load_house_set
 from adaptenv.agents.policy import ExpertPolicy

@@ -22,6 +22,7 @@ edit of a call is kept, so each kept edit moves one object (or one door), for ev
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
 from typing import Any
 
@@ -29,7 +30,9 @@ import numpy as np
 
 from adaptenv.adapt.analysis import Analyzer, BuiltinAnalyzer
 from adaptenv.adapt.edits import Edit, replay
-from adaptenv.adapt.generators import GenerationContext, Generator
+from adaptenv.adapt.generators import GenerationContext, Generator, StepRecord
+from adaptenv.adapt.llm.accounting import scene_usage
+from adaptenv.adapt.llm.usage import Usage
 from adaptenv.adapt.validation import validate_scene
 from adaptenv.agents.policy import Policy, as_policy
 from adaptenv.agents.rollout import draw_episode, run_policy
@@ -121,6 +124,8 @@ class TargetResult:
     """pi_t's environment steps in G's own rollout checks."""
     measure_steps: int = 0
     """pi_t's environment steps in every measurement (the first, and one per measured edit)."""
+    usage: Usage = field(default_factory=Usage)
+    """F's and G's LLM calls over all rounds (empty for the built-ins)."""
 
     @property
     def edits(self) -> list[Edit]:
@@ -159,6 +164,14 @@ class TargetResult:
                 "stopped": self.stopped, "success_trace": self.success_trace,
                 "trace": [r.to_dict() for r in self.rounds]}
 
+    def generation_log(self) -> dict[str, Any]:
+        """The rounds as a generator's log (``edits.json``: one step per round, kept edits ``applied``, the others
+        ``rejected`` or ``skipped``) with the figures of :meth:`to_dict` beside them."""
+        steps = [StepRecord(step=r.round - 1, status="applied" if r.kept else "rejected" if r.edit else "skipped",
+                            edit=r.edit, reason=r.reason).model_dump(mode="json") for r in self.rounds]
+        return {"generator": self.generator, "steps": steps,
+                "target_success": {k: v for k, v in self.to_dict().items() if k != "trace"}}
+
     def line(self) -> str:
         """The one-line summary: target, reached success, gap and edits."""
         return (f"target success {self.target:.2f} (tolerance {self.tolerance:.2f}): reached {self.after.success:.2f} "
@@ -166,10 +179,18 @@ class TargetResult:
                 f"{len(self.rounds)} proposed, {len(self.episodes)} episodes; {self.stopped}")
 
 
-def measurement_episodes(world: NavWorld, n: int, seed: int, target_type: str | None = None) -> list[Episode]:
-    """``n`` seeded episodes of ``world`` (:func:`~adaptenv.agents.rollout.draw_episode`), the same for a seed."""
-    return [replace(draw_episode(world, np.random.default_rng([seed, 3, k]), target_type), seed=seed * 1000 + k)
+def measurement_episodes(world: NavWorld, n: int, seed: int | Sequence[int],
+                         target_type: str | None = None) -> list[Episode]:
+    """``n`` seeded episodes of ``world`` (:func:`~adaptenv.agents.rollout.draw_episode`), the same for a seed
+    (an int, or seed words such as the loop's (seed, iteration, job)); episode ``k``'s seed ends in ``k``."""
+    words = _words(seed)
+    base = words[0] if len(words) == 1 else int(np.random.default_rng([*words, 4]).integers(1, 2**20))
+    return [replace(draw_episode(world, np.random.default_rng([*words, 3, k]), target_type), seed=base * 1000 + k)
             for k in range(n)]
+
+
+def _words(seed: int | Sequence[int]) -> list[int]:
+    return [int(seed)] if isinstance(seed, (int, np.integer)) else [int(w) for w in seed]
 
 
 def measure(world: NavWorld, episodes: list[Episode], policy: Policy) -> tuple[Measurement, list[Trajectory]]:
@@ -206,7 +227,7 @@ def focus_order(target: float, m: Measurement) -> list[int]:
 
 def adapt_to_success(house: House, policy: Policy, generator: Generator, target: float, *,
                      tolerance: float = TOLERANCE, episodes: int | list[Episode] = EPISODES, max_edits: int = 10,
-                     patience: int = PATIENCE, analyzer: Analyzer | None = None, seed: int = 0,
+                     patience: int = PATIENCE, analyzer: Analyzer | None = None, seed: int | Sequence[int] = 0,
                      target_type: str | None = None, name: str = "house",
                      rollout_episodes: int = 3) -> TargetResult:
     """Edit ``house`` with ``generator`` until the policy's success on fixed episodes is within ``tolerance`` of
@@ -222,7 +243,7 @@ def adapt_to_success(house: House, policy: Policy, generator: Generator, target:
         max_edits: most edits kept (the edit budget).
         patience: rounds in a row without a kept edit before giving up.
         analyzer: F for the episode G aims at (default the built-in).
-        seed: seed of the episode draw and of G's random stream.
+        seed: seed (an int or seed words) of the episode draw and of G's random stream.
         target_type: draw only episodes of this target type.
     """
     check_target(target, tolerance, what="target", tol_what="tolerance")
@@ -252,8 +273,9 @@ def adapt_to_success(house: House, policy: Policy, generator: Generator, target:
         order = focus_order(target, cur)
         k = order[turn % len(order)]
         turn += 1
-        edit, reason, steps = _propose(current, world, eps[k], trajs[k], policy, analyzer, generator,
-                                       g_steps, np.random.default_rng([seed, 5, len(result.rounds)]), rollout_episodes)
+        edit, reason, steps = _propose(result.usage, current, world, eps[k], trajs[k], policy, analyzer, generator,
+                                       g_steps, np.random.default_rng([*_words(seed), 5, len(result.rounds)]),
+                                       rollout_episodes)
         result.check_steps += steps
         n = len(result.rounds) + 1
         if edit is None:
@@ -279,14 +301,16 @@ def adapt_to_success(house: House, policy: Policy, generator: Generator, target:
     return result
 
 
-def _propose(house: House, world: NavWorld, episode: Episode, traj: Trajectory, policy: Policy, analyzer: Analyzer,
+def _propose(usage: Usage, house: House, world: NavWorld, episode: Episode, traj: Trajectory, policy: Policy, analyzer: Analyzer,
              generator: Generator, steps: int, rng: np.random.Generator,
              rollout_episodes: int) -> tuple[Edit | None, str, int]:
-    """G's first applied edit on ``house`` aimed at ``episode`` (or None and why), and G's check steps."""
+    """G's first applied edit on ``house`` aimed at ``episode`` (or None and why), and G's check steps; F's and
+    G's LLM calls are added to ``usage``."""
     analysis = analyzer.analyze(traj, world)
     context = GenerationContext(episode=episode, trajectory=traj, policy=policy, rollout_episodes=rollout_episodes,
                                 render=False)
     gen = generator.generate(house, analysis, steps=steps, context=context, rng=rng)
+    usage.merge(scene_usage(analysis, gen))
     check = sum(s.check_steps for s in gen.steps)
     applied = gen.applied
     if applied:
