@@ -338,8 +338,7 @@ def _target_one(h, name: str, out: Path, policy, analyzer, generator, *, steps: 
     pair = render_before_after(h, res.house, res.trajectories_before[0], res.trajectories_after[0],
                                [o["id"] for o in counts["objects"] if o["changed"]])
     save_render(pair.side_by_side(), out / "before_after.png")
-    (out / "edits.json").write_text(json.dumps({"generator": doc["generator"], "rounds": doc["trace"]}, indent=1,
-                                               default=str), encoding="utf-8")
+    (out / "edits.json").write_text(json.dumps(res.generation_log(), indent=1, default=str), encoding="utf-8")
     (out / "summary.json").write_text(json.dumps(summary, indent=1, default=str), encoding="utf-8")
     return {**summary, "target_success": doc}
 
