@@ -234,7 +234,8 @@ class EditingMethod(Method):
             new.append(it.store.put(f"{job.name.split('~')[0]}~t{it.t:02d}{self.tag}{k:02d}", made.house))
             it.parents[new[-1]] = job.name
             if len(it.gallery) < it.cfg.gallery:
-                it.gallery.append(gallery_item(it.run_dir, it.t, new[-1], job.house, made, rollouts[k].trajectory))
+                it.gallery.append(gallery_item(it.run_dir, it.t, new[-1], job.house, made,
+                                               made.before if made.before is not None else rollouts[k].trajectory))
         return new
 
 
