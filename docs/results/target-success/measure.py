@@ -1,6 +1,7 @@
 """Difficulty on request: how close each G brings the agent's success to P, and in how many edits.
 
     NUMBA_NUM_THREADS=1 nice -n 10 python docs/results/target-success/measure.py OUT.jsonl [HOUSES [STEPS]]
+    python docs/results/target-success/measure.py OUT.jsonl table    # the table of the rows already there
 
 For every G of ``GENERATORS``, every P of ``TARGETS`` and the first ``HOUSES`` houses of ``preset:validation``
 (held out from training), :func:`adaptenv.adapt.target.adapt_to_success` edits the house for the ``pretrained``
@@ -56,16 +57,23 @@ def rows(out: Path) -> list[dict]:
 
 def table(out: Path) -> None:
     """Per (G, P): houses within 10 points, mean edits kept, mean gap, mean success reached."""
-    rs = rows(out)
-    print("| G | P | houses within 0.10 | mean edits kept | mean gap | mean success reached | mean s per house |")
-    print("|---|---|---|---|---|---|---|")
+    everything = rows(out)
+    per_house = {h: sum(r["house"] == h for r in everything) for h in {r["house"] for r in everything}}
+    full = len(GENERATORS) * len(TARGETS)
+    rs = [r for r in everything if per_house[r["house"]] == full]  # houses with every (G, P) run
+    print(f"{len(per_house)} house(s) run, {sum(n == full for n in per_house.values())} with every (G, P) "
+          "(the table counts these)")
+    print("| G | P | houses within 0.10 | of them within before any edit | mean edits kept | mean gap | "
+          "mean success reached | mean s per house |")
+    print("|---|---|---|---|---|---|---|---|")
     for g in GENERATORS:
         for p in TARGETS:
             sel = [r for r in rs if r["generator"] == g and r["target"] == p]
             if not sel:
                 continue
             within = sum(r["gap"] <= 0.10 + 1e-9 for r in sel)
-            print(f"| {g} | {p:.2f} | {within}/{len(sel)} | {np.mean([r['edits'] for r in sel]):.1f} | "
+            already = sum(abs(r["success_before"] - p) <= 0.10 + 1e-9 for r in sel)
+            print(f"| {g} | {p:.2f} | {within}/{len(sel)} | {already} | {np.mean([r['edits'] for r in sel]):.1f} | "
                   f"{np.mean([r['gap'] for r in sel]):.3f} | {np.mean([r['success'] for r in sel]):.3f} | "
                   f"{np.mean([r['seconds'] for r in sel]):.0f} |")
     start = {r["house"]: r["success_before"] for r in rs}
@@ -74,5 +82,6 @@ def table(out: Path) -> None:
 
 if __name__ == "__main__":
     target = Path(sys.argv[1])
-    run(target, int(sys.argv[2]) if len(sys.argv) > 2 else 10, int(sys.argv[3]) if len(sys.argv) > 3 else 8)
+    if sys.argv[2:3] != ["table"]:  # `measure.py OUT.jsonl table` prints the table of the rows already there
+        run(target, int(sys.argv[2]) if len(sys.argv) > 2 else 10, int(sys.argv[3]) if len(sys.argv) > 3 else 8)
     table(target)
