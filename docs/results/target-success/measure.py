@@ -64,7 +64,7 @@ def table(out: Path) -> None:
     print(f"{len(per_house)} house(s) run, {sum(n == full for n in per_house.values())} with every (G, P) "
           "(the table counts these)")
     print("| G | P | houses within 0.10 | of them within before any edit | mean edits kept | mean gap | "
-          "mean success reached | mean s per house |")
+          "mean success reached | mean wall s per run |")
     print("|---|---|---|---|---|---|---|---|")
     for g in GENERATORS:
         for p in TARGETS:
