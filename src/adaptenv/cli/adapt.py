@@ -182,13 +182,23 @@ def adapt(
                                            "HOUSE (adaptenv rollout -o, adaptenv trajectory from-ai2thor) for F to "
                                            "analyze instead of rolling out --policy, which still checks G's edits "
                                            "and runs the episode again in the edited house."),
+    target_success: float | None = typer.Option(None, "--target-success", metavar="P", help="Difficulty on "
+                                                  "request: edit until the policy's success on --target-episodes "
+                                                  "fixed episodes is within --target-tolerance of P (0 < P < 1), "
+                                                  "keeping only edits that bring it closer; --steps is the edit "
+                                                  "budget."),
+    target_tolerance: float = typer.Option(0.10, "--target-tolerance", help="With --target-success: stop when "
+                                           "|success - P| is at most this."),
+    target_episodes: int = typer.Option(20, "--target-episodes", min=1, max=500, help="With --target-success: "
+                                        "episodes the success is measured on (the same after every edit)."),
     force: bool = FORCE_OPTION,
 ) -> None:
     """One closed-loop step: roll out the policy, analyze (F), edit the house (G), validate, write OUT.
 
     HOUSE may be a folder or a dataset (FILE.jsonl.gz[:START:STOP]): each usable house is adapted
     into OUT/NAME/ and OUT/summary.json counts the adapted, valid and skipped houses (exit 0 when
-    at least one valid house was made).
+    at least one valid house was made). With --target-success P the edits aim at the policy's
+    success rate P instead of the most difficulty (docs/adapt.md, "Difficulty on request").
     """
     from rich.console import Console
 
@@ -206,6 +216,13 @@ def adapt(
     if analyzer not in ("builtin", "llm"):
         raise ConfigError(f"--analyzer {analyzer!r}: unknown analyzer; use builtin or llm")
     check_llm_config(llm_config_file)
+    if target_success is not None:
+        from adaptenv.adapt.target import check_target
+
+        check_target(target_success, target_tolerance)
+        if trajectory is not None or diagnose:
+            raise ConfigError("--target-success: drop --trajectory and --diagnose (the success is measured on "
+                              "--target-episodes episodes of the policy itself)")
     folder = output_folder(out, "-o", "adapt", force=force, inputs=[house, trajectory, policy])
     many = _is_house_set(house, one=trajectory is not None)
     if trajectory is not None and (many or diagnose):
@@ -242,8 +259,12 @@ def adapt(
         for name, h in zip(names, houses, strict=True):
             where = out / name if many else out
             try:
-                s = _adapt_one(h, name, where, pol, f, gen, steps=steps, seed=seed, target=target,
-                               diagnose=diagnose, before=before)
+                if target_success is not None:
+                    s = _target_one(h, name, where, pol, f, gen, steps=steps, seed=seed, target=target,
+                                    success=target_success, tolerance=target_tolerance, episodes=target_episodes)
+                else:
+                    s = _adapt_one(h, name, where, pol, f, gen, steps=steps, seed=seed, target=target,
+                                   diagnose=diagnose, before=before)
             except AdaptenvError as exc:
                 if not many or strict:
                     raise
@@ -253,6 +274,8 @@ def adapt(
             summaries.append(s)
             if as_json and not many:
                 typer.echo(json.dumps(s, indent=1, default=str))
+            elif not as_json and target_success is not None:
+                _print_target_summary(console, s, where)
             elif not as_json:
                 _print_adapt_summary(console, s, h, where)
         if many:
@@ -289,6 +312,63 @@ def _adapt_one(h, name: str, out: Path, policy, analyzer, generator, *, steps: i
         s["trajectory"] = {"policy": before.policy, "after_policy": result.after.policy}
     write_outputs(result, s, out)
     return s
+
+
+def _target_one(h, name: str, out: Path, policy, analyzer, generator, *, steps: int, seed: int, target: str | None,
+                success: float, tolerance: float, episodes: int) -> dict:
+    """Edit one house toward the policy's success rate ``success`` with
+    :func:`~adaptenv.adapt.target.adapt_to_success`; write it into ``out`` and return its summary."""
+    from adaptenv.adapt.edits import edit_counts
+    from adaptenv.adapt.objectives import realism_score
+    from adaptenv.adapt.plausibility import audit
+    from adaptenv.adapt.step import house_types
+    from adaptenv.adapt.target import adapt_to_success
+    from adaptenv.agents.policy import policy_name
+    from adaptenv.progress import ProgressBar
+    from adaptenv.render.compare import render_before_after
+    from adaptenv.render.topdown import save_render
+    from adaptenv.scene.house import save_house
+
+    with ProgressBar(f"adapting {name} toward success {success:.2f}: measure, F, G, measure again ({steps} edits "
+                     "at most)"):
+        res = adapt_to_success(h, policy, generator, success, tolerance=tolerance, episodes=episodes, max_edits=steps,
+                               analyzer=analyzer, seed=seed, target_type=target, name=name)
+    counts = edit_counts(res.edits, h, res.house)
+    types = house_types(h)
+    counts["objects"] = [{"type": types.get(o["id"]), **o} for o in counts["objects"]]
+    doc = res.to_dict()
+    summary = {"house": name, "policy": policy_name(policy), "analyzer": analyzer.name, "generator": doc["generator"],
+               "seed": seed, "target_success": {k: v for k, v in doc.items() if k != "trace"},
+               "episodes": [{"target_type": e.target_type, "start": list(e.start), "seed": e.seed} for e in res.episodes],
+               "edits_applied": len(res.edits), "edit_counts": counts,
+               "plausibility": audit(h, res.house).counts(), "realism_before": realism_score(h, h),
+               "realism_after": realism_score(res.house, h), "env_steps": res.env_steps, "valid": True, "problems": []}
+    out.mkdir(parents=True, exist_ok=True)
+    save_house(res.house, out / "house.json")
+    pair = render_before_after(h, res.house, res.trajectories_before[0], res.trajectories_after[0],
+                               [o["id"] for o in counts["objects"] if o["changed"]])
+    save_render(pair.side_by_side(), out / "before_after.png")
+    (out / "edits.json").write_text(json.dumps(res.generation_log(), indent=1, default=str), encoding="utf-8")
+    (out / "summary.json").write_text(json.dumps(summary, indent=1, default=str), encoding="utf-8")
+    return {**summary, "target_success": doc}
+
+
+def _print_target_summary(console, s: dict, out: Path) -> None:
+    """The human-readable summary of one house edited toward a success rate: target, reached, gap, edits."""
+    t = s["target_success"]
+    console.print(f"policy {s['policy']}, analyzer {s['analyzer']}, generator {s['generator']}; success measured on "
+                  f"{t['episodes']} fixed episodes", highlight=False, soft_wrap=True)
+    console.print(f"target success {t['target']:.2f} +/- {t['tolerance']:.2f}: reached {t['success']:.2f} (from "
+                  f"{t['success_before']:.2f}), gap {t['gap']:.2f}, {t['edits']} edit(s) kept of {t['rounds']} "
+                  f"proposed; {t['stopped']}", highlight=False, soft_wrap=True)
+    console.print("success after each kept edit: " + " -> ".join(f"{x:.2f}" for x in t["success_trace"]),
+                  highlight=False, soft_wrap=True)
+    console.print(edit_counts_text(s["edit_counts"]), highlight=False, soft_wrap=True)
+    bad = {k: v for k, v in s["plausibility"].items() if v}
+    console.print("plausibility audit of the moved objects: " + (", ".join(f"{k} {v}" for k, v in bad.items())
+                                                                 if bad else "no violation") +
+                  f"; realism {_fmt(s['realism_before'])} -> {_fmt(s['realism_after'])}", highlight=False, soft_wrap=True)
+    console.print(f"wrote {out}/ (house.json, before_after.png, edits.json, summary.json)", soft_wrap=True)
 
 
 def _is_house_set(house: Path, one: bool = False) -> bool:

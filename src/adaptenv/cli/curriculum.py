@@ -153,6 +153,13 @@ def loop(
                                           "failures); otherwise no edit moves a target."),
     door_edits: bool = typer.Option(False, "--door-edits", help="G may also open or shut interior doors (the "
                                     "failure-mode G for search, looping and timeout failures; the LLM G by a tool)."),
+    target_success: float | None = typer.Option(None, "--target-success", metavar="P", help="Difficulty on request "
+                                                "(adapting methods): edit each adapted scene until pi_t's success on "
+                                                "--target-episodes fixed episodes is within --target-tolerance of P "
+                                                "(0 < P < 1), --edit-steps edits at most."),
+    target_tolerance: float = typer.Option(0.10, "--target-tolerance", help="With --target-success: the tolerance."),
+    target_episodes: int = typer.Option(20, "--target-episodes", min=1, max=500, help="With --target-success: "
+                                        "episodes per scene the success is measured on."),
     heldout_episodes: int = typer.Option(100, "--heldout-episodes", callback=numbers.episodes, help="Episodes per held-out set."),
     heldout: list[str] = typer.Option(None, "--heldout", help="Held-out set NAME=HOUSES (repeatable); default: "
                                       "rearranged=preset:pretrain-rearranged and unseen=preset:pretrain-unseen."),
@@ -206,7 +213,9 @@ def loop(
                      finetune_min_start=finetune_min_start, finetune_precision=finetune_precision,
                      finetune_beta=finetune_beta, finetune_max_steps=finetune_max_steps,
                      relocate_targets=relocate_targets, door_edits=door_edits, focus_training=focus_training,
-                     heldout_episodes=heldout_episodes, llm=llm, **({"heldout": h} if (h := _heldout(heldout)) else {}))
+                     heldout_episodes=heldout_episodes, llm=llm, target_success=target_success,
+                     target_tolerance=target_tolerance, target_episodes=target_episodes,
+                     **({"heldout": h} if (h := _heldout(heldout)) else {}))
     cfg.check("adaptenv loop")
     options = ExecutorOptions(executor, workers, address).check()
     check_house_sets([cfg.houses, *cfg.heldout.values()], strict, console.print)

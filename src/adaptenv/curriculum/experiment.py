@@ -46,6 +46,7 @@ from adaptenv.configfile import STRICT, parse_config, read_json
 from adaptenv.curriculum.executor import InProcessExecutor
 from adaptenv.curriculum.jobs import PolicyWeights
 from adaptenv.curriculum.loop import METHODS, LoopConfig, evaluate_sets, run_loop
+from adaptenv.curriculum.methods import ADAPTING_METHODS
 from adaptenv.curriculum.records import (
     HELDOUT_DIR,
     ITERATIONS,
@@ -157,6 +158,8 @@ class ExperimentConfig:
     def loop_config(self, method: str, seed: int, out: Path | None = None) -> LoopConfig:
         """One run's settings; ``dr-matched`` runs of experiment folder ``out`` match the same seed's run there."""
         fields = {**self.loop, "method": method, "seed": seed}
+        if method not in ADAPTING_METHODS:  # difficulty on request is for the adapting methods; baselines run as usual
+            fields = {k: v for k, v in fields.items() if not k.startswith("target_")}
         if method == "dr-matched" and out is not None and not fields.get("match_run"):
             fields["match_run"] = str(run_dir(out, fields.get("match_method", "ours"), seed))
         return LoopConfig(**fields)

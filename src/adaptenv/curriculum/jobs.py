@@ -18,12 +18,14 @@ import numpy as np
 
 from adaptenv.adapt.analysis import Analysis, Analyzer, BuiltinAnalyzer, LLMAnalyzer
 from adaptenv.adapt.diagnosis import NoAnalyzer, hard_episodes
+from adaptenv.adapt.edits import edit_counts
 from adaptenv.adapt.generators import GenerationResult, Generator, make_generator
 from adaptenv.adapt.generators.random_perturbation import random_single_edits
 from adaptenv.adapt.llm import LLMConfig, make_backend
 from adaptenv.adapt.llm.accounting import scene_usage
 from adaptenv.adapt.llm.usage import Usage
 from adaptenv.adapt.step import adapt_scene, changed_objects
+from adaptenv.adapt.target import adapt_to_success, measure
 from adaptenv.agents.evaluate import EpisodeResult, Recorded, run_episodes, sample_episodes
 from adaptenv.agents.houses import HouseSet, load_house_set
 from adaptenv.agents.map_explorer import MapExplorerPolicy
@@ -224,6 +226,11 @@ class GenerateJob:
     """``failure-modes``: G may relocate a target instance to a far room (``LoopConfig.relocate_targets``)."""
     door_edits: bool = False
     """``failure-modes`` and ``llm``: G may open or shut interior doors (``LoopConfig.door_edits``)."""
+    target_success: float | None = None
+    """When set: edit toward pi_t's success rate P on ``target_episodes`` fixed episodes
+    (:func:`~adaptenv.adapt.target.adapt_to_success`, ``edit_steps`` the budget) instead of the most difficulty."""
+    target_tolerance: float = 0.10
+    target_episodes: int = 20
 
 
 @dataclass
@@ -267,6 +274,8 @@ def run_generate(job: GenerateJob) -> Generated:
         child, log = random_single_edits(job.house, job.edit_steps, rng)
         moved = [e.object_id for e in log.edits if e.accepted and e.changed]
         return Generated(child, log.model_dump(mode="json"), len(moved), moved=moved)
+    if job.target_success is not None:
+        return _run_targeted(job)
     if job.diagnose_episodes > 0:
         return _run_diagnosed(job, rng)
     if job.rollout is None or job.weights is None:
@@ -308,6 +317,26 @@ def _run_diagnosed(job: GenerateJob, rng: np.random.Generator) -> Generated:
     return Generated(res.house, log, res.edits_applied, res.analysis, res.after,
                      moved=changed_objects(res), regret_after=res.diagnosis_after.regret,
                      success_after=res.diagnosis_after.success_rate, **common)
+
+
+def _run_targeted(job: GenerateJob) -> Generated:
+    """Edit the parent until pi_t's measured success is near the job's target; score parent and child on the
+    same episodes (pi_t's success, and its regret against the expert)."""
+    if job.weights is None:
+        raise ValueError(f"GenerateJob {job.name}: kind {job.kind!r} needs the policy weights")
+    analyzer, generator = make_fg(job.kind, job.llm, relocate_targets=job.relocate_targets, door_edits=job.door_edits)
+    res = adapt_to_success(job.house, job.weights.policy(), generator, job.target_success,
+                           tolerance=job.target_tolerance, episodes=job.target_episodes, max_edits=job.edit_steps,
+                           analyzer=analyzer, seed=job.seed, name=job.name)
+    expert_before, _ = measure(compile_world(job.house, job.name), res.episodes, ExpertPolicy())
+    expert_after, _ = measure(compile_world(res.house, job.name), res.episodes, ExpertPolicy()) if res.edits \
+        else (expert_before, None)
+    return Generated(res.house, res.generation_log(), len(res.edits), None, res.trajectories_after[0],
+                     moved=[o["id"] for o in edit_counts(res.edits, job.house, res.house)["objects"] if o["changed"]],
+                     usage=res.usage, regret_before=max(0.0, expert_before.success - res.before.success),
+                     regret_after=max(0.0, expert_after.success - res.after.success),
+                     success_before=res.before.success, success_after=res.after.success,
+                     rollout_steps=res.env_steps, before=res.trajectories_before[0])
 
 
 def check_steps(generation: GenerationResult) -> int:

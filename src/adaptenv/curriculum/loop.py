@@ -44,6 +44,7 @@ import numpy as np
 import torch
 
 from adaptenv.adapt.llm.accounting import check_llm_section, run_changes, scenes_usage
+from adaptenv.adapt.target import check_target
 from adaptenv.agents.checkpoint import load_checkpoint, load_tensors, save_checkpoint
 from adaptenv.agents.config import FinetuneConfig
 from adaptenv.agents.evaluate import EpisodeResult, EvalReport, mean_se, summarize, write_report
@@ -67,7 +68,7 @@ from adaptenv.curriculum.jobs import (
     skipped_houses,
 )
 from adaptenv.curriculum.llm_usage import budget_left, iteration_lines, record_iteration
-from adaptenv.curriculum.methods import LEVEL_SCORES, METHODS, Iteration, Stream
+from adaptenv.curriculum.methods import ADAPTING_METHODS, LEVEL_SCORES, METHODS, Iteration, Stream
 from adaptenv.curriculum.records import (
     HELDOUT_DIR,
     ITERATIONS,
@@ -183,6 +184,15 @@ class LoopConfig:
     door_edits: bool = False
     """G may also open or shut interior doors: the failure-mode G for search, looping and timeout failures, the LLM
     G (ours-llm) through its set_door_openness tool."""
+    target_success: float | None = None
+    """Difficulty on request: each adapted scene is edited until pi_t's success on target_episodes fixed episodes is
+    within target_tolerance of this rate P (0 < P < 1; edit_steps is the edit budget,
+    :func:`~adaptenv.adapt.target.adapt_to_success`) instead of being made as hard as G can; null: off. Only the
+    methods that adapt scenes with G (ADAPTING_METHODS) take it."""
+    target_tolerance: float = 0.10
+    """With target_success: stop editing a scene once |success - P| is at most this."""
+    target_episodes: int = 20
+    """With target_success: episodes pi_t's success on a scene is measured on (the same after every edit)."""
 
     __pydantic_config__ = STRICT
 
@@ -229,6 +239,14 @@ class LoopConfig:
             raise ConfigError(f"{source}: method ours-llm needs an llm section (provider, model, base_url); "
                               "see docs/llm.md")
         check_llm_section(self.llm, source)
+        if self.target_success is not None:
+            check_target(self.target_success, self.target_tolerance, what=f"{source}: target_success",
+                         tol_what=f"{source}: target_tolerance")
+            if self.method not in ADAPTING_METHODS:
+                raise ConfigError(f"{source}: target_success applies to the methods that adapt scenes with G "
+                                  f"({', '.join(ADAPTING_METHODS)}), not {self.method}; pick one or drop target_success")
+            if self.target_episodes < 1:
+                raise ConfigError(f"{source}: target_episodes must be at least 1, got {self.target_episodes}")
         return self
 
 

@@ -21,7 +21,7 @@ import time
 from dataclasses import dataclass, field
 from enum import IntEnum
 from pathlib import Path
-from typing import TYPE_CHECKING, ClassVar
+from typing import TYPE_CHECKING, Any, ClassVar
 
 import numpy as np
 
@@ -224,7 +224,7 @@ class EditingMethod(Method):
         policy = needs_policy(self.generator)  # random edits ignore pi_t: no weights to pickle per job
         jobs = [GenerateJob(self.generator, it.store.house(name), name, it.cfg.edit_steps,
                             (it.cfg.seed, it.t, Stream.GENERATE + k), weights=it.weights if policy else None,
-                            rollout=ro if policy else None, llm=it.cfg.llm)
+                            rollout=ro if policy else None, llm=it.cfg.llm, **(target_fields(it.cfg) if policy else {}))
                 for k, (name, ro) in enumerate(zip(rolled, rollouts, strict=True))]
         new = []
         for k, (job, made) in enumerate(zip(jobs, it.executor.map(run_generate, jobs, desc="generation"), strict=True)):
@@ -234,7 +234,8 @@ class EditingMethod(Method):
             new.append(it.store.put(f"{job.name.split('~')[0]}~t{it.t:02d}{self.tag}{k:02d}", made.house))
             it.parents[new[-1]] = job.name
             if len(it.gallery) < it.cfg.gallery:
-                it.gallery.append(gallery_item(it.run_dir, it.t, new[-1], job.house, made, rollouts[k].trajectory))
+                it.gallery.append(gallery_item(it.run_dir, it.t, new[-1], job.house, made,
+                                               made.before if made.before is not None else rollouts[k].trajectory))
         return new
 
 
@@ -373,7 +374,8 @@ class Ours(Method):
         jobs = [GenerateJob(self.generator, it.store.house(p), p, it.cfg.edit_steps,
                             (it.cfg.seed, it.t, Stream.GENERATE + k), weights=it.weights,
                             diagnose_episodes=it.cfg.diagnose_episodes, llm=it.cfg.llm,
-                            relocate_targets=it.cfg.relocate_targets, door_edits=it.cfg.door_edits)
+                            relocate_targets=it.cfg.relocate_targets, door_edits=it.cfg.door_edits,
+                            **target_fields(it.cfg))
                 for k, p in enumerate(parents)]
         children = []
         for k, (job, made) in enumerate(zip(jobs, it.executor.map(run_generate, jobs, desc="diagnosis and generation"),
@@ -514,3 +516,13 @@ def fresh_houses(it: Iteration, k: int, *, oracle: bool = False) -> list[str]:
 METHODS: dict[str, type[Method]] = {m.name: m for m in (NoNewScenes, RandomEdits, DomainRandomization, DRMatched,
                                                         SFL, Oracle, Rearrange, PLR, ACCEL, Ours, OursNoSelect,
                                                         OursRandomScene, OursNoF, OursDR, OursLLM)}
+#: The methods whose new scenes come from G's adaptation step (they take ``LoopConfig.target_success``).
+ADAPTING_METHODS: tuple[str, ...] = tuple(n for n, m in METHODS.items() if getattr(m, "generator", "random") != "random")
+
+
+def target_fields(cfg: LoopConfig) -> dict[str, Any]:
+    """The GenerateJob fields of difficulty on request (none when ``target_success`` is off)."""
+    if cfg.target_success is None:
+        return {}
+    return {"target_success": cfg.target_success, "target_tolerance": cfg.target_tolerance,
+            "target_episodes": cfg.target_episodes}

@@ -1,0 +1,87 @@
+"""Difficulty on request: how close each G brings the agent's success to P, and in how many edits.
+
+    NUMBA_NUM_THREADS=1 nice -n 10 python docs/results/target-success/measure.py OUT.jsonl [HOUSES [STEPS]]
+    python docs/results/target-success/measure.py OUT.jsonl table    # the table of the rows already there
+
+For every G of ``GENERATORS``, every P of ``TARGETS`` and the first ``HOUSES`` houses of ``preset:validation``
+(held out from training), :func:`adaptenv.adapt.target.adapt_to_success` edits the house for the ``pretrained``
+agent, measured on ``EPISODES`` seeded episodes, until its success is within ``TOLERANCE`` of P or ``STEPS``
+edits are kept or ``PATIENCE`` rounds in a row keep none. One JSON row per run is appended to OUT.jsonl (a rerun skips the runs already there); the
+table per (G, P) is printed at the end: houses within 10 points of P, mean edits kept, mean final gap.
+"""
+
+from __future__ import annotations
+
+import json
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+GENERATORS = ("builtin", "random", "failure-modes")
+TARGETS = (0.25, 0.5, 0.75)
+EPISODES, TOLERANCE, PATIENCE, SEED, POLICY = 20, 0.10, 3, 0, "pretrained"
+
+
+def run(out: Path, houses: int, steps: int) -> None:
+    """Every (G, P, house) not yet in ``out``: one row each."""
+    from adaptenv.adapt.generators import make_generator
+    from adaptenv.adapt.target import adapt_to_success
+    from adaptenv.agents.houses import load_house_set
+    from adaptenv.agents.network import configure_torch
+    from adaptenv.agents.registry import resolve_policy
+
+    configure_torch()
+    done = {(r["generator"], r["target"], r["house"]) for r in rows(out)}
+    hs = load_house_set("preset:validation")
+    policy = resolve_policy(POLICY, seed=SEED)
+    for name, house in list(zip(hs.names, hs.houses, strict=True))[:houses]:  # house by house: a cut run is a subset
+        for g in GENERATORS:
+            for p in TARGETS:
+                if (g, p, name) in done:
+                    continue
+                t0 = time.perf_counter()
+                res = adapt_to_success(house, policy, make_generator(g), p, tolerance=TOLERANCE, episodes=EPISODES,
+                                       max_edits=steps, patience=PATIENCE, seed=SEED, name=name)
+                row = {"generator": g, "target": p, "house": name, "steps": steps, "patience": PATIENCE, "seconds": time.perf_counter() - t0,
+                       **{k: v for k, v in res.to_dict().items() if k != "trace"}}
+                with out.open("a", encoding="utf-8") as f:
+                    f.write(json.dumps(row) + "\n")
+                print(f"{g:13s} P={p:.2f} {name}: {res.line()} ({row['seconds']:.0f} s)", flush=True)
+
+
+def rows(out: Path) -> list[dict]:
+    return [json.loads(x) for x in out.read_text(encoding="utf-8").splitlines()] if out.exists() else []
+
+
+def table(out: Path) -> None:
+    """Per (G, P): houses within 10 points, mean edits kept, mean gap, mean success reached."""
+    everything = rows(out)
+    per_house = {h: sum(r["house"] == h for r in everything) for h in {r["house"] for r in everything}}
+    full = len(GENERATORS) * len(TARGETS)
+    rs = [r for r in everything if per_house[r["house"]] == full]  # houses with every (G, P) run
+    print(f"{len(per_house)} house(s) run, {sum(n == full for n in per_house.values())} with every (G, P) "
+          "(the table counts these)")
+    print("| G | P | houses within 0.10 | of them within before any edit | mean edits kept | mean gap | "
+          "mean success reached | mean wall s per run |")
+    print("|---|---|---|---|---|---|---|---|")
+    for g in GENERATORS:
+        for p in TARGETS:
+            sel = [r for r in rs if r["generator"] == g and r["target"] == p]
+            if not sel:
+                continue
+            within = sum(r["gap"] <= 0.10 + 1e-9 for r in sel)
+            already = sum(abs(r["success_before"] - p) <= 0.10 + 1e-9 for r in sel)
+            print(f"| {g} | {p:.2f} | {within}/{len(sel)} | {already} | {np.mean([r['edits'] for r in sel]):.1f} | "
+                  f"{np.mean([r['gap'] for r in sel]):.3f} | {np.mean([r['success'] for r in sel]):.3f} | "
+                  f"{np.mean([r['seconds'] for r in sel]):.0f} |")
+    start = {r["house"]: r["success_before"] for r in rs}
+    print(f"\nsuccess before any edit, per house: {', '.join(f'{h} {s:.2f}' for h, s in sorted(start.items()))}")
+
+
+if __name__ == "__main__":
+    target = Path(sys.argv[1])
+    if sys.argv[2:3] != ["table"]:  # `measure.py OUT.jsonl table` prints the table of the rows already there
+        run(target, int(sys.argv[2]) if len(sys.argv) > 2 else 10, int(sys.argv[3]) if len(sys.argv) > 3 else 8)
+    table(target)

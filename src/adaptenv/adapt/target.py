@@ -1,0 +1,334 @@
+"""Difficulty on request: edit a house until the agent's measured success on it is near a target P.
+
+The agent's success on a house is measured on a fixed set of ``N`` episodes (seeded draws, the same
+episodes after every edit: paired). Each round asks G for one single-object edit, aimed at one of
+the measured episodes (one the agent solves when success is above P, one it fails when below),
+measures the edited house again and keeps the edit only when it brings success closer to P (or
+leaves success where it was and moves the mean SPL the way P lies); an edit that overshoots P by
+more than it gained is dropped and G is asked again, aimed at the next episode. It stops when
+``|success - P| <= tolerance``, when ``max_edits`` edits are kept, or after ``patience`` rounds in a
+row without a kept edit. Since only edits that come closer are kept, the house returned is the
+closest the run reached::
+
+    result = adapt_to_success(house, policy, make_generator("builtin"), 0.5, episodes=20, max_edits=10)
+    result.success_trace   # [1.0, 0.95, 0.85, ...]: success before and after each kept edit
+    result.edits, result.gap, result.stopped
+
+Every G works by name: the loop only calls :meth:`~adaptenv.adapt.generators.Generator.generate`.
+A G that makes no edit in one step is asked for one more step the next time (up to ``MAX_G_STEPS``;
+the failure-mode G, for one, aims its second step at another failure family), and only the first
+edit of a call is kept, so each kept edit moves one object (or one door), for every G.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass, field, replace
+from typing import Any
+
+import numpy as np
+
+from adaptenv.adapt.analysis import Analyzer, BuiltinAnalyzer
+from adaptenv.adapt.edits import Edit, replay
+from adaptenv.adapt.generators import GenerationContext, Generator, StepRecord
+from adaptenv.adapt.llm.accounting import scene_usage
+from adaptenv.adapt.llm.usage import Usage
+from adaptenv.adapt.validation import validate_scene
+from adaptenv.agents.policy import Policy, as_policy
+from adaptenv.agents.rollout import draw_episode, run_policy
+from adaptenv.errors import ConfigError
+from adaptenv.scene.house import House
+from adaptenv.scene.validate import validate_house
+from adaptenv.sim.geodesic import is_solvable
+from adaptenv.sim.task import Episode
+from adaptenv.sim.trajectory import Trajectory
+from adaptenv.sim.world import NavWorld, compile_world
+
+#: Defaults of the command line and the loop: episodes measured, tolerance, rounds without a kept edit.
+EPISODES = 20
+TOLERANCE = 0.10
+PATIENCE = 6
+#: Most steps one G call is asked for when G keeps making no edit.
+MAX_G_STEPS = 4
+#: A change of mean SPL smaller than this is no change.
+SPL_TOL = 1e-3
+
+
+def check_target(target: float, tolerance: float = TOLERANCE, *, what: str = "--target-success",
+                 tol_what: str = "--target-tolerance") -> None:
+    """Raise one ConfigError line unless 0 < target < 1 and 0 <= tolerance < 1 (both finite)."""
+    if not (isinstance(target, (int, float)) and np.isfinite(target) and 0.0 < float(target) < 1.0):
+        raise ConfigError(f"{what} {target}: the target success rate must lie strictly between 0 and 1, "
+                          "e.g. 0.5")
+    if not (isinstance(tolerance, (int, float)) and np.isfinite(tolerance) and 0.0 <= float(tolerance) < 1.0):
+        raise ConfigError(f"{tol_what} {tolerance}: the tolerance must lie in [0, 1), e.g. 0.1")
+
+
+@dataclass(frozen=True)
+class Measurement:
+    """The agent on the measured episodes of one house: per-episode success and SPL."""
+
+    successes: tuple[bool, ...]
+    spls: tuple[float, ...]
+    steps: int
+    """Environment steps the measurement took."""
+
+    @property
+    def success(self) -> float:
+        return float(np.mean(self.successes))
+
+    @property
+    def spl(self) -> float:
+        return float(np.mean(self.spls))
+
+
+@dataclass(frozen=True)
+class TargetRound:
+    """One round: G's proposed edit, and whether it was kept and what the house measured with it."""
+
+    round: int
+    episode: int
+    """Index of the measured episode G aimed at."""
+    edit: Edit | None
+    """G's edit (None when G made none)."""
+    kept: bool
+    reason: str
+    success: float | None = None
+    """Measured success with the edit (None when there was nothing to measure)."""
+    spl: float | None = None
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"round": self.round, "episode": self.episode, "kept": self.kept, "reason": self.reason,
+                "success": self.success, "spl": self.spl,
+                "edit": self.edit.model_dump(mode="json") if self.edit is not None else None}
+
+
+@dataclass
+class TargetResult:
+    """What :func:`adapt_to_success` reached: the house, the success before and after each kept edit, why it stopped."""
+
+    house: House
+    original: House
+    generator: str
+    target: float
+    tolerance: float
+    episodes: list[Episode]
+    before: Measurement
+    after: Measurement
+    rounds: list[TargetRound] = field(default_factory=list)
+    stopped: str = ""
+    """``within tolerance``, ``edit budget used`` or ``no kept edit in N rounds``."""
+    trajectories_before: list[Trajectory] = field(default_factory=list)
+    trajectories_after: list[Trajectory] = field(default_factory=list)
+    check_steps: int = 0
+    """pi_t's environment steps in G's own rollout checks."""
+    measure_steps: int = 0
+    """pi_t's environment steps in every measurement (the first, and one per measured edit)."""
+    usage: Usage = field(default_factory=Usage)
+    """F's and G's LLM calls over all rounds (empty for the built-ins)."""
+
+    @property
+    def edits(self) -> list[Edit]:
+        """The kept edits, in order (replaying them on ``original`` gives ``house``)."""
+        return [r.edit for r in self.rounds if r.kept and r.edit is not None]
+
+    @property
+    def success(self) -> float:
+        return self.after.success
+
+    @property
+    def gap(self) -> float:
+        """``|success - target|`` of the house returned (the closest the run reached)."""
+        return abs(self.after.success - self.target)
+
+    @property
+    def reached(self) -> bool:
+        return self.gap <= self.tolerance + 1e-9
+
+    @property
+    def success_trace(self) -> list[float]:
+        """Measured success before the first edit and after each kept edit."""
+        return [self.before.success] + [r.success for r in self.rounds if r.kept and r.success is not None]
+
+    @property
+    def env_steps(self) -> int:
+        """pi_t's environment steps in all measurements and G's checks."""
+        return self.measure_steps + self.check_steps
+
+    def to_dict(self) -> dict[str, Any]:
+        """Plain figures for JSON: target, reached success, gap, edits, rounds and the trace."""
+        return {"target": self.target, "tolerance": self.tolerance, "generator": self.generator,
+                "episodes": len(self.episodes), "success_before": self.before.success,
+                "spl_before": self.before.spl, "success": self.after.success, "spl": self.after.spl,
+                "gap": self.gap, "reached": self.reached, "edits": len(self.edits), "rounds": len(self.rounds),
+                "stopped": self.stopped, "success_trace": self.success_trace,
+                "trace": [r.to_dict() for r in self.rounds]}
+
+    def generation_log(self) -> dict[str, Any]:
+        """The rounds as a generator's log (``edits.json``: one step per round, kept edits ``applied``, the others
+        ``rejected`` or ``skipped``) with the figures of :meth:`to_dict` beside them."""
+        steps = [StepRecord(step=r.round - 1, status="applied" if r.kept else "rejected" if r.edit else "skipped",
+                            edit=r.edit, reason=r.reason).model_dump(mode="json") for r in self.rounds]
+        return {"generator": self.generator, "steps": steps,
+                "target_success": {k: v for k, v in self.to_dict().items() if k != "trace"}}
+
+    def line(self) -> str:
+        """The one-line summary: target, reached success, gap and edits."""
+        return (f"target success {self.target:.2f} (tolerance {self.tolerance:.2f}): reached {self.after.success:.2f} "
+                f"from {self.before.success:.2f}, gap {self.gap:.2f}, {len(self.edits)} edit(s) kept of "
+                f"{len(self.rounds)} proposed, {len(self.episodes)} episodes; {self.stopped}")
+
+
+def measurement_episodes(world: NavWorld, n: int, seed: int | Sequence[int],
+                         target_type: str | None = None) -> list[Episode]:
+    """``n`` seeded episodes of ``world`` (:func:`~adaptenv.agents.rollout.draw_episode`), the same for a seed
+    (an int, or seed words such as the loop's (seed, iteration, job)); episode ``k``'s seed ends in ``k``."""
+    words = _words(seed)
+    base = words[0] if len(words) == 1 else int(np.random.default_rng([*words, 4]).integers(1, 2**20))
+    return [replace(draw_episode(world, np.random.default_rng([*words, 3, k]), target_type), seed=base * 1000 + k)
+            for k in range(n)]
+
+
+def _words(seed: int | Sequence[int]) -> list[int]:
+    return [int(seed)] if isinstance(seed, (int, np.integer)) else [int(w) for w in seed]
+
+
+def measure(world: NavWorld, episodes: list[Episode], policy: Policy) -> tuple[Measurement, list[Trajectory]]:
+    """Roll the policy out on every episode: the measurement and the trajectories."""
+    trajs = run_policy(world, episodes, policy)
+    return (Measurement(tuple(bool(t.metrics.success) for t in trajs), tuple(float(t.metrics.spl) for t in trajs),
+                        sum(len(t.steps) for t in trajs)), trajs)
+
+
+def closer(target: float, before: Measurement, after: Measurement) -> tuple[bool, str]:
+    """Whether ``after`` is closer to the target than ``before``, and why: a smaller gap, or the same success
+    with the mean SPL moved the way the target lies."""
+    g0, g1 = abs(before.success - target), abs(after.success - target)
+    if g1 < g0 - 1e-9:
+        return True, f"success {before.success:.2f} -> {after.success:.2f}: closer to {target:.2f}"
+    if after.success == before.success:
+        d = after.spl - before.spl
+        if (before.success > target and d < -SPL_TOL) or (before.success < target and d > SPL_TOL):
+            return True, f"success unchanged at {after.success:.2f}, SPL {before.spl:.3f} -> {after.spl:.3f} toward the target"
+        return False, f"success unchanged at {after.success:.2f} and SPL {before.spl:.3f} -> {after.spl:.3f}: no closer"
+    return False, (f"success {before.success:.2f} -> {after.success:.2f}: "
+                   f"{'overshoots' if (before.success - target) * (after.success - target) < 0 else 'moves away from'} "
+                   f"{target:.2f} (gap {g0:.2f} -> {g1:.2f})")
+
+
+def focus_order(target: float, m: Measurement) -> list[int]:
+    """Episodes G aims at, in turn: the solved ones (lowest SPL first) when success is above the target, the
+    failed ones when below; every episode when none qualifies."""
+    harder = m.success > target
+    pick = [i for i, s in enumerate(m.successes) if s == harder]
+    pick = pick or list(range(len(m.successes)))
+    return sorted(pick, key=lambda i: (m.spls[i], i)) if harder else pick
+
+
+def adapt_to_success(house: House, policy: Policy, generator: Generator, target: float, *,
+                     tolerance: float = TOLERANCE, episodes: int | list[Episode] = EPISODES, max_edits: int = 10,
+                     patience: int = PATIENCE, analyzer: Analyzer | None = None, seed: int | Sequence[int] = 0,
+                     target_type: str | None = None, name: str = "house",
+                     rollout_episodes: int = 3) -> TargetResult:
+    """Edit ``house`` with ``generator`` until the policy's success on fixed episodes is within ``tolerance`` of
+    ``target`` (see the module docstring).
+
+    Args:
+        house: the house (not modified).
+        policy: the agent whose success is measured (and that G checks its candidates with).
+        generator: any G (``make_generator(name)``).
+        target: the success rate asked for, in (0, 1).
+        tolerance: stop when ``|success - target|`` is at most this.
+        episodes: how many episodes to measure on (seeded draws), or the episodes themselves.
+        max_edits: most edits kept (the edit budget).
+        patience: rounds in a row without a kept edit before giving up.
+        analyzer: F for the episode G aims at (default the built-in).
+        seed: seed (an int or seed words) of the episode draw and of G's random stream.
+        target_type: draw only episodes of this target type.
+    """
+    check_target(target, tolerance, what="target", tol_what="tolerance")
+    if max_edits < 0 or patience < 1:
+        raise ConfigError(f"max_edits must be >= 0 and patience >= 1, got {max_edits} and {patience}")
+    policy = as_policy(policy)
+    analyzer = analyzer or BuiltinAnalyzer()
+    world = compile_world(house, name)
+    eps = list(episodes) if not isinstance(episodes, int) else measurement_episodes(world, episodes, seed, target_type)
+    if not eps:
+        raise ConfigError("episodes: measure on at least one episode")
+    first, trajs = measure(world, eps, policy)
+    result = TargetResult(house, house, getattr(generator, "name", type(generator).__name__), float(target),
+                          float(tolerance), eps, first, first, trajectories_before=trajs, trajectories_after=trajs)
+    result.measure_steps = first.steps
+    current, cur, turn, misses, g_steps = house, first, 0, 0, 1
+    while True:
+        if abs(cur.success - target) <= tolerance + 1e-9:
+            result.stopped = "within tolerance"
+            break
+        if len(result.edits) >= max_edits:
+            result.stopped = "edit budget used"
+            break
+        if misses >= patience:
+            result.stopped = f"no kept edit in {patience} rounds in a row"
+            break
+        order = focus_order(target, cur)
+        k = order[turn % len(order)]
+        turn += 1
+        edit, reason, steps = _propose(result.usage, current, world, eps[k], trajs[k], policy, analyzer, generator,
+                                       g_steps, np.random.default_rng([*_words(seed), 5, len(result.rounds)]),
+                                       rollout_episodes)
+        result.check_steps += steps
+        n = len(result.rounds) + 1
+        if edit is None:
+            g_steps = min(g_steps + 1, MAX_G_STEPS)
+            result.rounds.append(TargetRound(n, k, None, False, reason))
+            misses += 1
+            continue
+        candidate = replay(current, [edit])
+        problems, cworld = _checked(candidate, house, eps, k, name)
+        if problems:
+            result.rounds.append(TargetRound(n, k, edit, False, "invalid: " + "; ".join(problems[:3])))
+            misses += 1
+            continue
+        m, ctrajs = measure(cworld, eps, policy)
+        result.measure_steps += m.steps
+        keep, why = closer(target, cur, m)
+        result.rounds.append(TargetRound(n, k, edit, keep, why, m.success, m.spl))
+        if not keep:
+            misses += 1
+            continue
+        current, world, cur, trajs, misses, turn = candidate, cworld, m, ctrajs, 0, 0
+    result.house, result.after, result.trajectories_after = current, cur, trajs
+    return result
+
+
+def _propose(usage: Usage, house: House, world: NavWorld, episode: Episode, traj: Trajectory, policy: Policy, analyzer: Analyzer,
+             generator: Generator, steps: int, rng: np.random.Generator,
+             rollout_episodes: int) -> tuple[Edit | None, str, int]:
+    """G's first applied edit on ``house`` aimed at ``episode`` (or None and why), and G's check steps; F's and
+    G's LLM calls are added to ``usage``."""
+    analysis = analyzer.analyze(traj, world)
+    context = GenerationContext(episode=episode, trajectory=traj, policy=policy, rollout_episodes=rollout_episodes,
+                                render=False)
+    gen = generator.generate(house, analysis, steps=steps, context=context, rng=rng)
+    usage.merge(scene_usage(analysis, gen))
+    check = sum(s.check_steps for s in gen.steps)
+    applied = gen.applied
+    if applied:
+        return applied[0], "", check
+    why = gen.stopped or "; ".join(dict.fromkeys(s.reason for s in gen.steps if s.reason)) or "no edit"
+    return None, f"G made no edit: {why}", check
+
+
+def _checked(candidate: House, original: House, episodes: list[Episode], aimed: int,
+             name: str) -> tuple[list[str], NavWorld | None]:
+    """Why the edited house cannot be measured fairly (validation against the original from the aimed episode's
+    start, or a measured episode no longer solvable), and its compiled world when it can."""
+    problems = [str(p) for p in validate_scene(candidate, episode_targets=sorted({e.target_type for e in episodes}),
+                                               start=episodes[aimed].start[:2], original=original)]
+    problems += [p.message for p in validate_house(candidate)]
+    if problems:
+        return problems, None
+    world = compile_world(candidate, name)
+    unsolvable = [f"episode {k} ({e.target_type}) is no longer solvable" for k, e in enumerate(episodes)
+                  if not is_solvable(world, e)]
+    return unsolvable, None if unsolvable else world

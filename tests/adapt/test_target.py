@@ -1,0 +1,183 @@
+"""Difficulty on request: adapt_to_success on a tiny house with an agent whose success depends on where one
+object stands, and a G that pushes that object a fixed stride per edit."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from adaptenv.adapt.edits import replay
+from adaptenv.adapt.generators import GenerationResult, StepRecord
+from adaptenv.adapt.target import Measurement, adapt_to_success, check_target, closer, focus_order
+from adaptenv.adapt.validation import EditValidator
+from adaptenv.agents.houses import load_house_set
+from adaptenv.agents.policy import ExpertPolicy
+from adaptenv.errors import ConfigError
+from adaptenv.sim.spec import END
+
+OBJECT = "DogBed|2|6"
+
+
+@pytest.fixture(scope="module")
+def tiny():
+    hs = load_house_set("preset:tiny")
+    return hs.houses[hs.names.index("tiny_0002")]
+
+
+class ShyExpert(ExpertPolicy):
+    """The expert, except that it gives up at once on episode k (k = seed % 1000) when k < the number of whole
+    ``per`` metres ``OBJECT`` stands from ``home``: its success falls as the object moves away."""
+
+    name = "shy-expert"
+
+    def __init__(self, home: tuple[float, float], per: float = 0.2):
+        super().__init__()
+        self.home, self.per = home, per
+        self._quit = np.zeros(0, bool)
+
+    def act(self, obs, state, done):
+        actions, state = super().act(obs, state, done)
+        ctx = self.bound()
+        if len(self._quit) != len(done):
+            self._quit = np.zeros(len(done), bool)
+        for i in np.flatnonzero(done):
+            world = ctx.worlds[int(ctx.env_idx[i])]
+            x, z = next(t.center for t in world.instances if t.object_id == OBJECT)
+            fails = math.floor(math.hypot(x - self.home[0], z - self.home[1]) / self.per + 1e-6)
+            self._quit[i] = int(ctx.seeds[i]) % 1000 < fails
+        actions = np.where(self._quit, END, actions)
+        return actions, state
+
+
+class Pusher:
+    """A G that moves ``OBJECT`` ``stride`` grid units along x (the other way once blocked), one validated edit."""
+
+    name = "pusher"
+
+    def __init__(self, stride: float):
+        self.stride, self.calls = stride, 0
+
+    def generate(self, house, analysis, *, steps, context, rng):
+        self.calls += 1
+        ep = context.episode
+        v = EditValidator(house, episode_targets=[ep.target_type], start=ep.start[:2], plausibility=False)
+        result = GenerationResult(house=v.house, steps=[], edit_log=v.log, generator=self.name)
+        for dx in (self.stride, -self.stride, 0.0):
+            edit = v.try_edit(OBJECT, dx, self.stride if dx == 0.0 else 0.0, None, source=self.name, intent="push")
+            if edit.accepted and edit.changed:
+                result.steps.append(StepRecord(step=0, status="applied", edit=edit))
+                break
+        result.house = v.house
+        return result
+
+
+def home_of(house) -> tuple[float, float]:
+    o = house.object_by_id(OBJECT)
+    return o.position.x, o.position.z
+
+
+def run(tiny, target, *, stride=3.0, tolerance=0.1, max_edits=8, patience=3, per=0.2):
+    return adapt_to_success(tiny, ShyExpert(home_of(tiny), per), Pusher(stride), target, tolerance=tolerance,
+                            episodes=10, max_edits=max_edits, patience=patience, seed=0, name="tiny")
+
+
+def test_success_is_brought_within_tolerance_and_each_kept_edit_comes_closer(tiny):
+    res = run(tiny, 0.7, tolerance=0.1)
+    assert res.before.success == 1.0
+    assert res.stopped == "within tolerance" and res.reached and res.gap <= 0.1 + 1e-9
+    assert 1 <= len(res.edits) <= 8 and res.success_trace[0] == 1.0 and res.success_trace[-1] == res.success
+    gaps = [abs(s - 0.7) for s in res.success_trace]
+    assert all(b <= a + 1e-9 for a, b in zip(gaps, gaps[1:], strict=False))
+    # the returned house is the original with the kept edits replayed, and it measures what the result says
+    again = replay(tiny, res.edits)
+    assert home_of(again) == home_of(res.house) != home_of(tiny)
+    assert res.to_dict()["edits"] == len(res.edits) and res.to_dict()["success"] == res.success
+    assert "target success 0.70" in res.line() and f"reached {res.success:.2f}" in res.line()
+    assert res.original is tiny and home_of(tiny) == home_of(res.original)  # the input is not modified
+
+
+def test_the_edit_budget_stops_the_run_at_the_closest_house(tiny):
+    res = run(tiny, 0.2, tolerance=0.0, max_edits=2, stride=3.0)
+    assert res.stopped == "edit budget used" and len(res.edits) == 2 and not res.reached
+    assert res.success < res.before.success and res.gap == pytest.approx(abs(res.success - 0.2))
+
+
+def test_an_edit_that_overshoots_is_dropped(tiny):
+    # big strides drop success by several episodes at a time: near P = 0.65 one overshoots and is refused
+    res = run(tiny, 0.65, tolerance=0.0, stride=6.0, max_edits=6, patience=2)
+    dropped = [r for r in res.rounds if not r.kept and r.success is not None]
+    assert dropped, [r.reason for r in res.rounds]
+    assert all(abs(r.success - 0.65) > res.gap for r in dropped)
+    assert res.stopped.startswith("no kept edit in 2 rounds")
+
+
+def test_already_within_tolerance_needs_no_edit(tiny):
+    g = Pusher(3.0)
+    res = adapt_to_success(tiny, ShyExpert(home_of(tiny)), g, 0.95, tolerance=0.1, episodes=10, name="tiny")
+    assert res.stopped == "within tolerance" and res.edits == [] and g.calls == 0 and res.house is tiny
+
+
+def test_acceptance_rule_and_focus():
+    m = lambda s, spl: Measurement(tuple([True] * int(s * 10) + [False] * (10 - int(s * 10))), (spl,) * 10, 0)  # noqa: E731
+    assert closer(0.5, m(0.9, 0.8), m(0.7, 0.8))[0]
+    assert not closer(0.5, m(0.6, 0.8), m(0.2, 0.5))[0]  # overshoot by more than it gained
+    assert closer(0.5, m(0.9, 0.8), m(0.9, 0.7))[0] and not closer(0.5, m(0.9, 0.8), m(0.9, 0.85))[0]
+    assert closer(0.5, m(0.2, 0.1), m(0.2, 0.2))[0]  # below P: higher SPL at equal success is easier
+    mixed = Measurement((True, False, True), (0.9, 0.0, 0.4), 0)
+    assert focus_order(0.5, mixed) == [2, 0] and focus_order(0.9, mixed) == [1]
+
+
+@pytest.mark.parametrize("p", [0.0, 1.0, -0.2, 1.5, float("nan")])
+def test_a_target_outside_zero_one_is_refused(p):
+    with pytest.raises(ConfigError, match="strictly between 0 and 1"):
+        check_target(p)
+    with pytest.raises(ConfigError, match="tolerance"):
+        check_target(0.5, 1.0)
+
+
+# ----------------------------------------------------------------------------- the command line
+
+def _tiny_file(tiny, tmp_path):
+    from adaptenv.scene.house import save_house
+
+    return str(save_house(tiny, tmp_path / "tiny.json"))
+
+
+@pytest.mark.parametrize("args", [["--target-success", "1.5"], ["--target-success", "0"],
+                                  ["--target-success", "0.5", "--target-tolerance", "2"],
+                                  ["--target-success", "0.5", "--diagnose", "2"]])
+def test_cli_refuses_a_bad_target_in_one_line_before_any_work(tiny, tmp_path, args):
+    from typer.testing import CliRunner
+
+    from adaptenv.cli import app
+
+    out = tmp_path / "out"
+    result = CliRunner().invoke(app, ["adapt", _tiny_file(tiny, tmp_path), "-o", str(out), *args])
+    assert isinstance(result.exception, ConfigError), result.output
+    assert "--target-" in str(result.exception) and "\n" not in str(result.exception)
+    assert not out.exists()
+
+
+def test_cli_reports_target_reached_success_gap_and_edits(tiny, tmp_path):
+    import json
+
+    from typer.testing import CliRunner
+
+    from adaptenv.cli import app
+
+    out = tmp_path / "out"
+    result = CliRunner().invoke(app, ["adapt", _tiny_file(tiny, tmp_path), "--policy", "expert", "--target-success",
+                                      "0.5", "--target-episodes", "4", "--steps", "1", "-o", str(out), "--json"])
+    assert result.exit_code == 0, result.output
+    doc = json.loads(result.output)["target_success"]
+    assert doc["target"] == 0.5 and doc["episodes"] == 4 and doc["edits"] <= 1
+    assert doc["gap"] == pytest.approx(abs(doc["success"] - 0.5)) and len(doc["success_trace"]) == doc["edits"] + 1
+    saved = json.loads((out / "summary.json").read_text())
+    assert saved["target_success"]["success"] == doc["success"] and saved["edits_applied"] == doc["edits"]
+    assert {"house.json", "before_after.png", "edits.json"} <= {p.name for p in out.iterdir()}
+    text = CliRunner().invoke(app, ["adapt", _tiny_file(tiny, tmp_path), "--policy", "expert", "--target-success",
+                                    "0.5", "--target-episodes", "4", "--steps", "1", "-o", str(out), "--force"])
+    assert text.exit_code == 0, text.output
+    assert f"target success 0.50 +/- 0.10: reached {doc['success']:.2f}" in text.output
