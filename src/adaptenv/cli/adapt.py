@@ -182,12 +182,14 @@ def adapt(
                                            "HOUSE (adaptenv rollout -o, adaptenv trajectory from-ai2thor) for F to "
                                            "analyze instead of rolling out --policy, which still checks G's edits "
                                            "and runs the episode again in the edited house."),
-    target_success: float | None = typer.Option(None, "--target-success", metavar="P", help="Difficulty on "
+    target_success: float | None = typer.Option(None, "--target-success", metavar="P",
+                                                  callback=numbers.finite, help="Difficulty on "
                                                   "request: edit until the policy's success on --target-episodes "
                                                   "fixed episodes is within --target-tolerance of P (0 < P < 1), "
                                                   "keeping only edits that bring it closer; --steps is the edit "
                                                   "budget."),
-    target_tolerance: float = typer.Option(0.10, "--target-tolerance", help="With --target-success: stop when "
+    target_tolerance: float = typer.Option(0.10, "--target-tolerance", callback=numbers.finite,
+                                           help="With --target-success: stop when "
                                            "|success - P| is at most this."),
     target_episodes: int = typer.Option(20, "--target-episodes", min=1, max=500, help="With --target-success: "
                                         "episodes the success is measured on (the same after every edit)."),

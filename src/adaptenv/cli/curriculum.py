@@ -153,11 +153,13 @@ def loop(
                                           "failures); otherwise no edit moves a target."),
     door_edits: bool = typer.Option(False, "--door-edits", help="G may also open or shut interior doors (the "
                                     "failure-mode G for search, looping and timeout failures; the LLM G by a tool)."),
-    target_success: float | None = typer.Option(None, "--target-success", metavar="P", help="Difficulty on request "
+    target_success: float | None = typer.Option(None, "--target-success", metavar="P",
+                                                  callback=numbers.finite, help="Difficulty on request "
                                                 "(adapting methods): edit each adapted scene until pi_t's success on "
                                                 "--target-episodes fixed episodes is within --target-tolerance of P "
                                                 "(0 < P < 1), --edit-steps edits at most."),
-    target_tolerance: float = typer.Option(0.10, "--target-tolerance", help="With --target-success: the tolerance."),
+    target_tolerance: float = typer.Option(0.10, "--target-tolerance", callback=numbers.finite,
+                                           help="With --target-success: the tolerance."),
     target_episodes: int = typer.Option(20, "--target-episodes", min=1, max=500, help="With --target-success: "
                                         "episodes per scene the success is measured on."),
     heldout_episodes: int = typer.Option(100, "--heldout-episodes", callback=numbers.episodes, help="Episodes per held-out set."),
