@@ -10,12 +10,14 @@ there, the best-scored one that passed every check (:func:`chosen_drop`).
 
 from __future__ import annotations
 
+import warnings
 import zlib
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
 
 import numpy as np
+from scipy.stats import spearmanr
 
 from adaptenv.adapt.gdata import Dataset, house_key, load_rows
 from adaptenv.adapt.generators.edit_features import FEATURE_NAMES
@@ -80,7 +82,8 @@ def arrays(rows: list[dict[str, Any]], heldin: int) -> Arrays:
 
 def chosen_drop(score: np.ndarray, a: Arrays, mask: np.ndarray) -> dict[str, float]:
     """Per (house, task) group under ``mask``: the measured drop of the best-scored usable candidate (what the G
-    makes), against the mean over usable candidates (a random pick) and the best one; means over the groups."""
+    makes), against the mean over usable candidates (a random pick) and the best one; means over the groups. Also
+    the rank correlation of score and measured drop over the usable candidates (``spearman``)."""
     chosen, rand, best = [], [], []
     for g in np.unique(a.group[mask]):
         idx = np.flatnonzero(mask & (a.group == g) & (a.usable > 0))
@@ -91,9 +94,13 @@ def chosen_drop(score: np.ndarray, a: Arrays, mask: np.ndarray) -> dict[str, flo
         rand.append(float(total.mean()))
         best.append(float(total.max()))
     if not chosen:
-        return {"groups": 0, "chosen": float("nan"), "random": float("nan"), "best": float("nan")}
+        return {"groups": 0, "chosen": float("nan"), "random": float("nan"), "best": float("nan"), "spearman": None}
+    use = np.flatnonzero(mask & (a.usable > 0))
+    with warnings.catch_warnings():  # constant drops (nothing measured moved) give NaN, reported as None
+        warnings.simplefilter("ignore")
+        rho = spearmanr(score[use], a.drops[use].sum(axis=1)).statistic if len(use) > 2 else float("nan")
     return {"groups": len(chosen), "chosen": float(np.mean(chosen)), "random": float(np.mean(rand)),
-            "best": float(np.mean(best))}
+            "best": float(np.mean(best)), "spearman": float(rho) if np.isfinite(rho) else None}
 
 
 def _collection(folder: Path) -> dict[str, Any]:
