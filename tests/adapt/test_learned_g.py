@@ -160,3 +160,16 @@ def test_adapt_with_the_learned_generator_end_to_end(tiny, tmp_path):
 def test_collect_refuses_held_out_houses(tmp_path):
     result = runner.invoke(app, ["gdata", "collect", "--houses", "suite:large", "-o", str(tmp_path / "x")])
     assert isinstance(result.exception, ConfigError) and "not training data" in str(result.exception)
+
+
+def test_chosen_drop_scores_the_edit_the_g_would_make():
+    from adaptenv.adapt.gtrain import Arrays, chosen_drop
+
+    # two tasks; in task 0 the best-scored candidate is unusable, so the G makes the second-best one
+    a = Arrays(x=np.zeros((5, 1), np.float32), usable=np.array([0, 1, 1, 1, 1], np.float32),
+               drops=np.array([[1, 1], [0, 0.2], [0, 0.1], [0, 0.3], [0, -0.1]], np.float32),
+               measured=np.ones(5, np.float32), group=np.array([0, 0, 0, 1, 1]), heldin=np.ones(5, bool))
+    got = chosen_drop(np.array([9.0, 2.0, 1.0, 0.0, 5.0]), a, a.heldin)
+    assert got["groups"] == 2
+    assert got["chosen"] == pytest.approx((0.2 - 0.1) / 2) and got["best"] == pytest.approx((0.2 + 0.3) / 2)
+    assert got["random"] == pytest.approx((0.15 + 0.1) / 2)
