@@ -157,6 +157,7 @@ def train(cfg: TrainConfig, *, progress=None, command: str = "") -> dict[str, An
         "format": "adaptenv-learned-g card/1", "command": command, "config": asdict(cfg),
         "collections": [_collection(Path(d)) for d in cfg.data],
         "data": {"rows": len(rows), "houses": len({house_key(r["house"]) for r in rows}),
+                 "house_keys": sorted({house_key(r["house"]) for r in rows}),
                  "heldin_houses": sorted({house_key(r["house"]) for r, h in zip(rows, a.heldin, strict=True) if h}),
                  "specs": sorted({r["house"]["spec"] for r in rows}), "policy": sorted({r["policy"] for r in rows}),
                  "usable": int(a.usable.sum()), "measured": int(a.measured.sum()),
