@@ -59,7 +59,7 @@ def test_the_fine_tuning_recipe_carries_the_loop_settings():
 @pytest.mark.slow
 @pytest.mark.parametrize("method", [m for m in METHODS if m not in ("ours-llm", "dr-matched")])
 def test_every_method_runs_and_counts_its_budget(method, tiny_policy, tmp_path):
-    roomy = method in ("ours", "ours-randomscene", "ours-nof", "ours-dr")  # a buffer no level is evicted from, to check them all
+    roomy = method in ("ours", "ours-randomscene", "ours-nof", "ours-dr", "ours-learned")  # a buffer no level is evicted from, to check them all
     cfg = tiny_config(tiny_policy, method, **({"buffer_capacity": 16} if roomy else {}))
     records = run_loop(cfg, tmp_path / method)
     assert [r.iteration for r in records] == [0, 1, 2]

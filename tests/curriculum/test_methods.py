@@ -34,10 +34,11 @@ def _rollouts(successes: list[bool], experts: list[bool] | None = None, explorer
 def test_every_method_is_registered_by_its_name():
     assert set(M.METHODS) == {"none", "random", "dr", "dr-matched", "sfl", "oracle", "rearrange", "plr", "accel", "ours",
                               "ours-noselect",
-                              "ours-randomscene", "ours-nof", "ours-dr", "ours-llm"}
+                              "ours-randomscene", "ours-nof", "ours-dr", "ours-learned", "ours-llm"}
     assert all(cls.name == name for name, cls in M.METHODS.items())
     assert M.METHODS["ours"].generator == "failure-modes" and M.METHODS["ours-nof"].generator == "regret-only"
     assert M.METHODS["ours-noselect"].generator == "builtin" and M.METHODS["ours-llm"].generator == "llm"
+    assert M.METHODS["ours-learned"].generator == "learned"
     assert M.METHODS["ours-randomscene"].uniform and not M.METHODS["ours"].uniform
 
 

@@ -155,7 +155,7 @@ def adapt(
                                "(.pt), or module:attribute."),
     steps: int = typer.Option(5, "--steps", min=1, max=50, help="Single-object edits to make."),
     generator: str = typer.Option("builtin", "--generator", help="builtin (offline), failure-modes (offline, aims at "
-                                  "F's failure families), llm, or random."),
+                                  "F's failure families), learned (offline, a trained scorer ranks edits), llm, or random."),
     door_edits: bool = typer.Option(False, "--door-edits", help="With --generator failure-modes or llm: G may also "
                                     "open or shut interior doors."),
     analyzer: str = typer.Option("builtin", "--analyzer", help="builtin (offline) or llm."),

@@ -106,7 +106,7 @@ def loop(
                                 "JSON files, a house file, a dataset FILE.jsonl[.gz][:START:STOP] or preset:NAME."),
     iterations: int = typer.Option(3, "--iterations", "-T", min=1, help="Loop iterations."),
     method: str = typer.Option("ours", "--method", help="none, random, dr, dr-matched, sfl, plr, accel, ours, "
-                                "ours-noselect, ours-randomscene, ours-nof, ours-dr or ours-llm."),
+                                "ours-noselect, ours-randomscene, ours-nof, ours-dr, ours-learned or ours-llm."),
     seed: int = typer.Option(0, "--seed", callback=numbers.seed, help="Root seed."),
     out: Path = typer.Option(Path("runs/loop"), "-o", "--out", help="Run folder."),
     resume: bool = typer.Option(False, "--resume", help="Continue the run in --out from its last iteration."),

@@ -194,7 +194,7 @@ def run_rollout(job: RolloutJob) -> Rollout:
                   [r.success for r in explorer])
 
 
-GeneratorKind = Literal["random", "builtin", "llm", "failure-modes", "regret-only"]
+GeneratorKind = Literal["random", "builtin", "llm", "failure-modes", "regret-only", "learned"]
 
 
 def needs_policy(kind: GeneratorKind) -> bool:
@@ -355,4 +355,6 @@ def make_fg(kind: GeneratorKind, llm: dict[str, Any], *, relocate_targets: bool 
                                                      door_edits=door_edits)
     if kind == "regret-only":
         return NoAnalyzer(), make_generator("builtin")
+    if kind == "learned":
+        return BuiltinAnalyzer(), make_generator("learned")
     return BuiltinAnalyzer(), make_generator("builtin")

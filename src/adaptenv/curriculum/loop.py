@@ -19,7 +19,8 @@ methods lives in their strategy classes (:mod:`adaptenv.curriculum.methods`):
   ablations ``ours-noselect`` (the plain
   step, one episode, round robin), ``ours-randomscene`` (uniform scene choice), ``ours-nof``
   (G on regret alone, no F analysis); variant ``ours-dr`` (trained on the children plus DR's
-  fresh houses instead of the buffer replay).
+  fresh houses instead of the buffer replay), ``ours-learned`` (the learned G, see
+  :mod:`adaptenv.adapt.generators.learned`, instead of the failure-mode G).
 - ``ours-llm``: the same with LLM F and G (needs an LLM config).
 
 Per iteration every method plays ``score_rollouts`` episodes in each scene it rolls out and spends
@@ -95,7 +96,7 @@ class LoopConfig:
     """Settings of one closed-loop run (one method, one seed); saved as run.json."""
 
     method: str = "ours"
-    """One of none, random, dr, dr-matched, sfl, plr, accel, ours, ours-noselect, ours-randomscene, ours-nof, ours-dr, ours-llm."""
+    """One of none, random, dr, dr-matched, sfl, plr, accel, ours, ours-noselect, ours-randomscene, ours-nof, ours-dr, ours-learned, ours-llm."""
     policy: str = "pretrained"
     """Starting policy pi_0: pretrained or a checkpoint path (it must be a neural policy to fine-tune)."""
     houses: str = "preset:pretrain-train"

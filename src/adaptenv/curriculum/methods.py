@@ -444,6 +444,14 @@ class OursDR(Ours):
         return list(dict.fromkeys(new + fresh)) or list(it.state.pool)
 
 
+class OursLearned(Ours):
+    """``ours-learned``: ``ours`` with the learned G (the shipped scorer) instead of the failure-mode G."""
+
+    name = "ours-learned"
+    generator = "learned"
+    tag = "g"
+
+
 class OursLLM(Ours):
     """``ours-llm``: ``ours`` with LLM-backed F and G (needs the config's ``llm`` section)."""
 
@@ -515,7 +523,7 @@ def fresh_houses(it: Iteration, k: int, *, oracle: bool = False) -> list[str]:
 #: Every method by name; add a method with one class and one line here.
 METHODS: dict[str, type[Method]] = {m.name: m for m in (NoNewScenes, RandomEdits, DomainRandomization, DRMatched,
                                                         SFL, Oracle, Rearrange, PLR, ACCEL, Ours, OursNoSelect,
-                                                        OursRandomScene, OursNoF, OursDR, OursLLM)}
+                                                        OursRandomScene, OursNoF, OursDR, OursLearned, OursLLM)}
 #: The methods whose new scenes come from G's adaptation step (they take ``LoopConfig.target_success``).
 ADAPTING_METHODS: tuple[str, ...] = tuple(n for n, m in METHODS.items() if getattr(m, "generator", "random") != "random")
 

@@ -15,6 +15,8 @@ token usage (LLM) and the objective trace.
   call per edit, with verification.
 - ``random`` (:class:`~adaptenv.adapt.generators.random_perturbation.RandomPerturbation`): every
   movable object displaced and rotated at random (the paper's comparison point).
+- ``learned`` (:class:`~adaptenv.adapt.generators.learned.LearnedGenerator`, offline): a trained network
+  scores candidate edits in one forward pass; the best that passes the checks is made.
 
 Moves are on the normalized 100x100 grid (+x right, +y up); ``rotation`` is the object's new
 absolute yaw in degrees (0 faces up on the map, 90 faces right).
@@ -39,13 +41,15 @@ from adaptenv.adapt.generators.base import (
 )
 from adaptenv.adapt.generators.builtin import BuiltinGenerator
 from adaptenv.adapt.generators.failure_modes import FailureModeGenerator
+from adaptenv.adapt.generators.learned import LearnedGenerator
 from adaptenv.adapt.generators.llm import LLMGenerator
 from adaptenv.adapt.generators.random_perturbation import RandomPerturbation
 from adaptenv.errors import ConfigError
 
 
 def make_generator(name: str = "builtin", **kw: Any) -> Generator:
-    """Build a generator by name: ``builtin`` (default), ``llm`` (needs ``backend=``) or ``random``."""
+    """Build a generator by name: ``builtin`` (default), ``llm`` (needs ``backend=``), ``random``, ``failure-modes``
+    or ``learned`` (``checkpoint=`` a scorer file; default the shipped one)."""
     if name == "builtin":
         return BuiltinGenerator(**kw)
     if name == "llm":
@@ -54,6 +58,8 @@ def make_generator(name: str = "builtin", **kw: Any) -> Generator:
         return RandomPerturbation(**kw)
     if name == "failure-modes":
         return FailureModeGenerator(**kw)
+    if name == "learned":
+        return LearnedGenerator(**kw)
     raise ConfigError(f"unknown generator {name!r}; use one of {', '.join(GENERATORS)}")
 
 

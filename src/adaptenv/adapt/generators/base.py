@@ -33,7 +33,7 @@ StepStatus = Literal["applied", "rejected", "skipped", "no-op"]
 """``applied``: the step's edit is in the house. ``rejected``: validation refused it. ``skipped``: no
 edit was made (no usable answer, or the step was aborted and its edit undone). ``no-op``: placement
 accepted a move that changed neither position nor heading (never counted as applied or verified)."""
-GENERATORS = ("builtin", "llm", "random", "failure-modes")
+GENERATORS = ("builtin", "llm", "random", "failure-modes", "learned")
 
 
 class StepRecord(BaseModel):

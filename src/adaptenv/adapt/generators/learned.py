@@ -1,0 +1,221 @@
+"""The learned G: a small network scores candidate edits in one forward pass; the best that passes the checks is made.
+
+Per step (offline, deterministic for a given rng):
+
+1. Draw candidate edits without rollouts, as the built-in and random G do
+   (:func:`~adaptenv.adapt.generators.edit_features.enumerate_candidates`).
+2. Score all of them in one forward pass of the scorer (:class:`Scorer`, a two-layer MLP over
+   :data:`~adaptenv.adapt.generators.edit_features.FEATURE_NAMES`): it predicts whether the edit survives
+   placement, validation, the plausibility rules and the expert check, and how much the agent's success
+   and SPL drop after it; the score is the first times the sum of the others.
+3. Try them best first through collision-aware placement, validation with the plausibility rules
+   (:meth:`~adaptenv.adapt.validation.EditValidator.propose`) and the shortest-path expert, and commit
+   the first that passes. No rollout of the agent is made.
+
+The scorer is trained by ``adaptenv gdata train`` on rows of ``adaptenv gdata collect``; the package ships
+one (``agents/data/learned-g.pt``, its card ``learned-g.json``). Its file is a ``torch.save`` dictionary
+``{"format", "features", "config", "state_dict", "mean", "std", "meta"}``; :func:`load_scorer` refuses any
+other file in one line.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import asdict, dataclass
+from importlib import resources
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from adaptenv.adapt.analysis import Analysis
+from adaptenv.adapt.generators._trial import moved_geometry
+from adaptenv.adapt.generators.base import (
+    GenerationContext,
+    GenerationResult,
+    StepRecord,
+    keep_render,
+    render_scene,
+)
+from adaptenv.adapt.generators.builtin import MIN_MOVE
+from adaptenv.adapt.generators.edit_features import (
+    FEATURE_NAMES,
+    Scene,
+    candidate_features,
+    enumerate_candidates,
+)
+from adaptenv.adapt.objectives import RouteSpec
+from adaptenv.adapt.validation import EditValidator
+from adaptenv.errors import ConfigError
+from adaptenv.scene.house import House
+from adaptenv.sim.rollout import expert_policy, run_episode
+from adaptenv.sim.world import compile_world
+
+FORMAT = "adaptenv-learned-g/1"
+SHIPPED = "learned-g"
+"""The shipped scorer's file stem in ``adaptenv/agents/data`` (beside the shipped agents)."""
+OUTPUTS = ("accept", "success_drop", "spl_drop")
+"""What the scorer predicts per candidate: the logit that it passes every check, the drops in success and SPL."""
+#: Candidate edits drawn and scored per step.
+CANDIDATES = 64
+
+
+@dataclass(frozen=True)
+class ScorerConfig:
+    """The scorer's shape: inputs (the feature count), hidden width and hidden layers."""
+
+    n_features: int = len(FEATURE_NAMES)
+    hidden: int = 64
+    layers: int = 2
+
+
+def build_net(cfg: ScorerConfig):
+    """The MLP: ``layers`` hidden ReLU layers of width ``hidden``, then one output per :data:`OUTPUTS`."""
+    import torch.nn as nn
+
+    mods, width = [], cfg.n_features
+    for _ in range(cfg.layers):
+        mods += [nn.Linear(width, cfg.hidden), nn.ReLU()]
+        width = cfg.hidden
+    return nn.Sequential(*mods, nn.Linear(width, len(OUTPUTS)))
+
+
+def expected_gain(out: np.ndarray) -> np.ndarray:
+    """The score of each candidate from the net's outputs: P(passes every check) x (success drop + SPL drop)."""
+    return (1.0 / (1.0 + np.exp(-out[:, 0]))) * (out[:, 1] + out[:, 2])
+
+
+@dataclass
+class Scorer:
+    """A loaded scorer: the net (eval mode), the feature normalisation, its card and where it came from."""
+
+    net: Any
+    mean: np.ndarray
+    std: np.ndarray
+    meta: dict[str, Any]
+    path: Path | None = None
+
+    def outputs(self, features: np.ndarray) -> np.ndarray:
+        """(N, 3) raw outputs for (N, F) features, in one forward pass."""
+        import torch
+
+        x = torch.as_tensor((np.asarray(features, dtype=np.float32) - self.mean) / self.std)
+        with torch.no_grad():
+            return self.net(x).numpy().astype(np.float64)
+
+    def score(self, features: np.ndarray) -> np.ndarray:
+        """(N,) expected gain of each candidate (higher: try first)."""
+        if len(features) == 0:
+            return np.zeros(0)
+        return expected_gain(self.outputs(features))
+
+
+def shipped_path() -> Path:
+    """Where the shipped scorer lives inside the installed package."""
+    return Path(str(resources.files("adaptenv.agents") / "data" / f"{SHIPPED}.pt"))
+
+
+def save_scorer(path: str | Path, net, cfg: ScorerConfig, mean: np.ndarray, std: np.ndarray,
+                meta: dict[str, Any]) -> Path:
+    """Write a scorer atomically (float32 on CPU) with its normalisation and card."""
+    import torch
+
+    from adaptenv.agents.checkpoint import atomic_torch_save, non_finite_weight
+
+    if (bad := non_finite_weight(net)) is not None:
+        raise ConfigError(f"{path}: not written, the weight {bad} holds NaN or infinite values; train again with a "
+                          "lower learning rate")
+    return atomic_torch_save({
+        "format": FORMAT, "features": list(FEATURE_NAMES), "config": asdict(cfg),
+        "state_dict": {k: v.detach().to("cpu", torch.float32).clone() for k, v in net.state_dict().items()},
+        "mean": torch.as_tensor(mean, dtype=torch.float32), "std": torch.as_tensor(std, dtype=torch.float32),
+        "meta": dict(meta)}, path)
+
+
+def load_scorer(path: str | Path | None = None) -> Scorer:
+    """Read a scorer written by :func:`save_scorer` (default: the shipped one); any problem is one ConfigError."""
+    import torch
+
+    p = Path(path) if path is not None else shipped_path()
+    fix = "train one with `adaptenv gdata train DATA -o FILE.pt`"
+    if not p.is_file():
+        raise ConfigError(f"{p}: no such learned-G checkpoint; {fix}")
+    try:
+        doc = torch.load(p, map_location="cpu", weights_only=True)
+    except Exception as exc:  # torch raises many types for corrupt files
+        raise ConfigError(f"{p}: not a readable torch checkpoint ({type(exc).__name__}); {fix}") from None
+    if not isinstance(doc, dict) or doc.get("format") != FORMAT:
+        raise ConfigError(f"{p}: not a learned-G checkpoint (expected format {FORMAT!r}); {fix}")
+    if doc.get("features") != list(FEATURE_NAMES):
+        raise ConfigError(f"{p}: scores other candidate features than this version of adaptenv computes; {fix}")
+    try:
+        cfg = ScorerConfig(**doc["config"])
+        if cfg.n_features != len(FEATURE_NAMES) or not (1 <= cfg.hidden <= 4096 and 0 <= cfg.layers <= 8):
+            raise ValueError("shape")
+        net = build_net(cfg)
+        net.load_state_dict(doc["state_dict"])
+        mean = np.asarray(doc["mean"].numpy(), dtype=np.float32).reshape(len(FEATURE_NAMES))
+        std = np.asarray(doc["std"].numpy(), dtype=np.float32).reshape(len(FEATURE_NAMES))
+    except Exception as exc:
+        raise ConfigError(f"{p}: its config, weights or normalisation do not fit a learned-G scorer "
+                          f"({type(exc).__name__}); {fix}") from None
+    finite = all(bool(torch.isfinite(t).all()) for t in net.state_dict().values())
+    if not finite or not np.isfinite(mean).all() or not (np.isfinite(std).all() and (std > 0).all()):
+        raise ConfigError(f"{p}: holds NaN, infinite or zero-scale values; {fix}")
+    net.eval()
+    meta = doc.get("meta") if isinstance(doc.get("meta"), dict) else {}
+    return Scorer(net, mean, std, meta, p)
+
+
+class LearnedGenerator:
+    """G that scores candidate edits with a trained network and makes the best one that passes the checks."""
+
+    name = "learned"
+
+    def __init__(self, *, checkpoint: str | Path | None = None, candidates: int = CANDIDATES,
+                 require_expert: bool = True, scorer: Scorer | None = None):
+        self.scorer = scorer or load_scorer(checkpoint)
+        self.candidates = candidates
+        self.require_expert = require_expert
+        self._expert = expert_policy()
+
+    def generate(self, house: House, analysis: Analysis, *, steps: int, context: GenerationContext,
+                 rng: np.random.Generator) -> GenerationResult:
+        ep = context.episode
+        route = RouteSpec.from_episode(ep.target_type, ep.start, context.trajectory)
+        v = EditValidator(house, episode_targets=[ep.target_type], start=ep.start[:2])
+        result = GenerationResult(house=v.house, steps=[], edit_log=v.log, generator=self.name)
+        for step in range(steps):
+            world = compile_world(v.house, "candidate")
+            scene = Scene.of(v, world, route)
+            cands = enumerate_candidates(v, world, route, rng, self.candidates, scene=scene)
+            scores = self.scorer.score(candidate_features(v, scene, cands, analysis))
+            record = StepRecord(step=step, status="skipped", candidates=len(cands))
+            for tried, k in enumerate(np.argsort(-scores, kind="stable"), start=1):
+                c = cands[int(k)]
+                p = v.propose(c.object_id, c.dx_units, c.dy_units, c.rotation, relocate=c.relocate)
+                res = p.result
+                if not p.valid or not res.changed or (not res.rotation_applied and math.hypot(*res.achieved) < MIN_MOVE):
+                    continue
+                if self.require_expert:
+                    cw = compile_world(v.house, "candidate", geometry=moved_geometry(v.geometry, res))
+                    if not run_episode(cw, ep, self._expert, record=False).metrics.success:
+                        continue
+                edit = v.commit(p, source=self.name,
+                                intent=f"learned: {c.kind} move, expected drop {scores[int(k)]:+.3f} (rank {tried})")
+                record.status, record.edit, record.attempts = "applied", edit, tried
+                record.reason = f"the best-scored of {len(cands)} candidates that passed every check (tried {tried})"
+                if context.render:
+                    record.render = keep_render(result, render_scene(v.house, context,
+                                                                     highlight={edit.object_id: "gold"}), context, step)
+                break
+            else:
+                record.reason = ("no candidate passed placement, validation, the plausibility rules and the expert "
+                                 "check" if cands else "no movable object to edit")
+            result.steps.append(record)
+        result.house = v.house
+        return result
+
+
+__all__ = ["CANDIDATES", "FORMAT", "LearnedGenerator", "Scorer", "ScorerConfig", "build_net", "expected_gain",
+           "load_scorer", "save_scorer", "shipped_path"]

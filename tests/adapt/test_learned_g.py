@@ -1,0 +1,175 @@
+"""The learned G: its data (``adaptenv gdata collect``: rows, resume), its scorer (``gdata train``, checkpoints) and
+the generator itself (``adapt --generator learned``)."""
+
+from __future__ import annotations
+
+import gzip
+import json
+
+import numpy as np
+import pytest
+from typer.testing import CliRunner
+
+from adaptenv.adapt.gdata import (
+    ROWS,
+    SCHEMA,
+    CollectConfig,
+    Dataset,
+    collect,
+    house_sha256,
+    iter_rows,
+    load_rows,
+    run_settings,
+)
+from adaptenv.adapt.generators import GenerationContext, make_generator
+from adaptenv.adapt.generators.edit_features import FEATURE_NAMES
+from adaptenv.adapt.generators.learned import LearnedGenerator, load_scorer, shipped_path
+from adaptenv.adapt.plausibility import audit
+from adaptenv.adapt.validation import validate_scene
+from adaptenv.agents.houses import load_house_set
+from adaptenv.agents.policy import ExpertPolicy
+from adaptenv.agents.rollout import draw_episode, rollout
+from adaptenv.cli import app
+from adaptenv.errors import ConfigError
+
+runner = CliRunner()
+CFG = CollectConfig(tasks=1, candidates=6, episodes=1, seed=3)
+
+
+@pytest.fixture(scope="module")
+def tiny():
+    return load_house_set("preset:tiny")
+
+
+def _pairs(hs, n):
+    return [(h, {"spec": "preset:tiny", "name": w.name, "index": i, "sha256": house_sha256(h)})
+            for i, (h, w) in enumerate(zip(hs.houses[:n], hs.worlds[:n], strict=True))]
+
+
+@pytest.fixture(scope="module")
+def collected(tiny, tmp_path_factory):
+    out = tmp_path_factory.mktemp("gdata")
+    counts = collect(_pairs(tiny, 2), ExpertPolicy(), CFG, out)
+    return out, counts
+
+
+def test_rows_follow_the_documented_schema(collected, tiny):
+    out, counts = collected
+    rows = load_rows(out)
+    assert counts["houses"] == 2 and counts["rows"] == len(rows) == 2 * CFG.candidates
+    for r in rows:
+        assert r["schema"] == SCHEMA and r["house"]["spec"] == "preset:tiny"
+        assert set(r) >= {"house", "task", "candidate", "episode", "policy", "analysis", "edit", "placement",
+                          "accepted", "problems", "plausibility", "plausible", "expert_success", "effect", "features"}
+        assert len(r["features"]) == len(FEATURE_NAMES)
+        assert r["edit"]["generator"] in ("builtin", "random") and -100 <= r["edit"]["dx_units"] <= 100
+        if r["effect"] is not None:  # measured only when validation accepted it and the expert still solves it
+            assert r["accepted"] and r["expert_success"] and r["effect"]["episodes"] == CFG.episodes
+            assert r["effect"]["spl_drop"] == pytest.approx(r["effect"]["spl_before"] - r["effect"]["spl_after"])
+        if not r["accepted"]:
+            assert r["effect"] is None
+    assert any(r["effect"] is not None for r in rows) and any(not r["accepted"] for r in rows)
+    # the house reference rebuilds the house exactly
+    ref = rows[0]["house"]
+    assert house_sha256(tiny.houses[[w.name for w in tiny.worlds].index(ref["name"])]) == ref["sha256"]
+    meta = json.loads((out / "meta.json").read_text())
+    assert meta["features"] == list(FEATURE_NAMES) and meta["collect"]["candidates"] == CFG.candidates
+
+
+def test_collection_resumes_and_drops_an_unfinished_house(collected, tiny, tmp_path):
+    out, _ = collected
+    folder = tmp_path / "d"
+    folder.mkdir()
+    for name in (ROWS, "houses.jsonl", "meta.json"):
+        (folder / name).write_bytes((out / name).read_bytes())
+    lines = (folder / "houses.jsonl").read_text().splitlines()
+    (folder / "houses.jsonl").write_text(lines[0] + "\n")  # the second house did not finish...
+    with open(folder / ROWS, "ab") as f:  # ...and an append was cut short
+        f.write(gzip.compress(b'{"torn": ')[:-6])
+    ds = Dataset(folder)
+    done = ds.start(run_settings(ExpertPolicy(), CFG))
+    assert len(done) == 1
+    kept = list(iter_rows(folder / ROWS))
+    assert len(kept) == CFG.candidates and {r["house"]["name"] for r in kept} == {json.loads(lines[0])["key"].split("#")[1]}
+    counts = collect(_pairs(tiny, 2), ExpertPolicy(), CFG, folder)  # finishes the second house only
+    assert counts["houses"] == 2 and counts["rows"] == 2 * CFG.candidates
+    assert load_rows(folder) == load_rows(out)  # the same rows as the uninterrupted run
+
+
+def test_collection_with_other_settings_is_refused(collected, tiny):
+    out, _ = collected
+    with pytest.raises(ConfigError, match="other settings"):
+        collect(_pairs(tiny, 1), ExpertPolicy(), CollectConfig(tasks=1, candidates=7, episodes=1, seed=3), out)
+
+
+def test_train_writes_a_scorer_and_its_card(collected, tmp_path):
+    out, _ = collected
+    ckpt = tmp_path / "g.pt"
+    result = runner.invoke(app, ["gdata", "train", str(out), "-o", str(ckpt), "--epochs", "3", "--heldin", "2"])
+    assert result.exit_code == 0, result.output
+    card = json.loads(ckpt.with_suffix(".json").read_text())
+    assert card["data"]["rows"] == 2 * CFG.candidates and len(card["data"]["heldin_houses"]) == 1
+    assert 1 <= card["selection"]["epoch"] <= 3
+    scorer = load_scorer(ckpt)
+    assert scorer.score(np.zeros((4, len(FEATURE_NAMES)), np.float32)).shape == (4,)
+
+
+def test_shipped_scorer_loads_and_a_corrupt_one_is_refused_in_one_line(tmp_path):
+    scorer = load_scorer()
+    assert scorer.path == shipped_path() and scorer.meta["data"]["houses"] >= 2
+    assert shipped_path().stat().st_size < 400_000
+    bad = tmp_path / "bad.pt"
+    bad.write_bytes(b"not a checkpoint")
+    with pytest.raises(ConfigError) as err:
+        load_scorer(bad)
+    assert "\n" not in str(err.value) and "gdata train" in str(err.value)
+    with pytest.raises(ConfigError, match="no such learned-G checkpoint"):
+        make_generator("learned", checkpoint=tmp_path / "missing.pt")
+
+
+def test_learned_g_edits_pass_validation_and_the_audit_deterministically(tiny):
+    house, world = tiny.houses[0], tiny.worlds[0]
+    ep = draw_episode(world, np.random.default_rng(0))
+    ctx = GenerationContext(episode=ep, trajectory=rollout(world, ep, ExpertPolicy()), render=False)
+    from adaptenv.adapt.analysis import analyze_trajectory
+
+    analysis = analyze_trajectory(ctx.trajectory, world)
+    gen = LearnedGenerator()
+    runs = [gen.generate(house, analysis, steps=2, context=ctx, rng=np.random.default_rng(5)) for _ in range(2)]
+    a, b = runs
+    assert [s.edit for s in a.steps] == [s.edit for s in b.steps]
+    assert a.applied, [s.reason for s in a.steps]
+    assert all(e.accepted and e.changed and e.source == "learned" for e in a.applied)
+    assert validate_scene(a.house, episode_targets=[ep.target_type], start=ep.start[:2], original=house) == []
+    assert audit(house, a.house).total == 0
+
+
+def test_adapt_with_the_learned_generator_end_to_end(tiny, tmp_path):
+    from adaptenv.scene.house import save_house
+
+    path = save_house(tiny.houses[1], tmp_path / "h.json")
+    out = tmp_path / "out"
+    result = runner.invoke(app, ["adapt", str(path), "--generator", "learned", "--policy", "expert", "--steps", "2",
+                                 "--seed", "1", "-o", str(out)])
+    assert result.exit_code == 0, result.output
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["generator"] == "learned" and summary["valid"] and summary["edits_applied"] >= 1
+    assert sum(summary["plausibility"].values()) == 0
+
+
+def test_collect_refuses_held_out_houses(tmp_path):
+    result = runner.invoke(app, ["gdata", "collect", "--houses", "suite:large", "-o", str(tmp_path / "x")])
+    assert isinstance(result.exception, ConfigError) and "not training data" in str(result.exception)
+
+
+def test_chosen_drop_scores_the_edit_the_g_would_make():
+    from adaptenv.adapt.gtrain import Arrays, chosen_drop
+
+    # two tasks; in task 0 the best-scored candidate is unusable, so the G makes the second-best one
+    a = Arrays(x=np.zeros((5, 1), np.float32), usable=np.array([0, 1, 1, 1, 1], np.float32),
+               drops=np.array([[1, 1], [0, 0.2], [0, 0.1], [0, 0.3], [0, -0.1]], np.float32),
+               measured=np.ones(5, np.float32), group=np.array([0, 0, 0, 1, 1]), heldin=np.ones(5, bool))
+    got = chosen_drop(np.array([9.0, 2.0, 1.0, 0.0, 5.0]), a, a.heldin)
+    assert got["groups"] == 2
+    assert got["chosen"] == pytest.approx((0.2 - 0.1) / 2) and got["best"] == pytest.approx((0.2 + 0.3) / 2)
+    assert got["random"] == pytest.approx((0.15 + 0.1) / 2)
