@@ -163,7 +163,9 @@ def number_cases() -> list[Case]:
                 out.append(Case(f"{at} nan", (*path, flag, "nan"), (f"{flag} nan:",), 2 if param.min is not None or
                                 param.max is not None else 1))
                 if callback == "finite" or name in CHECKED_IN_COMMAND:
-                    out.append(Case(f"{at} inf", (*path, flag, "inf"), (f"{flag} inf:",), 1))
+                    # a finite maximum is click's range: it refuses inf itself, as a usage error
+                    out.append(Case(f"{at} inf", (*path, flag, "inf"), (f"{flag} inf:",), 2 if param.max is not None
+                                    else 1))
             if name in CHECKED_IN_COMMAND or callback in ("seed", "episodes"):
                 out.append(Case(f"{at} -1", (*path, flag, "-1"), (f"{flag} -1",), 1))
             if callback in ("seed", "episodes", "episodes_or_none"):
