@@ -2,7 +2,7 @@
 
 Two steps, so that the adaptation can run on any revision and the audit with the current rules:
 
-    python measure.py adapt OUT TAG     # adapt every house with the built-in and failure-mode G; writes OUT/TAG/
+    python measure.py adapt OUT TAG [POLICY]  # adapt every house with the built-in and failure-mode G; writes OUT/TAG/
     python measure.py audit OUT TAG...  # audit OUT/TAG/ with the rules of the code on PYTHONPATH; prints a table
 
 Houses: the first ``HOUSES`` houses of ``preset:validation`` (procedural) and the real-format ProcTHOR house of
@@ -19,7 +19,10 @@ from pathlib import Path
 
 import numpy as np
 
-HOUSES, REAL_SEEDS, STEPS, SEED, POLICY = 20, 3, 3, 0, "pretrained"  # the scan-only agent at the measured commits (pretrained-scan since)
+HOUSES, REAL_SEEDS, STEPS, SEED = 20, 3, 3, 0
+#: The policy solving the episodes and checking G's candidates: ``pretrained`` at the commits before cf96152 was the
+#: scan-only agent (``pretrained-scan`` since); ``pretrained`` is now the PPO-tuned map agent.
+POLICY = "pretrained"
 GENERATORS = ("builtin", "failure-modes")
 REAL = Path(__file__).resolve().parents[3] / "tests" / "data" / "procthor-10k-train-1.json"
 
@@ -37,7 +40,7 @@ def jobs():
         yield f"real-seed{s}", real
 
 
-def adapt(out: Path, tag: str) -> None:
+def adapt(out: Path, tag: str, policy: str = POLICY) -> None:
     from adaptenv.adapt.analysis import BuiltinAnalyzer
     from adaptenv.adapt.generators import make_generator
     from adaptenv.adapt.step import adapt_scene
@@ -48,7 +51,7 @@ def adapt(out: Path, tag: str) -> None:
 
     folder = out / tag
     folder.mkdir(parents=True, exist_ok=True)
-    agent, analyzer = resolve_policy(POLICY, seed=SEED), BuiltinAnalyzer()
+    agent, analyzer = resolve_policy(policy, seed=SEED), BuiltinAnalyzer()
     with open(folder / "rows.jsonl", "w") as rows:
         for n, (name, house) in enumerate(jobs()):
             world = compile_world(house, name)
@@ -102,7 +105,7 @@ def audit(out: Path, tags: list[str]) -> None:
 
 if __name__ == "__main__":
     if len(sys.argv) >= 4 and sys.argv[1] == "adapt":
-        adapt(Path(sys.argv[2]), sys.argv[3])
+        adapt(Path(sys.argv[2]), sys.argv[3], *sys.argv[4:5])
     elif len(sys.argv) >= 4 and sys.argv[1] == "audit":
         audit(Path(sys.argv[2]), sys.argv[3:])
     else:

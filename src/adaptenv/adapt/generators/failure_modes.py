@@ -222,6 +222,8 @@ class FailureModeGenerator(BuiltinGenerator):
     name = "failure-modes"
 
     def __init__(self, *, tolerance: float = 1e-6, relocate_targets: bool = False, door_edits: bool = False, **kw):
+        kw.setdefault("max_candidates", 16)
+        kw.setdefault("rollout_candidates", 3)
         super().__init__(**kw)
         self.tolerance = tolerance
         self.relocate_targets = relocate_targets
