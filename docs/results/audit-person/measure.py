@@ -2,7 +2,8 @@
 
 Two steps, so that the adaptation can run on any revision and the audit with the current rules:
 
-    python measure.py adapt OUT TAG [POLICY]  # adapt every house with the built-in and failure-mode G; writes OUT/TAG/
+    python measure.py adapt OUT TAG [POLICY [G,...]]  # adapt every house with each G (default: built-in and
+                                                      # failure-mode) checked with POLICY; writes OUT/TAG/
     python measure.py audit OUT TAG...  # audit OUT/TAG/ with the rules of the code on PYTHONPATH; prints a table
 
 Houses: the first ``HOUSES`` houses of ``preset:validation`` (procedural) and the real-format ProcTHOR house of
@@ -40,7 +41,7 @@ def jobs():
         yield f"real-seed{s}", real
 
 
-def adapt(out: Path, tag: str, policy: str = POLICY) -> None:
+def adapt(out: Path, tag: str, policy: str = POLICY, generators: tuple[str, ...] = GENERATORS) -> None:
     from adaptenv.adapt.analysis import BuiltinAnalyzer
     from adaptenv.adapt.generators import make_generator
     from adaptenv.adapt.step import adapt_scene
@@ -52,7 +53,7 @@ def adapt(out: Path, tag: str, policy: str = POLICY) -> None:
     folder = out / tag
     folder.mkdir(parents=True, exist_ok=True)
     agent, analyzer = resolve_policy(policy, seed=SEED), BuiltinAnalyzer()
-    with open(folder / "rows.jsonl", "w") as rows:
+    with open(folder / "rows.jsonl", "a") as rows:
         for n, (name, house) in enumerate(jobs()):
             world = compile_world(house, name)
             found = find_solved_episode(world, agent, np.random.default_rng([SEED, n]), tries=10)
@@ -61,7 +62,7 @@ def adapt(out: Path, tag: str, policy: str = POLICY) -> None:
                 continue
             episode, before = found
             save_house(house, folder / f"{name}-original.json")
-            for gen in GENERATORS:
+            for gen in generators:
                 res = adapt_scene(house, episode, policy=agent, analyzer=analyzer, generator=make_generator(gen),
                                   steps=STEPS, rng=np.random.default_rng([SEED, n, 1]), before=before, name=name)
                 save_house(res.house, folder / f"{name}-{gen}.json")
@@ -69,9 +70,16 @@ def adapt(out: Path, tag: str, policy: str = POLICY) -> None:
                                        "success_before": bool(before.metrics.success),
                                        "success_after": bool(res.after.metrics.success),
                                        "spl_before": float(before.metrics.spl), "spl_after": float(res.after.metrics.spl),
-                                       "edits": int(res.edits_applied)}) + "\n")
+                                       "edits": int(res.edits_applied), "policy": policy,
+                                       "steps": [_counts(s) for s in res.generation.steps]}) + "\n")
                 rows.flush()
             print(name, flush=True)
+
+
+def _counts(step) -> dict:
+    """A G step's search cost: candidates drawn, passing their dry run, checked with the policy; its status."""
+    return {"status": step.status, "drawn": int(step.candidates), "passed": int(getattr(step, "passed", 0)),
+            "checked": int(getattr(step, "checked", 0)), "check_steps": int(step.check_steps)}
 
 
 def audit(out: Path, tags: list[str]) -> None:
@@ -84,9 +92,11 @@ def audit(out: Path, tags: list[str]) -> None:
     print("|---|---|---|---|---|---|---|---|---|")
     for tag in tags:
         folder = out / tag
-        rows = [json.loads(line) for line in open(folder / "rows.jsonl")]
+        rows = [json.loads(line) for line in (folder / "rows.jsonl").read_text().splitlines()]
         for gen in GENERATORS:
             mine = [r for r in rows if r.get("generator") == gen]
+            if not mine:
+                continue
             counts: Counter[str] = Counter()
             for r in mine:
                 original = load_house(folder / f"{r['job']}-original.json", validate=False)
@@ -105,7 +115,8 @@ def audit(out: Path, tags: list[str]) -> None:
 
 if __name__ == "__main__":
     if len(sys.argv) >= 4 and sys.argv[1] == "adapt":
-        adapt(Path(sys.argv[2]), sys.argv[3], *sys.argv[4:5])
+        policy = sys.argv[4] if len(sys.argv) > 4 else POLICY
+        adapt(Path(sys.argv[2]), sys.argv[3], policy, tuple(sys.argv[5].split(",")) if len(sys.argv) > 5 else GENERATORS)
     elif len(sys.argv) >= 4 and sys.argv[1] == "audit":
         audit(Path(sys.argv[2]), sys.argv[3:])
     else:

@@ -233,7 +233,7 @@ class BuiltinGenerator:
             tried = self._try(v, cands, route, original, ep)
             rollouts: dict[int, tuple[int, float]] = {}
             record = StepRecord(step=step, status="skipped", suggestion_id=order[0].id,
-                                suggestion_kind=order[0].kind, candidates=len(cands),
+                                suggestion_kind=order[0].kind, candidates=len(cands), passed=len(tried),
                                 objective_before=values.as_dict())
             if not tried:
                 record.reason = "no candidate move passed placement and validation"
@@ -427,6 +427,7 @@ class BuiltinGenerator:
         first = record.policy_score_before is None
         batch = run_in_worlds(([world] if first else []) + [c.world for c in todo], episodes, context.policy)
         record.check_steps += total_steps(batch)
+        record.checked += len(todo)
         runs = iter(batch)
         if first:
             record.policy_score_before = mean_spl(next(runs))

@@ -246,7 +246,7 @@ class FailureModeGenerator(BuiltinGenerator):
                                  (o.dx_units, o.dy_units, o.rotation) for o in cands)]
             tried = self._try(v, cands, route, reference, ep)
             record = StepRecord(step=step, status="skipped", suggestion_kind=family, failure_mode=family,
-                                candidates=len(cands), objective_before=values.as_dict())
+                                candidates=len(cands), passed=len(tried), objective_before=values.as_dict())
             if not tried:
                 record.reason = "no candidate move passed placement and validation"
                 result.steps.append(record)
@@ -292,6 +292,7 @@ class FailureModeGenerator(BuiltinGenerator):
         head = ranked[: self.rollout_candidates]
         runs = run_in_worlds([world] + [c.world for c in head], episodes, context.policy)
         record.check_steps += total_steps(runs)
+        record.checked += len(head)
         record.policy_score_before = mean_spl(runs[0])
         for c, trajs in zip(head, runs[1:], strict=True):
             c.policy_score = mean_spl(trajs)
