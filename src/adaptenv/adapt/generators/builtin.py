@@ -9,7 +9,8 @@ Per step (offline, deterministic for a given rng):
    their back to a wall slide along it (:func:`along_wall`) or are set against the parallel wall
    nearest to where the move aimed (:func:`to_wall`, a relocation inside their room) instead. The targets
    themselves are never moved, so the episode stays comparable (the validator refuses it:
-   ``target_moved``).
+   ``target_moved``). Each move is fitted to the plausibility rules before its dry run
+   (:func:`fit_rules`: shortened until its end pose breaks none, or not drawn).
 3. Dry-run them in order (up to ``POOL`` times ``max_candidates`` drawn, until ``max_candidates``
    pass) through collision-aware placement and incremental validation
    (:meth:`~adaptenv.adapt.validation.EditValidator.propose`, which also applies the plausibility
@@ -18,9 +19,9 @@ Per step (offline, deterministic for a given rng):
    ``realism_weight`` times the change in realism (:mod:`adaptenv.adapt.realism`). Candidates on
    which the shortest-path expert no longer solves the episode are dropped (``require_expert``):
    the raster says the route exists, but the agent's continuous motion may not fit through it.
-4. With a policy in the context, roll it out on the best few candidates (the same start and
-   target, a few headings) and prefer the one that lowers its mean SPL most: the paper's argmin
-   over R subject to validity.
+4. With a policy in the context, roll it out on the best candidates of ``rollout_candidates``
+   distinct objects (the same start and target, a few headings) and prefer the one on which it
+   succeeds least often, then with the lowest mean SPL: the paper's argmin over R subject to validity.
 5. Verification: the targeted objective must move in the intended direction; otherwise revise
    by taking the next candidate (at most ``max_revisions`` times).
 6. Commit the chosen proposal with ``EditValidator.commit``, re-render.
