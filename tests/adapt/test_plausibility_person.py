@@ -159,8 +159,14 @@ def test_builtin_g_candidates_respect_the_rules_by_construction():
     assert len(cands) >= 30 and {c.kind for c in cands} >= {"turn", "sideways"}
     now = {f.object_id: f for f in v.geometry.footprints}
     upm = v.ctx.grid.units_per_meter
-    for c in cands:  # the pose each asks for breaks no rule (placement may still stop short of it)
+
+    def broken(c) -> list:
         i = v.ctx.index[c.object_id]
         yaw = float(v.ctx.yaws[i]) if c.rotation is None else c.rotation
-        fp = v.footprint_at(i, v.ctx.centers[i] + np.array([c.dx_units, c.dy_units]) / upm, yaw)
-        assert check_move(v.plausible, fp, now) == [], c
+        return check_move(v.plausible, v.footprint_at(i, v.ctx.centers[i] + np.array([c.dx_units, c.dy_units]) / upm,
+                                                      yaw), now)
+
+    assert all(broken(c) == [] for c in cands)  # the pose each asks for breaks no rule (placement may stop short)
+    unfitted = BuiltinGenerator(fit_to_rules=False)._candidates(v, compile_world(v.house, "c"), route, targets,
+                                                                np.random.default_rng(3), limit=60)
+    assert any(broken(c) for c in unfitted)  # drawn as they come, some would be refused

@@ -2,8 +2,9 @@
 
 Two steps, so that the adaptation can run on any revision and the audit with the current rules:
 
-    python measure.py adapt OUT TAG [POLICY [G,...]]  # adapt every house with each G (default: built-in and
+    python measure.py adapt OUT TAG [POLICY [G;...]]  # adapt every house with each G (default: built-in and
                                                       # failure-mode) checked with POLICY; writes OUT/TAG/
+                                                      # (a G with settings: builtin:max_candidates=16,fit_to_rules=false)
     python measure.py audit OUT TAG...  # audit OUT/TAG/ with the rules of the code on PYTHONPATH; prints a table
 
 Houses: the first ``HOUSES`` houses of ``preset:validation`` (procedural) and the real-format ProcTHOR house of
@@ -43,7 +44,6 @@ def jobs():
 
 def adapt(out: Path, tag: str, policy: str = POLICY, generators: tuple[str, ...] = GENERATORS) -> None:
     from adaptenv.adapt.analysis import BuiltinAnalyzer
-    from adaptenv.adapt.generators import make_generator
     from adaptenv.adapt.step import adapt_scene
     from adaptenv.agents.registry import resolve_policy
     from adaptenv.agents.rollout import find_solved_episode
@@ -63,9 +63,9 @@ def adapt(out: Path, tag: str, policy: str = POLICY, generators: tuple[str, ...]
             episode, before = found
             save_house(house, folder / f"{name}-original.json")
             for gen in generators:
-                res = adapt_scene(house, episode, policy=agent, analyzer=analyzer, generator=make_generator(gen),
+                res = adapt_scene(house, episode, policy=agent, analyzer=analyzer, generator=_generator(gen),
                                   steps=STEPS, rng=np.random.default_rng([SEED, n, 1]), before=before, name=name)
-                save_house(res.house, folder / f"{name}-{gen}.json")
+                save_house(res.house, folder / f"{name}-{_slug(gen)}.json")
                 rows.write(json.dumps({"job": name, "solved": True, "generator": gen, "target": episode.target_type,
                                        "success_before": bool(before.metrics.success),
                                        "success_after": bool(res.after.metrics.success),
@@ -74,6 +74,20 @@ def adapt(out: Path, tag: str, policy: str = POLICY, generators: tuple[str, ...]
                                        "steps": [_counts(s) for s in res.generation.steps]}) + "\n")
                 rows.flush()
             print(name, flush=True)
+
+
+def _generator(spec: str):
+    """A G from ``name`` or ``name:key=value,...`` (values read as JSON: 16, false)."""
+    from adaptenv.adapt.generators import make_generator
+
+    name, _, settings = spec.partition(":")
+    kw = {k: json.loads(v) for k, v in (item.split("=") for item in settings.split(",") if item)}
+    return make_generator(name, **kw)
+
+
+def _slug(spec: str) -> str:
+    """A file-name form of a G spec."""
+    return spec.replace(":", "-").replace(",", "-").replace("=", "")
 
 
 def _counts(step) -> dict:
@@ -93,14 +107,14 @@ def audit(out: Path, tags: list[str]) -> None:
     for tag in tags:
         folder = out / tag
         rows = [json.loads(line) for line in (folder / "rows.jsonl").read_text().splitlines()]
-        for gen in GENERATORS:
+        for gen in dict.fromkeys(r["generator"] for r in rows if "generator" in r):
             mine = [r for r in rows if r.get("generator") == gen]
             if not mine:
                 continue
             counts: Counter[str] = Counter()
             for r in mine:
                 original = load_house(folder / f"{r['job']}-original.json", validate=False)
-                adapted = load_house(folder / f"{r['job']}-{gen}.json", validate=False)
+                adapted = load_house(folder / f"{r['job']}-{_slug(gen)}.json", validate=False)
                 report = run_audit(original, adapted)
                 counts.update(v.rule for v in report.violations)
                 for v in report.violations:
@@ -116,7 +130,7 @@ def audit(out: Path, tags: list[str]) -> None:
 if __name__ == "__main__":
     if len(sys.argv) >= 4 and sys.argv[1] == "adapt":
         policy = sys.argv[4] if len(sys.argv) > 4 else POLICY
-        adapt(Path(sys.argv[2]), sys.argv[3], policy, tuple(sys.argv[5].split(",")) if len(sys.argv) > 5 else GENERATORS)
+        adapt(Path(sys.argv[2]), sys.argv[3], policy, tuple(sys.argv[5].split(";")) if len(sys.argv) > 5 else GENERATORS)
     elif len(sys.argv) >= 4 and sys.argv[1] == "audit":
         audit(Path(sys.argv[2]), sys.argv[3:])
     else:

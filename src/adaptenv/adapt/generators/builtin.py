@@ -208,8 +208,12 @@ class BuiltinGenerator:
     """Whether the validator lets the episode's target instances move (only edit kinds that relocate the target)."""
 
     def __init__(self, *, max_candidates: int = 24, realism_weight: float = 0.5, other_weight: float = 0.25,
-                 rollout_candidates: int = 5, max_revisions: int = 2, require_expert: bool = True):
+                 rollout_candidates: int = 5, max_revisions: int = 2, require_expert: bool = True,
+                 fit_to_rules: bool = True):
+        """``fit_to_rules``: fit every move to the plausibility rules before its dry run (:func:`fit_rules`; off only
+        to measure what the fitting adds: the validator refuses what breaks a rule either way)."""
         self.max_candidates = max_candidates
+        self.fit_to_rules = fit_to_rules
         self.require_expert = require_expert
         self._expert = expert_policy()
         self.realism_weight = realism_weight
@@ -363,7 +367,7 @@ class BuiltinGenerator:
                 d, rotation, relocate, kind = w[0], w[1], True, "to_wall"
             else:
                 d, rotation = along_wall(v, oid, d, rotation, rng)
-            fitted = fit_rules(v, current, oid, d, rotation, shrink=not relocate)
+            fitted = fit_rules(v, current, oid, d, rotation, shrink=not relocate) if self.fit_to_rules else d
             if fitted is None:
                 continue
             d = fitted
