@@ -6,6 +6,9 @@ Two steps, so that the adaptation can run on any revision and the audit with the
                                                       # failure-mode) checked with POLICY; writes OUT/TAG/
                                                       # (a G with settings: builtin:max_candidates=16,fit_to_rules=false)
     python measure.py audit OUT TAG...  # audit OUT/TAG/ with the rules of the code on PYTHONPATH; prints a table
+    python measure.py cost OUT TAG...   # the search's counts per step (drawn, passing the dry run, policy-checked)
+
+``adapt`` appends to OUT/TAG/rows.jsonl, so several G can be run into one TAG one after another.
 
 Houses: the first ``HOUSES`` houses of ``preset:validation`` (procedural) and the real-format ProcTHOR house of
 tests/data on ``REAL_SEEDS`` episode seeds. Per house: an episode the policy solves (10 draws at most), then
@@ -127,11 +130,27 @@ def audit(out: Path, tags: list[str]) -> None:
                   f"{100 * (before - after):.1f} | {spl:.3f} | {bad} |")
 
 
+def cost(out: Path, tags: list[str]) -> None:
+    """Print each G's mean counts per step (rows of 51fb814 on; earlier rows have none)."""
+    print("| revision | G | candidates drawn | passing their dry run | checked with the policy (max) |")
+    print("|---|---|---|---|---|")
+    for tag in tags:
+        rows = [json.loads(line) for line in (out / tag / "rows.jsonl").read_text().splitlines()]
+        for gen in dict.fromkeys(r["generator"] for r in rows if "generator" in r):
+            steps = [s for r in rows if r.get("generator") == gen for s in r.get("steps", [])]
+            if steps:
+                mean = {k: np.mean([s[k] for s in steps]) for k in ("drawn", "passed", "checked")}
+                print(f"| {tag} | {gen} | {mean['drawn']:.1f} | {mean['passed']:.1f} | {mean['checked']:.2f} "
+                      f"({max(s['checked'] for s in steps)}) |")
+
+
 if __name__ == "__main__":
     if len(sys.argv) >= 4 and sys.argv[1] == "adapt":
         policy = sys.argv[4] if len(sys.argv) > 4 else POLICY
         adapt(Path(sys.argv[2]), sys.argv[3], policy, tuple(sys.argv[5].split(";")) if len(sys.argv) > 5 else GENERATORS)
     elif len(sys.argv) >= 4 and sys.argv[1] == "audit":
         audit(Path(sys.argv[2]), sys.argv[3:])
+    elif len(sys.argv) >= 4 and sys.argv[1] == "cost":
+        cost(Path(sys.argv[2]), sys.argv[3:])
     else:
         sys.exit(__doc__)
