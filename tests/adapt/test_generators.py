@@ -62,11 +62,21 @@ def test_builtin_edits_are_valid_verified_and_harder(scene, builtin_run):
         assert sign * (s.objective_after[kind] - s.objective_before[kind]) > 0
         assert s.edit.accepted and s.edit.source == "builtin" and s.candidates > 0
         assert s.policy_score_before is not None
+        assert 0 < s.passed <= min(s.candidates, 12) and 0 < s.checked <= s.passed  # the search's cost is recorded
     assert len(res.objective_trace) == 1 + len(applied)
     assert validate_scene(res.house, episode_targets=[ep.target_type], start=ep.start[:2], original=house) == []
     assert validate_house(res.house) == []
     new_world = compile_world(res.house, "after")
     assert run_episode(new_world, ep, expert_policy()).metrics.success
+
+
+def test_policy_checks_moves_of_distinct_objects():
+    from adaptenv.adapt.generators.builtin import Candidate, _distinct_head
+
+    ranked = [Candidate(oid, 1.0, 0.0, None, "toward") for oid in ("a", "a", "b", "a", "c", "d")]
+    assert [c.object_id for c in _distinct_head(ranked, 3)] == ["a", "b", "c"]
+    head = _distinct_head(ranked, 6)  # too few objects: the next best fill it
+    assert [c.object_id for c in head] == ["a", "b", "c", "d", "a", "a"] and head[4] is ranked[1]
 
 
 def test_builtin_never_moves_targets_and_replays(scene, builtin_run):

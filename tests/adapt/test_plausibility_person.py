@@ -126,3 +126,47 @@ def test_fridge_in_front_of_a_window(window_room):
     assert _rules(window_room, _moved(window_room, "Fridge|0", 3.5, 1.2)) == {"edge_off_wall"}  # 0.84 m off: free
     assert _rules(window_room, _moved(window_room, "Sofa|1", 3.5, 0.475)) == set()  # low: it stands under it
     assert _refused_by(window_room, "Fridge|0", 2.5, 0.0, None, (5.5, 4.5)) == {"blocks_window"}
+
+
+def test_builtin_g_fits_moves_to_the_rules(dining, window_room):
+    from adaptenv.adapt.generators.builtin import fit_rules
+
+    v = EditValidator(dining, start=(5.5, 4.5))
+    now = {f.object_id: f for f in v.geometry.footprints}
+    d = fit_rules(v, now, "DiningTable|0", np.array([0.0, 0.45]), None)
+    assert np.allclose(d, [0.0, 0.225])  # 0.45 and 0.34 m leave its chairs behind; half of it does not
+    assert np.allclose(fit_rules(v, now, "Chair|1", np.array([0.0, 0.2]), None), [0.0, 0.2])  # nothing to fit
+    assert fit_rules(v, now, "DiningTable|0", np.zeros(2), 90.0) is None  # the turn leaves the chairs at its corners
+    w = EditValidator(window_room, start=(5.5, 4.5))
+    now = {f.object_id: f for f in w.geometry.footprints}
+    assert np.allclose(fit_rules(w, now, "Fridge|0", np.array([2.5, 0.0]), None), [1.25, 0.0])  # stops beside it
+    assert fit_rules(w, now, "Fridge|0", np.array([2.5, 0.0]), None, shrink=False) is None
+
+
+def test_builtin_g_candidates_respect_the_rules_by_construction():
+    from adaptenv.adapt.generators.builtin import BuiltinGenerator
+    from adaptenv.adapt.objectives import RouteSpec
+    from adaptenv.adapt.plausibility import check_move
+    from adaptenv.sim.world import compile_world
+    from tests.adapt.scenes import procedural_scene
+
+    house, world, ep, traj, _ = procedural_scene(3, 5, [0, 1])
+    v = EditValidator(house, episode_targets=[ep.target_type], start=ep.start[:2])
+    route = RouteSpec.from_episode(ep.target_type, ep.start, traj)
+    targets = {t.object_id for t in world.instances_of(ep.target_type)}
+    cands = BuiltinGenerator()._candidates(v, compile_world(v.house, "c"), route, targets, np.random.default_rng(3),
+                                           limit=60)
+    assert len(cands) >= 30 and {c.kind for c in cands} >= {"turn", "sideways"}
+    now = {f.object_id: f for f in v.geometry.footprints}
+    upm = v.ctx.grid.units_per_meter
+
+    def broken(c) -> list:
+        i = v.ctx.index[c.object_id]
+        yaw = float(v.ctx.yaws[i]) if c.rotation is None else c.rotation
+        return check_move(v.plausible, v.footprint_at(i, v.ctx.centers[i] + np.array([c.dx_units, c.dy_units]) / upm,
+                                                      yaw), now)
+
+    assert all(broken(c) == [] for c in cands)  # the pose each asks for breaks no rule (placement may stop short)
+    unfitted = BuiltinGenerator(fit_to_rules=False)._candidates(v, compile_world(v.house, "c"), route, targets,
+                                                                np.random.default_rng(3), limit=60)
+    assert any(broken(c) for c in unfitted)  # drawn as they come, some would be refused

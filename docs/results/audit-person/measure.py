@@ -2,8 +2,13 @@
 
 Two steps, so that the adaptation can run on any revision and the audit with the current rules:
 
-    python measure.py adapt OUT TAG     # adapt every house with the built-in and failure-mode G; writes OUT/TAG/
+    python measure.py adapt OUT TAG [POLICY [G;...]]  # adapt every house with each G (default: built-in and
+                                                      # failure-mode) checked with POLICY; writes OUT/TAG/
+                                                      # (a G with settings: builtin:max_candidates=16,fit_to_rules=false)
     python measure.py audit OUT TAG...  # audit OUT/TAG/ with the rules of the code on PYTHONPATH; prints a table
+    python measure.py cost OUT TAG...   # the search's counts per step (drawn, passing the dry run, policy-checked)
+
+``adapt`` appends to OUT/TAG/rows.jsonl, so several G can be run into one TAG one after another.
 
 Houses: the first ``HOUSES`` houses of ``preset:validation`` (procedural) and the real-format ProcTHOR house of
 tests/data on ``REAL_SEEDS`` episode seeds. Per house: an episode the policy solves (10 draws at most), then
@@ -19,7 +24,10 @@ from pathlib import Path
 
 import numpy as np
 
-HOUSES, REAL_SEEDS, STEPS, SEED, POLICY = 20, 3, 3, 0, "pretrained"  # the scan-only agent at the measured commits (pretrained-scan since)
+HOUSES, REAL_SEEDS, STEPS, SEED = 20, 3, 3, 0
+#: The policy solving the episodes and checking G's candidates: ``pretrained`` at the commits before cf96152 was the
+#: scan-only agent (``pretrained-scan`` since); ``pretrained`` is now the PPO-tuned map agent.
+POLICY = "pretrained"
 GENERATORS = ("builtin", "failure-modes")
 REAL = Path(__file__).resolve().parents[3] / "tests" / "data" / "procthor-10k-train-1.json"
 
@@ -37,9 +45,8 @@ def jobs():
         yield f"real-seed{s}", real
 
 
-def adapt(out: Path, tag: str) -> None:
+def adapt(out: Path, tag: str, policy: str = POLICY, generators: tuple[str, ...] = GENERATORS) -> None:
     from adaptenv.adapt.analysis import BuiltinAnalyzer
-    from adaptenv.adapt.generators import make_generator
     from adaptenv.adapt.step import adapt_scene
     from adaptenv.agents.registry import resolve_policy
     from adaptenv.agents.rollout import find_solved_episode
@@ -48,8 +55,8 @@ def adapt(out: Path, tag: str) -> None:
 
     folder = out / tag
     folder.mkdir(parents=True, exist_ok=True)
-    agent, analyzer = resolve_policy(POLICY, seed=SEED), BuiltinAnalyzer()
-    with open(folder / "rows.jsonl", "w") as rows:
+    agent, analyzer = resolve_policy(policy, seed=SEED), BuiltinAnalyzer()
+    with open(folder / "rows.jsonl", "a") as rows:
         for n, (name, house) in enumerate(jobs()):
             world = compile_world(house, name)
             found = find_solved_episode(world, agent, np.random.default_rng([SEED, n]), tries=10)
@@ -58,17 +65,38 @@ def adapt(out: Path, tag: str) -> None:
                 continue
             episode, before = found
             save_house(house, folder / f"{name}-original.json")
-            for gen in GENERATORS:
-                res = adapt_scene(house, episode, policy=agent, analyzer=analyzer, generator=make_generator(gen),
+            for gen in generators:
+                res = adapt_scene(house, episode, policy=agent, analyzer=analyzer, generator=_generator(gen),
                                   steps=STEPS, rng=np.random.default_rng([SEED, n, 1]), before=before, name=name)
-                save_house(res.house, folder / f"{name}-{gen}.json")
+                save_house(res.house, folder / f"{name}-{_slug(gen)}.json")
                 rows.write(json.dumps({"job": name, "solved": True, "generator": gen, "target": episode.target_type,
                                        "success_before": bool(before.metrics.success),
                                        "success_after": bool(res.after.metrics.success),
                                        "spl_before": float(before.metrics.spl), "spl_after": float(res.after.metrics.spl),
-                                       "edits": int(res.edits_applied)}) + "\n")
+                                       "edits": int(res.edits_applied), "policy": policy,
+                                       "steps": [_counts(s) for s in res.generation.steps]}) + "\n")
                 rows.flush()
             print(name, flush=True)
+
+
+def _generator(spec: str):
+    """A G from ``name`` or ``name:key=value,...`` (values read as JSON: 16, false)."""
+    from adaptenv.adapt.generators import make_generator
+
+    name, _, settings = spec.partition(":")
+    kw = {k: json.loads(v) for k, v in (item.split("=") for item in settings.split(",") if item)}
+    return make_generator(name, **kw)
+
+
+def _slug(spec: str) -> str:
+    """A file-name form of a G spec."""
+    return spec.replace(":", "-").replace(",", "-").replace("=", "")
+
+
+def _counts(step) -> dict:
+    """A G step's search cost: candidates drawn, passing their dry run, checked with the policy; its status."""
+    return {"status": step.status, "drawn": int(step.candidates), "passed": int(getattr(step, "passed", 0)),
+            "checked": int(getattr(step, "checked", 0)), "check_steps": int(step.check_steps)}
 
 
 def audit(out: Path, tags: list[str]) -> None:
@@ -81,13 +109,15 @@ def audit(out: Path, tags: list[str]) -> None:
     print("|---|---|---|---|---|---|---|---|---|")
     for tag in tags:
         folder = out / tag
-        rows = [json.loads(line) for line in open(folder / "rows.jsonl")]
-        for gen in GENERATORS:
+        rows = [json.loads(line) for line in (folder / "rows.jsonl").read_text().splitlines()]
+        for gen in dict.fromkeys(r["generator"] for r in rows if "generator" in r):
             mine = [r for r in rows if r.get("generator") == gen]
+            if not mine:
+                continue
             counts: Counter[str] = Counter()
             for r in mine:
                 original = load_house(folder / f"{r['job']}-original.json", validate=False)
-                adapted = load_house(folder / f"{r['job']}-{gen}.json", validate=False)
+                adapted = load_house(folder / f"{r['job']}-{_slug(gen)}.json", validate=False)
                 report = run_audit(original, adapted)
                 counts.update(v.rule for v in report.violations)
                 for v in report.violations:
@@ -100,10 +130,27 @@ def audit(out: Path, tags: list[str]) -> None:
                   f"{100 * (before - after):.1f} | {spl:.3f} | {bad} |")
 
 
+def cost(out: Path, tags: list[str]) -> None:
+    """Print each G's mean counts per step (rows of 51fb814 on; earlier rows have none)."""
+    print("| revision | G | candidates drawn | passing their dry run | checked with the policy (max) |")
+    print("|---|---|---|---|---|")
+    for tag in tags:
+        rows = [json.loads(line) for line in (out / tag / "rows.jsonl").read_text().splitlines()]
+        for gen in dict.fromkeys(r["generator"] for r in rows if "generator" in r):
+            steps = [s for r in rows if r.get("generator") == gen for s in r.get("steps", [])]
+            if steps:
+                mean = {k: np.mean([s[k] for s in steps]) for k in ("drawn", "passed", "checked")}
+                print(f"| {tag} | {gen} | {mean['drawn']:.1f} | {mean['passed']:.1f} | {mean['checked']:.2f} "
+                      f"({max(s['checked'] for s in steps)}) |")
+
+
 if __name__ == "__main__":
     if len(sys.argv) >= 4 and sys.argv[1] == "adapt":
-        adapt(Path(sys.argv[2]), sys.argv[3])
+        policy = sys.argv[4] if len(sys.argv) > 4 else POLICY
+        adapt(Path(sys.argv[2]), sys.argv[3], policy, tuple(sys.argv[5].split(";")) if len(sys.argv) > 5 else GENERATORS)
     elif len(sys.argv) >= 4 and sys.argv[1] == "audit":
         audit(Path(sys.argv[2]), sys.argv[3:])
+    elif len(sys.argv) >= 4 and sys.argv[1] == "cost":
+        cost(Path(sys.argv[2]), sys.argv[3:])
     else:
         sys.exit(__doc__)

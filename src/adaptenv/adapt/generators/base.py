@@ -56,7 +56,11 @@ class StepRecord(BaseModel):
     attempts: int = 1
     """Proposals requested for this step (LLM answers, including invalid ones)."""
     candidates: int = 0
-    """Candidate moves evaluated (built-in)."""
+    """Candidate moves drawn (built-in)."""
+    passed: int = 0
+    """Candidates that passed their dry run (placement, validation, the expert's check) and were scored (built-in)."""
+    checked: int = 0
+    """Candidates pi_t's rollouts checked (built-in, with a policy)."""
     objective_before: dict[str, float | None] = Field(default_factory=dict)
     objective_after: dict[str, float | None] = Field(default_factory=dict)
     gain: float | None = None

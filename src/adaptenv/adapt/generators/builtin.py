@@ -9,7 +9,8 @@ Per step (offline, deterministic for a given rng):
    their back to a wall slide along it (:func:`along_wall`) or are set against the parallel wall
    nearest to where the move aimed (:func:`to_wall`, a relocation inside their room) instead. The targets
    themselves are never moved, so the episode stays comparable (the validator refuses it:
-   ``target_moved``).
+   ``target_moved``). Each move is fitted to the plausibility rules before its dry run
+   (:func:`fit_rules`: shortened until its end pose breaks none, or not drawn).
 3. Dry-run them in order (up to ``POOL`` times ``max_candidates`` drawn, until ``max_candidates``
    pass) through collision-aware placement and incremental validation
    (:meth:`~adaptenv.adapt.validation.EditValidator.propose`, which also applies the plausibility
@@ -18,9 +19,9 @@ Per step (offline, deterministic for a given rng):
    ``realism_weight`` times the change in realism (:mod:`adaptenv.adapt.realism`). Candidates on
    which the shortest-path expert no longer solves the episode are dropped (``require_expert``):
    the raster says the route exists, but the agent's continuous motion may not fit through it.
-4. With a policy in the context, roll it out on the best few candidates (the same start and
-   target, a few headings) and prefer the one that lowers its mean SPL most: the paper's argmin
-   over R subject to validity.
+4. With a policy in the context, roll it out on the best candidates of ``rollout_candidates``
+   distinct objects (the same start and target, a few headings) and prefer the one on which it
+   succeeds least often, then with the lowest mean SPL: the paper's argmin over R subject to validity.
 5. Verification: the targeted objective must move in the intended direction; otherwise revise
    by taking the next candidate (at most ``max_revisions`` times).
 6. Commit the chosen proposal with ``EditValidator.commit``, re-render.
@@ -56,12 +57,12 @@ from adaptenv.adapt.objectives import (
     realism_score,
     route_points,
 )
-from adaptenv.adapt.plausibility import OVERHANG
+from adaptenv.adapt.plausibility import OVERHANG, check_move
 from adaptenv.adapt.realism import RealismReference
 from adaptenv.adapt.validation import EditValidator, Proposal
 from adaptenv.adapt.verification import Check, check_objective, revise_until_verified
 from adaptenv.agents.rollout import checking_episodes, mean_spl, run_in_worlds, total_steps
-from adaptenv.scene.geometry import SceneGeometry, heading
+from adaptenv.scene.geometry import Footprint, SceneGeometry, heading
 from adaptenv.scene.house import House
 from adaptenv.sim.rollout import expert_policy, run_episode
 from adaptenv.sim.task import Episode
@@ -127,6 +128,22 @@ def _within_wall(v: EditValidator, oid: str, t: np.ndarray, along: float) -> flo
     return along
 
 
+def fit_rules(v: EditValidator, current: dict[str, Footprint], oid: str, d: np.ndarray, rotation: float | None,
+              *, shrink: bool = True) -> np.ndarray | None:
+    """The longest of the displacement ``d`` (m) and its three quarters, half and quarter whose end pose (turned to
+    ``rotation``) breaks no plausibility rule, with the other objects where ``current`` has them; None when none does
+    (only ``d`` itself is tried for a turn in place or with ``shrink`` off). The dry run still decides: placement
+    may stop short of the end."""
+    if v.plausible is None:
+        return d
+    i = v.ctx.index[oid]
+    c, yaw = v.ctx.centers[i], float(v.ctx.yaws[i]) if rotation is None else float(rotation)
+    for f in (1.0, 0.75, 0.5, 0.25) if shrink and np.any(d) else (1.0,):
+        if not check_move(v.plausible, v.footprint_at(i, c + d * f, yaw), current):
+            return d * f
+    return None
+
+
 def to_wall(v: EditValidator, oid: str, aim: np.ndarray) -> tuple[np.ndarray, float] | None:
     """For an object that must keep its back to a wall: the displacement (m) and yaw that set it against the wall
     of its room nearest to ``aim`` that runs parallel to it (turned 180 degrees for the opposite wall); None for
@@ -157,6 +174,19 @@ def to_wall(v: EditValidator, oid: str, aim: np.ndarray) -> tuple[np.ndarray, fl
     return best
 
 
+def _distinct_head(ranked: list[Candidate], k: int) -> list[Candidate]:
+    """The first ``k`` candidates of ``ranked`` that move distinct objects (the policy checks several objects' moves
+    rather than near-copies of one), filled with the next best when fewer objects are there."""
+    head: list[Candidate] = []
+    for c in ranked:
+        if len(head) < k and all(c.object_id != h.object_id for h in head):
+            head.append(c)
+    for c in ranked:
+        if len(head) < k and all(c is not h for h in head):
+            head.append(c)
+    return head
+
+
 def _rotation(step: int, suggestions: list[Suggestion]) -> list[Suggestion]:
     """Suggestions (one per kind, by priority) starting with the step's round-robin choice."""
     usable, kinds = [], set()
@@ -177,9 +207,13 @@ class BuiltinGenerator:
     move_targets = False
     """Whether the validator lets the episode's target instances move (only edit kinds that relocate the target)."""
 
-    def __init__(self, *, max_candidates: int = 16, realism_weight: float = 0.5, other_weight: float = 0.25,
-                 rollout_candidates: int = 3, max_revisions: int = 2, require_expert: bool = True):
+    def __init__(self, *, max_candidates: int = 24, realism_weight: float = 0.5, other_weight: float = 0.25,
+                 rollout_candidates: int = 5, max_revisions: int = 2, require_expert: bool = True,
+                 fit_to_rules: bool = True):
+        """``fit_to_rules``: fit every move to the plausibility rules before its dry run (:func:`fit_rules`; off only
+        to measure what the fitting adds: the validator refuses what breaks a rule either way)."""
         self.max_candidates = max_candidates
+        self.fit_to_rules = fit_to_rules
         self.require_expert = require_expert
         self._expert = expert_policy()
         self.realism_weight = realism_weight
@@ -202,9 +236,9 @@ class BuiltinGenerator:
                 continue
             cands = self._candidates(v, world, route, targets, rng, limit=POOL * self.max_candidates)
             tried = self._try(v, cands, route, original, ep)
-            rollouts: dict[int, float] = {}
+            rollouts: dict[int, tuple[int, float]] = {}
             record = StepRecord(step=step, status="skipped", suggestion_id=order[0].id,
-                                suggestion_kind=order[0].kind, candidates=len(cands),
+                                suggestion_kind=order[0].kind, candidates=len(cands), passed=len(tried),
                                 objective_before=values.as_dict())
             if not tried:
                 record.reason = "no candidate move passed placement and validation"
@@ -296,6 +330,7 @@ class BuiltinGenerator:
         weights = 1.0 / (0.3 + np.minimum(d_route[near], d_target[near]))
         weights /= weights.sum()
         upm = ctx.grid.units_per_meter
+        current = {f.object_id: f for f in v.geometry.footprints}
         out: list[Candidate] = []
         seen: set[tuple] = set()
         for _ in range(limit * 3):
@@ -332,6 +367,10 @@ class BuiltinGenerator:
                 d, rotation, relocate, kind = w[0], w[1], True, "to_wall"
             else:
                 d, rotation = along_wall(v, oid, d, rotation, rng)
+            fitted = fit_rules(v, current, oid, d, rotation, shrink=not relocate) if self.fit_to_rules else d
+            if fitted is None:
+                continue
+            d = fitted
             dx, dy = round(float(d[0] * upm), 1), round(float(d[1] * upm), 1)
             key = (oid, dx, dy, rotation)
             if key in seen:
@@ -381,25 +420,29 @@ class BuiltinGenerator:
         return sorted(tried, key=lambda c: -c.score)
 
     def _rollout_rank(self, scored: list[Candidate], world: NavWorld, context: GenerationContext,
-                      record: StepRecord, cache: dict[int, float]) -> list[Candidate]:
-        """Re-rank the best few candidates by the policy's mean SPL on them (lowest first); ``cache`` by id.
+                      record: StepRecord, cache: dict[int, tuple[int, float]]) -> list[Candidate]:
+        """Re-rank the best few candidates (of distinct objects, :func:`_distinct_head`) by the policy's successes on
+        them, then its mean SPL (fewest, lowest first); ``cache``: (successes, mean SPL) by id.
 
         The scene itself (first time) and the candidates not yet scored are rolled out in one batch."""
         episodes = checking_episodes(context.episode, context.rollout_episodes)
-        head = scored[:self.rollout_candidates]
+        head = _distinct_head(scored, self.rollout_candidates)
+        rest = [c for c in scored if all(c is not h for h in head)]
         todo = [c for c in head if id(c) not in cache]
         first = record.policy_score_before is None
         batch = run_in_worlds(([world] if first else []) + [c.world for c in todo], episodes, context.policy)
         record.check_steps += total_steps(batch)
+        record.checked += len(todo)
         runs = iter(batch)
         if first:
             record.policy_score_before = mean_spl(next(runs))
         for c in todo:
-            cache[id(c)] = mean_spl(next(runs))
+            trajs = next(runs)
+            cache[id(c)] = (sum(bool(t.metrics.success) for t in trajs), mean_spl(trajs))
         for c in head:
-            c.policy_score = cache[id(c)]
-        head.sort(key=lambda c: (round(c.policy_score, 6), -c.score))
-        return head + scored[self.rollout_candidates:]
+            c.policy_score = cache[id(c)][1]
+        head.sort(key=lambda c: (cache[id(c)][0], round(c.policy_score, 6), -c.score))
+        return head + rest
 
     def _verify(self, ranked: list[Candidate], kind: str, before: ObjectiveValues,
                 record: StepRecord) -> Candidate | None:
