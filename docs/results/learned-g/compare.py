@@ -13,6 +13,7 @@ the same before and after). Each house G writes is audited against the original.
 from __future__ import annotations
 
 import argparse
+import functools
 import json
 import os
 import time
@@ -26,6 +27,7 @@ GENERATORS = ("learned", "builtin", "random")
 REAL = Path(__file__).resolve().parents[3] / "tests" / "data" / "procthor-10k-train-1.json"
 
 
+@functools.cache
 def jobs() -> list[tuple[str, object]]:
     """(job name, house) for every job, in a fixed order."""
     from adaptenv.agents.houses import load_house_set
