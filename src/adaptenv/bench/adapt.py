@@ -12,7 +12,9 @@ re-run the policy from the same start on the same target. Reported:
   claim: built-in scores higher), and the plausibility audit's violations of each (summed over houses);
 - validated edits per second (placement + validation, no rollouts) from
   :mod:`adaptenv.bench.adapt_edits` (target: at least 1,000 on one core for a 5-room house), and
-  the wall time per adapted house.
+  the wall time per adapted house;
+- the learned G (``--generator learned``, the shipped scorer) on the same episodes: its success drop,
+  audit violations and wall time per adapted house beside the built-in G's.
 
 Imports sit inside the functions: this module is loaded by its ``adaptenv bench`` command, and a
 benchmark loads what it measures (torch, numba, ray) only when it runs.
@@ -34,7 +36,7 @@ def run(*, houses: int = 50, steps: int = 5, policy: str = "pretrained-scan", se
         tries: int = 10, max_houses: int | None = None) -> dict[str, Any]:
     """Adapt ``houses`` solved houses and return the figures (see the module docstring)."""
     from adaptenv.adapt.analysis import BuiltinAnalyzer
-    from adaptenv.adapt.generators import GenerationContext
+    from adaptenv.adapt.generators import GenerationContext, make_generator
     from adaptenv.adapt.generators.builtin import BuiltinGenerator
     from adaptenv.adapt.generators.random_perturbation import RandomPerturbation
     from adaptenv.adapt.objectives import realism_score
@@ -51,9 +53,10 @@ def run(*, houses: int = 50, steps: int = 5, policy: str = "pretrained-scan", se
     expert = ExpertPolicy()
     cfg = GenerationConfig(n_rooms=rooms)
     analyzer, builtin, random_g = BuiltinAnalyzer(), BuiltinGenerator(), RandomPerturbation()
+    learned = make_generator("learned")
     rows: list[dict[str, Any]] = []
     skipped = 0
-    t_adapt = 0.0
+    t_adapt = t_learned = 0.0
     limit = max_houses if max_houses is not None else houses * 3
     k = 0
     while len(rows) < houses and k < limit:
@@ -71,6 +74,10 @@ def run(*, houses: int = 50, steps: int = 5, policy: str = "pretrained-scan", se
                           rng=np.random.default_rng([seed, k, 1]), before=before, name=f"bench-{k}")
         t_adapt += time.perf_counter() - t
         exp = rollout(res.world, episode, expert)
+        t = time.perf_counter()
+        lrn = adapt_scene(house, episode, policy=agent, analyzer=analyzer, generator=learned, steps=steps,
+                          rng=np.random.default_rng([seed, k, 1]), before=before, name=f"bench-{k}")
+        t_learned += time.perf_counter() - t
         rnd = random_g.generate(house, res.analysis, steps=steps,
                                 context=GenerationContext(episode=episode, render=False),
                                 rng=np.random.default_rng([seed, k, 2]))
@@ -82,6 +89,7 @@ def run(*, houses: int = 50, steps: int = 5, policy: str = "pretrained-scan", se
             "realism_original": realism_score(house, house), "realism_builtin": realism_score(res.house, house),
             "realism_random": realism_score(rnd.house, house),
             "violations_builtin": audit(house, res.house).total, "violations_random": audit(house, rnd.house).total,
+            "success_after_learned": lrn.after.metrics.success, "violations_learned": audit(house, lrn.house).total,
         })
     n = len(rows)
 
@@ -103,5 +111,9 @@ def run(*, houses: int = 50, steps: int = 5, policy: str = "pretrained-scan", se
         "validated edits per s": edits["validated edits per s"],
         "valid after final validation": mean("valid"),
         "adapt s per house (adapt_scene: F, G with rollout checks, validation, after-rollout)": t_adapt / max(n, 1),
+        "learned G: agent success after": mean("success_after_learned"),
+        "learned G: success drop (points)": 100.0 * (mean("success_before") - mean("success_after_learned")),
+        "learned G: plausibility violations (sum)": int(sum(r["violations_learned"] for r in rows)),
+        "learned G: adapt s per house (one-pass proposals, validation, after-rollout)": t_learned / max(n, 1),
     }
     return figures
