@@ -9,6 +9,12 @@ from pathlib import Path
 import pytest
 from hypothesis import HealthCheck, settings
 
+os.environ["OMP_NUM_THREADS"] = "1"
+"""Every torch block of a test, and of the processes it starts, runs on one thread: ``pytest -n 2`` runs two
+workers on two cores, and training's default of every available core (``available_cores``, which reads this
+variable as an executor's worker does) made two workers' four spinning threads slow each small torch op tens of
+times over. Tests of the thread rule set the variable themselves."""
+
 DATA = Path(__file__).parent / "data"
 REAL_HOUSE = DATA / "procthor-10k-train-1.json"
 

@@ -211,13 +211,12 @@ def test_a_dead_worker_is_reported_and_the_pool_restarts():
 
 @pytest.mark.slow
 @pytest.mark.skipif(not HAVE_RAY, reason=NO_RAY)
-def test_a_loop_on_ray_gives_the_in_process_records(ray_executor, tiny_policy, tmp_path):
-    from adaptenv.curriculum.loop import LoopConfig, run_loop
+def test_a_loop_on_ray_gives_the_in_process_records(ray_executor, tiny_policy, loop_run, tmp_path):
+    from adaptenv.curriculum.loop import run_loop
+    from tests.curriculum.loops import tiny_config
 
-    cfg = LoopConfig(method="ours", policy=str(tiny_policy), houses="preset:tiny", heldout={"tiny": "preset:tiny"},
-                     iterations=1, scenes_per_iteration=2, edit_steps=1, finetune_frames=512, finetune_envs=16,
-                     heldout_episodes=3, gallery=1)
-    local = run_loop(cfg, tmp_path / "local")
+    cfg = tiny_config(tiny_policy, "ours", iterations=1)  # test_loop.py's same-seed test runs it in process too
+    local, _ = loop_run(cfg)
     remote = run_loop(cfg, tmp_path / "ray", executor=ray_executor)
     strip = [r.model_dump(exclude={"wall_time_s", "stage_seconds"}) for r in remote]
     assert strip == [r.model_dump(exclude={"wall_time_s", "stage_seconds"}) for r in local]

@@ -15,20 +15,15 @@ import pytest
 from adaptenv.curriculum.loop import METHODS, LoopConfig, finetune_config, run_loop
 from adaptenv.curriculum.records import STATE, read_iterations
 from adaptenv.errors import ConfigError
+from tests.curriculum.loops import figures, tiny_config
+
+ROOMY = ("ours", "ours-randomscene", "ours-nof", "ours-dr", "ours-learned")
+"""Methods checked with a buffer no level is evicted from, so every scored and adapted scene is in it."""
 
 
-def tiny_config(policy: Path, method: str, **kw) -> LoopConfig:
-    base = dict(method=method, policy=str(policy), houses="preset:tiny", heldout={"tiny": "preset:tiny"},
-                iterations=2, scenes_per_iteration=2, edit_steps=1, finetune_frames=512, finetune_envs=16,
-                heldout_episodes=3, gallery=1, buffer_capacity=4, diagnose_episodes=1)
-    return LoopConfig(**{**base, **kw})
-
-
-def figures(records) -> list[tuple]:
-    """Everything a run measures, without wall times."""
-    return [(r.iteration, r.env_steps, r.grad_updates, r.edits,
-             {k: (v.success, round(v.spl, 9), v.collisions) for k, v in r.heldout.items()},
-             (r.train.success, round(r.train.spl, 9)) if r.train else None) for r in records]
+def method_config(policy: Path, method: str) -> LoopConfig:
+    """The two-iteration run of ``method`` that several tests read (the loop_run fixture runs it once)."""
+    return tiny_config(policy, method, **({"buffer_capacity": 16} if method in ROOMY else {}))
 
 
 def test_config_errors_name_the_field():
@@ -58,10 +53,9 @@ def test_the_fine_tuning_recipe_carries_the_loop_settings():
 
 @pytest.mark.slow
 @pytest.mark.parametrize("method", [m for m in METHODS if m not in ("ours-llm", "dr-matched")])
-def test_every_method_runs_and_counts_its_budget(method, tiny_policy, tmp_path):
-    roomy = method in ("ours", "ours-randomscene", "ours-nof", "ours-dr", "ours-learned")  # a buffer no level is evicted from, to check them all
-    cfg = tiny_config(tiny_policy, method, **({"buffer_capacity": 16} if roomy else {}))
-    records = run_loop(cfg, tmp_path / method)
+def test_every_method_runs_and_counts_its_budget(method, tiny_policy, loop_run):
+    cfg = method_config(tiny_policy, method)
+    records, run = loop_run(cfg)
     assert [r.iteration for r in records] == [0, 1, 2]
     assert records[0].env_steps == 0 and records[0].heldout["tiny"].episodes == 3
     # identical gradient updates and fine-tuning frames across methods; steps only grow
@@ -71,20 +65,20 @@ def test_every_method_runs_and_counts_its_budget(method, tiny_policy, tmp_path):
         assert records[2].edits > 0
     else:
         assert records[2].edits == 0
-    assert read_iterations(tmp_path / method) == records
+    assert read_iterations(run) == records
     for r in records[1:]:  # where the time went, for docs/BENCHMARKS.md
         assert set(r.stage_seconds) == {"rollouts", "scenes", "finetune", "evaluate"}
         assert 0 < sum(r.stage_seconds.values()) <= r.wall_time_s + 0.05
-    scenes = json.loads((tmp_path / method / "iter_0002" / "scenes.json").read_text())
+    scenes = json.loads((run / "iter_0002" / "scenes.json").read_text())
     assert scenes["trained_on"], "every iteration fine-tunes on some scenes"
-    heldout = tmp_path / method / "iter_0002" / "heldout" / "tiny"
+    heldout = run / "iter_0002" / "heldout" / "tiny"
     houses = (heldout / "houses.csv").read_text().splitlines()
     assert houses[0].startswith("house,episodes,success") and len(houses) > 1, "per-house held-out table for the report"
     failed = json.loads((heldout / "summary.json").read_text())["success"] < 1.0
     assert (heldout / "failures.png").is_file() == failed, "failed held-out episodes are drawn for the report"
     if method in ("plr", "accel"):
         assert any(x.startswith("dr") for x in scenes["rolled_out"]), "fresh houses are scored each iteration"
-        state = json.loads((tmp_path / method / STATE).read_text())["state"]
+        state = json.loads((run / STATE).read_text())["state"]
         buffered = set(state["buffer"]["level_ids"])
         assert set(scenes["trained_on"]) <= buffered, "robust PLR/ACCEL train on replayed buffer levels only"
     if method == "sfl":
@@ -96,19 +90,19 @@ def test_every_method_runs_and_counts_its_budget(method, tiny_policy, tmp_path):
         fresh = [x for x in scenes["rolled_out"] if x.startswith("dr")]
         assert fresh and set(fresh) <= set(scenes["trained_on"]), "ours-dr trains on every fresh house, as dr does"
     if method in ("ours", "ours-randomscene", "ours-nof", "ours-dr"):
-        state = json.loads((tmp_path / method / STATE).read_text())["state"]
+        state = json.loads((run / STATE).read_text())["state"]
         assert any(x.startswith("dr") for x in scenes["rolled_out"]), "fresh houses are scored each iteration"
         assert set(scenes["rolled_out"]) <= set(state["buffer"]["level_ids"]), "scored scenes go into the buffer"
         assert scenes["replayed"] and set(scenes["replayed"]) <= set(state["buffer"]["level_ids"]), \
             "adapted scenes come from the buffer"
-        trained = {t: json.loads((tmp_path / method / f"iter_{t:04d}" / "scenes.json").read_text())["trained_on"]
+        trained = {t: json.loads((run / f"iter_{t:04d}" / "scenes.json").read_text())["trained_on"]
                    for t in (1, 2)}  # G may find no plausible edit in a given iteration's scenes
         assert any(f"~t{t:02d}" in x for t in trained for x in trained[t]), "fine-tuning uses the iteration's children"
         assert any(p is not None for p in state["buffer"]["parent_ids"]), "children are scored into the buffer"
     if method.startswith("ours"):
         item = records[1].gallery[0]
         for rel in (item.before_png, item.after_png, item.analysis_json, item.edits_json):
-            assert (tmp_path / method / rel).is_file()
+            assert (run / rel).is_file()
 
 
 @pytest.mark.slow
@@ -202,11 +196,11 @@ def test_ppo_fine_tuning_continues_its_critic_across_iterations(tiny_policy, tmp
 
 
 @pytest.mark.slow
-def test_dr_matched_spends_the_environment_steps_of_the_run_it_matches(tiny_policy, tmp_path):
-    ours = run_loop(tiny_config(tiny_policy, "ours", iterations=2, buffer_capacity=16), tmp_path / "ours")
-    cfg = tiny_config(tiny_policy, "dr-matched", iterations=2, match_run=str(tmp_path / "ours"))
+def test_dr_matched_spends_the_environment_steps_of_the_run_it_matches(tiny_policy, loop_run, tmp_path):
+    ours, ours_run = loop_run(method_config(tiny_policy, "ours"))
+    cfg = tiny_config(tiny_policy, "dr-matched", iterations=2, match_run=str(ours_run))
     matched = run_loop(cfg, tmp_path / "matched")
-    plain = run_loop(tiny_config(tiny_policy, "dr", iterations=2), tmp_path / "dr")
+    plain, _ = loop_run(method_config(tiny_policy, "dr"))
     block = cfg.finetune_envs * 32  # fine-tuning collects whole blocks of agents x rollout steps
     assert ours[2].env_steps > plain[2].env_steps, "ours spends steps beyond fine-tuning (diagnosis, G's checks)"
     for t in (1, 2):
@@ -244,24 +238,25 @@ def test_ours_edits_already_edited_scenes_again(tiny_policy, tmp_path):
     assert all(p in second["replayed"] for p in second["parents"].values()), "every child names its parent"
 
 
-def test_same_seed_same_results(tiny_policy, tmp_path):
+def test_same_seed_same_results(tiny_policy, loop_run, tmp_path):
+    """A fresh run repeats the shared one (which other tests' runs came before): what loop_run relies on."""
     cfg = tiny_config(tiny_policy, "ours", iterations=1)
-    a = run_loop(cfg, tmp_path / "a")
+    a, _ = loop_run(cfg)
     b = run_loop(cfg, tmp_path / "b")
     assert figures(a) == figures(b)
 
 
 @pytest.mark.slow
 @pytest.mark.parametrize("method", ["ours", "accel"])
-def test_a_process_pool_gives_the_same_results_as_in_process(method, tiny_policy, tmp_path):
+def test_a_process_pool_gives_the_same_results_as_in_process(method, tiny_policy, loop_run, tmp_path):
     from adaptenv.curriculum.executor import make_executor
 
-    cfg = tiny_config(tiny_policy, method)
-    local = run_loop(cfg, tmp_path / "local")
+    cfg = tiny_config(tiny_policy, method)  # a buffer of 4 evicts levels; accel's run is test_every_method's
+    local, local_run = loop_run(cfg)
     with make_executor("process", workers=2) as ex:
         pooled = run_loop(cfg, tmp_path / "pool", executor=ex)
     assert figures(pooled) == figures(local)
-    assert records_scenes(tmp_path / "pool") == records_scenes(tmp_path / "local")
+    assert records_scenes(tmp_path / "pool") == records_scenes(local_run)
 
 
 def records_scenes(run: Path) -> list[tuple[str, str]]:
@@ -315,10 +310,10 @@ def test_focus_training_saves_the_aimed_target_type_of_each_adapted_scene(tiny_p
 
 
 @pytest.mark.slow
-def test_a_killed_run_resumes_to_the_same_results(tiny_policy, tmp_path):
+def test_a_killed_run_resumes_to_the_same_results(tiny_policy, loop_run, tmp_path):
     """Kill a run (SIGKILL) right after its first iteration is checkpointed, resume it, compare."""
-    cfg = tiny_config(tiny_policy, "ours", iterations=3)
-    reference = run_loop(cfg, tmp_path / "reference")
+    cfg = tiny_config(tiny_policy, "ours")  # its buffer evicts levels, so the resumed buffer must too
+    reference, _ = loop_run(cfg)
 
     killed = tmp_path / "killed"
     script = ("import sys, json; from adaptenv.curriculum.loop import LoopConfig, run_loop; "
@@ -341,7 +336,7 @@ def test_a_killed_run_resumes_to_the_same_results(tiny_policy, tmp_path):
         proc.send_signal(signal.SIGKILL)
     finally:
         proc.wait(timeout=60)
-    assert json.loads((killed / STATE).read_text())["state"]["iteration"] < 3
+    assert json.loads((killed / STATE).read_text())["state"]["iteration"] < cfg.iterations
     resumed = run_loop(cfg, killed, resume=True)
     assert figures(resumed) == figures(reference)
 

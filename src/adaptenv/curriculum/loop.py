@@ -37,15 +37,14 @@ import json
 import shutil
 import time
 from collections.abc import Callable
-from dataclasses import asdict, dataclass, field, replace
+from dataclasses import asdict, replace
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 import torch
 
-from adaptenv.adapt.llm.accounting import check_llm_section, run_changes, scenes_usage
-from adaptenv.adapt.target import check_target
+from adaptenv.adapt.llm.accounting import run_changes, scenes_usage
 from adaptenv.agents.checkpoint import load_checkpoint, load_tensors, save_checkpoint
 from adaptenv.agents.config import FinetuneConfig
 from adaptenv.agents.evaluate import EpisodeResult, EvalReport, mean_se, summarize, write_report
@@ -53,9 +52,8 @@ from adaptenv.agents.houses import load_house_set
 from adaptenv.agents.network import NavNet, NeuralPolicy, torch_threads
 from adaptenv.agents.ppo import learner_problem
 from adaptenv.agents.registry import resolve_policy, weights_record
-from adaptenv.agents.teachers import TEACHERS
-from adaptenv.agents.train import check_precision, finetune
-from adaptenv.configfile import STRICT, parse_config, printable, read_json
+from adaptenv.agents.train import finetune
+from adaptenv.configfile import parse_config, printable, read_json
 from adaptenv.curriculum import buffer as lb
 from adaptenv.curriculum.executor import Executor, InProcessExecutor
 from adaptenv.curriculum.jobs import (
@@ -69,7 +67,13 @@ from adaptenv.curriculum.jobs import (
     skipped_houses,
 )
 from adaptenv.curriculum.llm_usage import budget_left, iteration_lines, record_iteration
-from adaptenv.curriculum.methods import ADAPTING_METHODS, LEVEL_SCORES, METHODS, Iteration, Stream
+from adaptenv.curriculum.methods import (
+    METHODS,
+    Iteration,
+    LoopConfig,
+    LoopState,
+    Stream,
+)
 from adaptenv.curriculum.records import (
     HELDOUT_DIR,
     ITERATIONS,
@@ -84,190 +88,10 @@ from adaptenv.curriculum.records import (
     write_iterations,
 )
 from adaptenv.errors import ConfigError
-from adaptenv.limits import check_float, check_seed
 from adaptenv.render.topdown import render_house
 
 #: The fix a corrupt state.json's errors suggest.
 STATE_FIX = "the file is damaged: restore it, or start the run again in a new folder"
-
-
-@dataclass
-class LoopConfig:
-    """Settings of one closed-loop run (one method, one seed); saved as run.json."""
-
-    method: str = "ours"
-    """One of none, random, dr, dr-matched, sfl, plr, accel, ours, ours-noselect, ours-randomscene, ours-nof, ours-dr, ours-learned, ours-llm."""
-    policy: str = "pretrained"
-    """Starting policy pi_0: pretrained or a checkpoint path (it must be a neural policy to fine-tune)."""
-    houses: str = "preset:pretrain-train"
-    """Training scenes e_0: a folder of house JSON files, a dataset FILE.jsonl[.gz][:START:STOP] or preset:NAME."""
-    heldout: dict[str, str] = field(default_factory=lambda: {"rearranged": "preset:pretrain-rearranged",
-                                                             "unseen": "preset:pretrain-unseen"})
-    """Held-out sets, never trained on: name -> folder, dataset (FILE.jsonl.gz[:START:STOP]) or preset:NAME."""
-    iterations: int = 3
-    """Loop iterations T."""
-    seed: int = 0
-    """Root seed; every random choice derives from (seed, iteration)."""
-    scenes_per_iteration: int = 8
-    """Scenes rolled out (analysed or scored) and new scenes made per iteration."""
-    score_rollouts: int = 4
-    """Episodes of pi_t (and of the expert) per rolled-out scene: scene scores average them, F analyses the first."""
-    level_score: str = "regret"
-    """How plr, accel and ours score a scene: regret (expert success - pi_t's), learnability (p(1-p), p pi_t's
-    success rate) or explorer_regret (the map explorer's success - pi_t's; one more rollout per episode)."""
-    sfl_candidates: int = 4
-    """sfl: fresh houses scored per training scene; it trains on the most learnable 1 in sfl_candidates."""
-    match_method: str = "ours"
-    """dr-matched: the method whose environment steps it matches (an experiment runs it first, same seed)."""
-    match_run: str = ""
-    """dr-matched: that run's folder (an experiment fills it in: OUT/<match_method>/seed_<seed>)."""
-    edit_steps: int = 5
-    """Single-object edits per adapted scene (editing methods)."""
-    finetune_algo: str = "dagger"
-    """How pi_t is fine-tuned: dagger (imitation of finetune_teacher) or ppo (anchored PPO on the simulator's
-    reward, docs/agent.md)."""
-    finetune_frames: int = FinetuneConfig.frames
-    """Environment frames of fine-tuning per iteration (identical for every method)."""
-    finetune_envs: int = FinetuneConfig.num_envs
-    """Parallel agents while fine-tuning."""
-    finetune_lr: float = FinetuneConfig.learning_rate
-    """Adam learning rate of fine-tuning, annealed to zero over each iteration's frames (the gentler of
-    the two rates compared in docs/results/ARCHIVE.md)."""
-    finetune_teacher: str = "expert"
-    """Who labels fine-tuning's states (DAgger's, or PPO's imitation term finetune_bc_coef): expert (shortest path),
-    explorer or map-explorer (search, docs/agent.md) or mix."""
-    finetune_min_start: float = 0.0
-    """Fine-tuning episodes start at least this geodesic distance (m) from the target where a house allows
-    (0: uniform starts; the long suites use 6 m)."""
-    finetune_precision: str = "fp32"
-    """Arithmetic of fine-tuning's gradient steps: fp32, or bf16 autocast (on CPUs with AVX512_BF16 DAgger's steps
-    about 2.4x faster and PPO end to end 1.4x, slower elsewhere; docs/BENCHMARKS.md)."""
-    finetune_beta: float = FinetuneConfig.beta
-    """Probability that the teacher's action is executed while fine-tuning (DAgger's beta, constant)."""
-    finetune_max_steps: int = FinetuneConfig.max_episode_steps
-    """Episode cap of fine-tuning's episodes (the map-reading agent trains to the evaluation's 600)."""
-    finetune_kl_coef: float = 0.0
-    """ppo: weight of the KL anchor to pi_t (0.3 in the PPO runs of docs/agent.md)."""
-    finetune_explore_bonus: float = 0.0
-    """ppo: reward per newly seen map cell (0.002 in the PPO runs of docs/agent.md)."""
-    finetune_bc_coef: float = 0.0
-    """ppo: weight of a cross-entropy to finetune_teacher's labels of the states PPO visits (an imitation term;
-    0: off)."""
-    finetune_freeze_encoder: bool = False
-    """ppo: train pi_t's memory and heads only, its observation encoder fixed at pi_0's weights (faster updates;
-    docs/BENCHMARKS.md)."""
-    finetune_keep_learner: bool = True
-    """ppo: each iteration continues the last one's value head and Adam moments (one PPO run across the loop, as
-    UED methods train); false starts every iteration with a fresh critic and a value warm-up."""
-    replay_fraction: float = 0.5
-    """Share of the fine-tuning scenes drawn from earlier scenes so the policy does not forget."""
-    heldout_episodes: int = 100
-    """Episodes per held-out set per evaluation (the same episodes every iteration)."""
-    gallery: int = 4
-    """Adapted scenes per iteration kept with before/after renders for the report."""
-    llm: dict[str, Any] = field(default_factory=dict)
-    """LLMConfig fields for ours-llm (provider, model, base_url, api, cache_dir, prompts, price_in, price_out,
-    max_tokens, max_cost, ...; docs/llm.md). Never an API key: name its variable in api_key_env."""
-    buffer_capacity: int = 64
-    """Level buffer size (plr, accel, ours)."""
-    seed_buffer: bool = True
-    """The first iteration scores the training scenes into the level buffer (plr, accel, ours); false keeps
-    them out, so the buffer holds only generated scenes (fresh houses and their children)."""
-    diagnose_episodes: int = 4
-    """Hard episodes F diagnoses per adapted scene (ours, ours-randomscene, ours-nof, ours-dr)."""
-    focus_training: bool = False
-    """Fine-tuning episodes in a scene adapted after a diagnosis (ours and its variants) ask for the target type
-    G's edits aimed at (the worst diagnosed episode's), instead of any type: pi_t trains on the failure it was shown."""
-    relocate_targets: bool = False
-    """The failure-mode G may answer search failures by moving a target instance inside its room or relocating it
-    to a far room of a type where it plausibly stands (the methods with the failure-mode G: ours,
-    ours-randomscene, ours-dr); otherwise no edit moves a target."""
-    door_edits: bool = False
-    """G may also open or shut interior doors: the failure-mode G for search, looping and timeout failures, the LLM
-    G (ours-llm) through its set_door_openness tool."""
-    target_success: float | None = None
-    """Difficulty on request: each adapted scene is edited until pi_t's success on target_episodes fixed episodes is
-    within target_tolerance of this rate P (0 < P < 1; edit_steps is the edit budget,
-    :func:`~adaptenv.adapt.target.adapt_to_success`) instead of being made as hard as G can; null: off. Only the
-    methods that adapt scenes with G (ADAPTING_METHODS) take it."""
-    target_tolerance: float = 0.10
-    """With target_success: stop editing a scene once |success - P| is at most this."""
-    target_episodes: int = 20
-    """With target_success: episodes pi_t's success on a scene is measured on (the same after every edit)."""
-
-    __pydantic_config__ = STRICT
-
-    def check(self, source: str = "loop config") -> LoopConfig:
-        """Return self or raise one ConfigError naming the field and the fix (``source`` starts the message)."""
-        parse_config(LoopConfig, asdict(self), source)
-        if self.method not in METHODS:
-            raise ConfigError(f"{source}: method {self.method!r} is unknown; use one of {', '.join(METHODS)}")
-        check_seed(self.seed, f"{source}: seed")
-        check_float(self.finetune_lr, f"{source}: finetune_lr", 0.0, 1.0, lo_open=True)
-        for name in ("finetune_kl_coef", "finetune_explore_bonus", "finetune_bc_coef", "finetune_min_start"):
-            check_float(getattr(self, name), f"{source}: {name}")
-        for name in ("iterations", "scenes_per_iteration", "finetune_frames", "heldout_episodes", "finetune_envs",
-                     "score_rollouts", "sfl_candidates"):
-            if getattr(self, name) < 1:
-                raise ConfigError(f"{source}: {name} must be at least 1, got {getattr(self, name)}")
-        if self.edit_steps < 0 or self.diagnose_episodes < 1 or not 0.0 <= self.replay_fraction < 1.0:
-            raise ConfigError(f"{source}: edit_steps must be >= 0, diagnose_episodes >= 1 and replay_fraction "
-                              "in [0, 1)")
-        check_precision(self.finetune_precision, f"{source}: finetune_precision")
-        if self.finetune_algo not in ("dagger", "ppo"):
-            raise ConfigError(f"{source}: finetune_algo must be dagger or ppo, got {self.finetune_algo!r}")
-        if self.finetune_algo == "dagger" and (self.finetune_kl_coef or self.finetune_explore_bonus
-                                               or self.finetune_freeze_encoder or self.finetune_bc_coef):
-            raise ConfigError(f"{source}: finetune_kl_coef, finetune_explore_bonus, finetune_freeze_encoder and "
-                              "finetune_bc_coef apply to ppo only; set finetune_algo to ppo or leave them unset")
-        if not 0.0 <= self.finetune_beta <= 1.0 or self.finetune_max_steps < 1:
-            raise ConfigError(f"{source}: finetune_beta must lie in [0, 1] and finetune_max_steps be positive, got "
-                              f"{self.finetune_beta} and {self.finetune_max_steps}")
-        if self.finetune_min_start < 0:
-            raise ConfigError(f"{source}: finetune_min_start must be >= 0 metres, got {self.finetune_min_start}")
-        if self.method == "dr-matched" and (self.match_method not in METHODS or self.match_method == "dr-matched"):
-            raise ConfigError(f"{source}: match_method {self.match_method!r} must name another method, e.g. ours")
-        if self.method == "dr-matched" and not self.match_run:
-            raise ConfigError(f"{source}: dr-matched needs match_run, the folder of the run it matches (--match-run); "
-                              "an experiment fills it in")
-        if self.level_score not in LEVEL_SCORES:
-            raise ConfigError(f"{source}: level_score {self.level_score!r} is unknown; use one of "
-                              f"{', '.join(LEVEL_SCORES)}")
-        if self.finetune_teacher not in TEACHERS:
-            raise ConfigError(f"{source}: finetune_teacher {self.finetune_teacher!r} is unknown; use one of "
-                              f"{', '.join(TEACHERS)}")
-        if self.method == "ours-llm" and not self.llm:
-            raise ConfigError(f"{source}: method ours-llm needs an llm section (provider, model, base_url); "
-                              "see docs/llm.md")
-        check_llm_section(self.llm, source)
-        if self.target_success is not None:
-            check_target(self.target_success, self.target_tolerance, what=f"{source}: target_success",
-                         tol_what=f"{source}: target_tolerance")
-            if self.method not in ADAPTING_METHODS:
-                raise ConfigError(f"{source}: target_success applies to the methods that adapt scenes with G "
-                                  f"({', '.join(ADAPTING_METHODS)}), not {self.method}; pick one or drop target_success")
-            if self.target_episodes < 1:
-                raise ConfigError(f"{source}: target_episodes must be at least 1, got {self.target_episodes}")
-        return self
-
-
-@dataclass
-class LoopState:
-    """Where a run stands after a finished iteration (state.json); scenes live in RUN_DIR/scenes/."""
-
-    __pydantic_config__ = STRICT
-
-    iteration: int = 0
-    pool: list[str] = field(default_factory=list)
-    """Current training scenes (names), the ones the next iteration rolls out and adapts."""
-    archive: list[str] = field(default_factory=list)
-    """Every training scene made so far, originals first (replay mix draws from it)."""
-    buffer: dict[str, Any] | None = None
-    """The level buffer (plr, accel) as JSON-ready data."""
-    env_steps: int = 0
-    grad_updates: int = 0
-    edits: int = 0
-    generated: int = 0
 
 
 def set_metrics(results: list[EpisodeResult]) -> SetMetrics:

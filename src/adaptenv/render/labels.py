@@ -23,12 +23,12 @@ from typing import TYPE_CHECKING
 import numpy as np
 import shapely
 
+from adaptenv.render.layout import MapLayout, MapTransform
 from adaptenv.render.text import RGB, text_size
 from adaptenv.scene.assets import object_label
 from adaptenv.scene.geometry import Footprint, SceneGeometry
 
 if TYPE_CHECKING:
-    from adaptenv.render.topdown import MapLayout, MapTransform
     from adaptenv.sim.trajectory import Trajectory
 
 Box = tuple[float, float, float, float]

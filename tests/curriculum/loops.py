@@ -1,0 +1,22 @@
+"""Small closed-loop settings the curriculum tests share, and what a run measures."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from adaptenv.curriculum.loop import LoopConfig
+
+
+def tiny_config(policy: Path, method: str, **kw) -> LoopConfig:
+    """Two iterations on the tiny preset with the smallest budgets that still exercise every stage."""
+    base = dict(method=method, policy=str(policy), houses="preset:tiny", heldout={"tiny": "preset:tiny"},
+                iterations=2, scenes_per_iteration=2, edit_steps=1, finetune_frames=512, finetune_envs=16,
+                heldout_episodes=3, gallery=1, buffer_capacity=4, diagnose_episodes=1)
+    return LoopConfig(**{**base, **kw})
+
+
+def figures(records) -> list[tuple]:
+    """Everything a run measures, without wall times."""
+    return [(r.iteration, r.env_steps, r.grad_updates, r.edits,
+             {k: (v.success, round(v.spl, 9), v.collisions) for k, v in r.heldout.items()},
+             (r.train.success, round(r.train.spl, 9)) if r.train else None) for r in records]
