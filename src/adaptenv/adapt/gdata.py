@@ -91,7 +91,7 @@ def _split(problems) -> tuple[list[str], list[str]]:
     kinds, rules = [], []
     for p in problems:
         if p.kind == "implausible":
-            rules.append(p.message.partition("(")[2].partition(")")[0])
+            rules.append(p.rule)
         else:
             kinds.append(p.kind)
     return kinds, rules

@@ -96,6 +96,8 @@ class ValidationProblem:
     kind: ProblemKind
     message: str
     object_ids: tuple[str, ...] = ()
+    rule: str = ""
+    """The plausibility rule broken (``implausible`` problems only)."""
 
     def __str__(self) -> str:
         return self.message
@@ -744,7 +746,8 @@ class EditValidator:
         if self.plausible is None:
             return []
         current = {f.object_id: f for f in self.geometry.footprints}
-        return [ValidationProblem("implausible", f"implausible ({v.rule}): {v.message}", (v.object_id, *v.others))
+        return [ValidationProblem("implausible", f"implausible ({v.rule}): {v.message}", (v.object_id, *v.others),
+                                  rule=v.rule)
                 for v in check_move(self.plausible, fp, current)]
 
     def _polygon(self, k: int) -> shapely.Polygon:

@@ -136,12 +136,14 @@ def load_scorer(path: str | Path | None = None) -> Scorer:
     """Read a scorer written by :func:`save_scorer` (default: the shipped one); any problem is one ConfigError."""
     import torch
 
+    from adaptenv.agents.checkpoint import load_tensors
+
     p = Path(path) if path is not None else shipped_path()
     fix = "train one with `adaptenv gdata train DATA -o FILE.pt`"
     if not p.is_file():
         raise ConfigError(f"{p}: no such learned-G checkpoint; {fix}")
     try:
-        doc = torch.load(p, map_location="cpu", weights_only=True)
+        doc = load_tensors(p)
     except Exception as exc:  # torch raises many types for corrupt files
         raise ConfigError(f"{p}: not a readable torch checkpoint ({type(exc).__name__}); {fix}") from None
     if not isinstance(doc, dict) or doc.get("format") != FORMAT:
