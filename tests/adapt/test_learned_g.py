@@ -144,6 +144,46 @@ def test_learned_g_edits_pass_validation_and_the_audit_deterministically(tiny):
     assert audit(house, a.house).total == 0
 
 
+def _context(tiny, policy=None):
+    from adaptenv.adapt.analysis import analyze_trajectory
+
+    house, world = tiny.houses[0], tiny.worlds[0]
+    ep = draw_episode(world, np.random.default_rng(0))
+    ctx = GenerationContext(episode=ep, trajectory=rollout(world, ep, ExpertPolicy()), policy=policy, render=False)
+    return house, ctx, analyze_trajectory(ctx.trajectory, world)
+
+
+def test_learned_g_edits_each_object_at_most_once(tiny):
+    house, ctx, analysis = _context(tiny)
+    res = LearnedGenerator().generate(house, analysis, steps=4, context=ctx, rng=np.random.default_rng(2))
+    moved = [e.object_id for e in res.applied]
+    assert len(moved) >= 2 and len(set(moved)) == len(moved)
+
+
+def test_learned_g_with_checks_makes_the_edit_the_agent_fails_on(tiny, monkeypatch):
+    from types import SimpleNamespace
+
+    import adaptenv.adapt.generators.learned as learned
+
+    shown = []
+
+    def fake_runs(worlds, episodes, policy):  # the agent fails only in the second world it is shown
+        shown.append(worlds)
+        return [[SimpleNamespace(metrics=SimpleNamespace(success=w != 1, spl=0.5), steps=[0] * 7) for _ in episodes]
+                for w in range(len(worlds))]
+
+    monkeypatch.setattr(learned, "run_in_worlds", fake_runs)
+    house, ctx, analysis = _context(tiny, ExpertPolicy())
+    plain = LearnedGenerator().generate(house, analysis, steps=1, context=ctx, rng=np.random.default_rng(2))
+    checked = LearnedGenerator(checks=3).generate(house, analysis, steps=1, context=ctx, rng=np.random.default_rng(2))
+    step = checked.steps[0]
+    assert len(shown) == 1 and len(shown[0]) == step.checked == 3
+    assert step.check_steps == 3 * ctx.rollout_episodes * 7 and "hardest for the agent" in step.reason
+    assert plain.steps[0].checked == 0 and plain.applied[0].object_id != checked.applied[0].object_id
+    with pytest.raises(ConfigError, match="checks 99"):
+        LearnedGenerator(checks=99)
+
+
 def test_adapt_with_the_learned_generator_end_to_end(tiny, tmp_path):
     from adaptenv.scene.house import save_house
 

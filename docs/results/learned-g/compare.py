@@ -3,6 +3,11 @@
     python compare.py run OUT [--agent NAME] [--workers N]   # resumable: OUT/rows-AGENT.jsonl, one row per (job, G)
     python compare.py table OUT [--agent NAME]               # the declared table, with paired 95% intervals
 
+``--generators`` names the generators (default ``learned,builtin,random``): ``learned`` is the shipped scorer,
+``learned+checksK`` the same scorer with ``checks=K`` (the agent shown its K best edits), and ``--checkpoint FILE``
+replaces the shipped scorer. ``--tag T`` writes ``rows-AGENT-T.jsonl`` instead, so a second comparison keeps its own
+rows. The first generator is the one the intervals compare with the others.
+
 Jobs: the first ``HOUSES`` houses of ``preset:pretrain-unseen`` (procedural houses no G was built or trained on) and
 the real-format ProcTHOR house of tests/data on ``REAL_SEEDS`` episode seeds. Per job: an episode the agent solves
 (10 draws at most, seed ``[SEED, job]``), then ``STEPS`` edits by each G (seed ``[SEED, job, 1]``), then the agent
@@ -38,11 +43,20 @@ def jobs() -> list[tuple[str, object]]:
     return out + [(f"real-seed{s}", real) for s in range(REAL_SEEDS)]
 
 
-def one_job(args: tuple[int, str, str]) -> list[dict]:
-    """Every G's row for job ``n`` with agent ``agent``."""
-    n, name, agent_name = args
-    from adaptenv.adapt.analysis import BuiltinAnalyzer
+def make(gen: str, checkpoint: str | None):
+    """The generator ``gen`` names (see the module docstring)."""
     from adaptenv.adapt.generators import make_generator
+
+    if gen.startswith("learned"):
+        checks = int(gen.split("+checks")[1]) if "+checks" in gen else 0
+        return make_generator("learned", checkpoint=checkpoint, checks=checks)
+    return make_generator(gen)
+
+
+def one_job(args: tuple[int, str, str, tuple[str, ...], str | None]) -> list[dict]:
+    """Every G's row for job ``n`` with agent ``agent``."""
+    n, name, agent_name, generators, checkpoint = args
+    from adaptenv.adapt.analysis import BuiltinAnalyzer
     from adaptenv.adapt.generators.random_perturbation import random_single_edits
     from adaptenv.adapt.plausibility import audit
     from adaptenv.adapt.step import adapt_scene
@@ -61,7 +75,7 @@ def one_job(args: tuple[int, str, str]) -> list[dict]:
     paired = [draw_episode(world, rng, episode.target_type) for _ in range(PAIRED)]
     paired_before = [rollout(world, ep, agent).metrics.success for ep in paired]
     rows = []
-    for gen in GENERATORS:
+    for gen in generators:
         t0 = time.perf_counter()
         rng = np.random.default_rng([SEED, n, 1])
         if gen == "random":  # STEPS accepted random single-object edits (ACCEL's editor), validated, not audited
@@ -71,7 +85,7 @@ def one_job(args: tuple[int, str, str]) -> list[dict]:
             new_world = compile_world(new, name)
             after = rollout(new_world, episode, agent)  # timed, as adapt_scene's own rollout after G is
         else:
-            res = adapt_scene(house, episode, policy=agent, analyzer=analyzer, generator=make_generator(gen),
+            res = adapt_scene(house, episode, policy=agent, analyzer=analyzer, generator=make(gen, checkpoint),
                               steps=STEPS, rng=rng, before=before, name=name)
             new, edits, problems, new_world, after = res.house, int(res.edits_applied), res.problems, res.world, res.after
         seconds = time.perf_counter() - t0
@@ -85,12 +99,16 @@ def one_job(args: tuple[int, str, str]) -> list[dict]:
     return rows
 
 
-def run(out: Path, agent: str, workers: int) -> None:
-    """Run every job not yet in ``OUT/rows-AGENT.jsonl`` (append-only, so a stopped run resumes)."""
+def rows_path(out: Path, agent: str, tag: str) -> Path:
+    return out / (f"rows-{agent}-{tag}.jsonl" if tag else f"rows-{agent}.jsonl")
+
+
+def run(out: Path, agent: str, workers: int, generators: tuple[str, ...], checkpoint: str | None, tag: str) -> None:
+    """Run every job not yet in ``OUT/rows-AGENT[-TAG].jsonl`` (append-only, so a stopped run resumes)."""
     out.mkdir(parents=True, exist_ok=True)
-    path = out / f"rows-{agent}.jsonl"
+    path = rows_path(out, agent, tag)
     done = {json.loads(line)["job"] for line in path.open()} if path.exists() else set()
-    todo = [(n, name, agent) for n, (name, _) in enumerate(jobs()) if name not in done]
+    todo = [(n, name, agent, generators, checkpoint) for n, (name, _) in enumerate(jobs()) if name not in done]
     with ProcessPoolExecutor(workers) as pool, path.open("a") as f:
         for rows in pool.map(one_job, todo):
             f.write("".join(json.dumps(r) + "\n" for r in rows))
@@ -105,17 +123,17 @@ def paired_interval(diff: np.ndarray, seed: int = 0, n: int = 10_000) -> tuple[f
     return float(np.percentile(means, 2.5)), float(np.percentile(means, 97.5))
 
 
-def table(out: Path, agent: str) -> None:
+def table(out: Path, agent: str, generators: tuple[str, ...], tag: str) -> None:
     """Print the declared table for ``agent``'s rows."""
-    rows = [json.loads(line) for line in (out / f"rows-{agent}.jsonl").open()]
+    rows = [json.loads(line) for line in rows_path(out, agent, tag).open()]
     solved = sorted({r["job"] for r in rows if r["solved"]})
     print(f"agent {agent}: {len(solved)} of {len({r['job'] for r in rows})} jobs with a solved episode; "
           f"{STEPS} edits per G")
     print("| G | runs | edits accepted | success after | drop (points) | drop per edit | paired drop (points) | "
           "audit violations | s per accepted edit |")
     print("|---|---|---|---|---|---|---|---|---|")
-    by = {g: {r["job"]: r for r in rows if r.get("generator") == g} for g in GENERATORS}
-    for g in GENERATORS:
+    by = {g: {r["job"]: r for r in rows if r.get("generator") == g} for g in generators}
+    for g in generators:
         mine = [by[g][j] for j in solved]
         edits = sum(r["edits"] for r in mine)
         drop = 100 * (1 - np.mean([r["success_after"] for r in mine]))
@@ -123,10 +141,11 @@ def table(out: Path, agent: str) -> None:
         secs = sum(r["seconds"] for r in mine) / max(edits, 1)
         print(f"| {g} | {len(mine)} | {edits} | {1 - drop / 100:.3f} | {drop:.1f} | {drop / max(edits / len(mine), 1e-9):.1f} "
               f"| {paired:.1f} | {sum(len(r['violations']) for r in mine)} | {secs:.2f} |")
-    for other in GENERATORS[1:]:
-        d = np.array([float(by[other][j]["success_after"]) - float(by["learned"][j]["success_after"]) for j in solved])
+    first = generators[0]
+    for other in generators[1:]:
+        d = np.array([float(by[other][j]["success_after"]) - float(by[first][j]["success_after"]) for j in solved])
         lo, hi = paired_interval(d)
-        print(f"learned - {other} drop: {100 * d.mean():+.1f} points, 95% interval [{100 * lo:+.1f}, {100 * hi:+.1f}] "
+        print(f"{first} - {other} drop: {100 * d.mean():+.1f} points, 95% interval [{100 * lo:+.1f}, {100 * hi:+.1f}] "
               f"over {len(d)} paired runs")
 
 
@@ -136,5 +155,12 @@ if __name__ == "__main__":
     ap.add_argument("out", type=Path)
     ap.add_argument("--agent", default="pretrained")
     ap.add_argument("--workers", type=int, default=os.cpu_count() or 1)
+    ap.add_argument("--generators", default=",".join(GENERATORS))
+    ap.add_argument("--checkpoint", default=None, help="a learned-G scorer instead of the shipped one")
+    ap.add_argument("--tag", default="")
     a = ap.parse_args()
-    run(a.out, a.agent, a.workers) if a.step == "run" else table(a.out, a.agent)
+    gens = tuple(a.generators.split(","))
+    if a.step == "run":
+        run(a.out, a.agent, a.workers, gens, a.checkpoint, a.tag)
+    else:
+        table(a.out, a.agent, gens, a.tag)

@@ -10,7 +10,12 @@ Per step (offline, deterministic for a given rng):
    and SPL drop after it; the score is the first times the sum of the others.
 3. Try them best first through collision-aware placement, validation with the plausibility rules
    (:meth:`~adaptenv.adapt.validation.EditValidator.propose`) and the shortest-path expert, and commit
-   the first that passes. No rollout of the agent is made.
+   the first that passes. No rollout of the agent is made. An object is edited at most once per
+   generation (a second move of the same object can undo the first).
+4. With ``checks`` K > 0 and a policy in the context, the first K that pass (distinct objects) are
+   instead rolled out with the agent in one batch (the episode's start and target, a few headings) and
+   the one it succeeds on least often, then with the lowest mean SPL, is made: the network only chooses
+   which K edits the agent is shown.
 
 The scorer is trained by ``adaptenv gdata train`` on rows of ``adaptenv gdata collect``; the package ships
 one (``agents/data/learned-g.pt``, its card ``learned-g.json``). Its file is a ``torch.save`` dictionary
@@ -45,11 +50,12 @@ from adaptenv.adapt.generators.edit_features import (
     enumerate_candidates,
 )
 from adaptenv.adapt.objectives import RouteSpec
-from adaptenv.adapt.validation import EditValidator
+from adaptenv.adapt.validation import EditValidator, Proposal
+from adaptenv.agents.rollout import checking_episodes, mean_spl, run_in_worlds, total_steps
 from adaptenv.errors import ConfigError
 from adaptenv.scene.house import House
 from adaptenv.sim.rollout import expert_policy, run_episode
-from adaptenv.sim.world import compile_world
+from adaptenv.sim.world import NavWorld, compile_world
 
 FORMAT = "adaptenv-learned-g/1"
 SHIPPED = "learned-g"
@@ -175,10 +181,15 @@ class LearnedGenerator:
     name = "learned"
 
     def __init__(self, *, checkpoint: str | Path | None = None, candidates: int = CANDIDATES,
-                 require_expert: bool = True, scorer: Scorer | None = None):
+                 require_expert: bool = True, checks: int = 0, scorer: Scorer | None = None):
+        """``checks``: with a policy in the context, roll the agent out on the best this many edits that pass every
+        check and make the hardest for it (0: no rollout, the best-scored edit is made)."""
+        if not 0 <= int(checks) <= candidates:
+            raise ConfigError(f"checks {checks}: must be a whole number from 0 to the candidates per step ({candidates})")
         self.scorer = scorer or load_scorer(checkpoint)
         self.candidates = candidates
         self.require_expert = require_expert
+        self.checks = int(checks)
         self._expert = expert_policy()
 
     def generate(self, house: House, analysis: Analysis, *, steps: int, context: GenerationContext,
@@ -187,36 +198,72 @@ class LearnedGenerator:
         route = RouteSpec.from_episode(ep.target_type, ep.start, context.trajectory)
         v = EditValidator(house, episode_targets=[ep.target_type], start=ep.start[:2])
         result = GenerationResult(house=v.house, steps=[], edit_log=v.log, generator=self.name)
+        want = self.checks if self.checks and context.policy is not None else 1
+        edited: set[str] = set()
         for step in range(steps):
             world = compile_world(v.house, "candidate")
             scene = Scene.of(v, world, route)
-            cands = enumerate_candidates(v, world, route, rng, self.candidates, scene=scene)
+            cands = [c for c in enumerate_candidates(v, world, route, rng, self.candidates, scene=scene)
+                     if c.object_id not in edited]
             scores = self.scorer.score(candidate_features(v, scene, cands, analysis))
             record = StepRecord(step=step, status="skipped", candidates=len(cands))
+            passed: list[tuple[int, int, Proposal, NavWorld | None]] = []
             for tried, k in enumerate(np.argsort(-scores, kind="stable"), start=1):
                 c = cands[int(k)]
-                p = v.propose(c.object_id, c.dx_units, c.dy_units, c.rotation, relocate=c.relocate)
-                res = p.result
-                if not p.valid or not res.changed or (not res.rotation_applied and math.hypot(*res.achieved) < MIN_MOVE):
+                if any(cands[j].object_id == c.object_id for _, j, _, _ in passed):
                     continue
-                if self.require_expert:
-                    cw = compile_world(v.house, "candidate", geometry=moved_geometry(v.geometry, res))
-                    if not run_episode(cw, ep, self._expert, record=False).metrics.success:
-                        continue
-                edit = v.commit(p, source=self.name,
-                                intent=f"learned: {c.kind} move, expected drop {scores[int(k)]:+.3f} (rank {tried})")
-                record.status, record.edit, record.attempts = "applied", edit, tried
-                record.reason = f"the best-scored of {len(cands)} candidates that passed every check (tried {tried})"
-                if context.render:
-                    record.render = keep_render(result, render_scene(v.house, context,
-                                                                     highlight={edit.object_id: "gold"}), context, step)
-                break
-            else:
+                if (found := self._passes(v, c, ep, want > 1)) is not None:
+                    passed.append((tried, int(k), *found))
+                    if len(passed) >= want:
+                        break
+            if not passed:
                 record.reason = ("no candidate passed placement, validation, the plausibility rules and the expert "
-                                 "check" if cands else "no movable object to edit")
+                                 "check" if cands else "no movable object left to edit")
+                result.steps.append(record)
+                continue
+            tried, k, p, _ = self._check(passed, context, record) if len(passed) > 1 else passed[0]
+            c = cands[k]
+            edit = v.commit(p, source=self.name,
+                            intent=f"learned: {c.kind} move, expected drop {scores[k]:+.3f} (rank {tried})")
+            edited.add(c.object_id)
+            record.status, record.edit, record.attempts = "applied", edit, tried
+            record.reason = (f"the best-scored of {len(cands)} candidates that passed every check (tried {tried})"
+                             if len(passed) == 1 else
+                             f"the hardest for the agent of the {len(passed)} best-scored candidates that passed "
+                             f"every check (rank {tried} of {len(cands)})")
+            if context.render:
+                record.render = keep_render(result, render_scene(v.house, context, highlight={edit.object_id: "gold"}),
+                                            context, step)
             result.steps.append(record)
         result.house = v.house
         return result
+
+    def _passes(self, v: EditValidator, c, ep, keep_world: bool) -> tuple[Proposal, NavWorld | None] | None:
+        """The proposal of ``c`` (and, with ``keep_world``, its edited world) when it passes placement, validation,
+        the plausibility rules and (``require_expert``) the expert; None otherwise."""
+        p = v.propose(c.object_id, c.dx_units, c.dy_units, c.rotation, relocate=c.relocate)
+        res = p.result
+        if not p.valid or not res.changed or (not res.rotation_applied and math.hypot(*res.achieved) < MIN_MOVE):
+            return None
+        cw = None
+        if self.require_expert or keep_world:
+            cw = compile_world(v.house, "candidate", geometry=moved_geometry(v.geometry, res))
+            if self.require_expert and not run_episode(cw, ep, self._expert, record=False).metrics.success:
+                return None
+        return p, cw
+
+    def _check(self, passed: list, context: GenerationContext, record: StepRecord) -> tuple:
+        """The passed candidate the policy succeeds on least often, then with the lowest mean SPL, then the best
+        scored (one batch of rollouts over every passed candidate's world)."""
+        episodes = checking_episodes(context.episode, context.rollout_episodes)
+        batch = run_in_worlds([w for *_, w in passed], episodes, context.policy)
+        record.check_steps += total_steps(batch)
+        record.checked += len(passed)
+        keys = [(sum(bool(t.metrics.success) for t in trajs), round(mean_spl(trajs), 6), n)
+                for n, trajs in enumerate(batch)]
+        best = min(keys)
+        record.policy_score_after = best[1]
+        return passed[best[2]]
 
 
 __all__ = ["CANDIDATES", "FORMAT", "LearnedGenerator", "Scorer", "ScorerConfig", "build_net", "expected_gain",
