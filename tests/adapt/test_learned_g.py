@@ -197,6 +197,27 @@ def test_adapt_with_the_learned_generator_end_to_end(tiny, tmp_path):
     assert sum(summary["plausibility"].values()) == 0
 
 
+def test_adapt_learned_checks_rolls_the_policy_out_on_k_edits(tiny, tmp_path, monkeypatch):
+    import adaptenv.adapt.generators.learned as learned
+    from adaptenv.scene.house import save_house
+
+    shown = []
+    real = learned.run_in_worlds
+
+    def spy(worlds, episodes, policy):
+        shown.append(len(worlds))
+        return real(worlds, episodes, policy)
+
+    monkeypatch.setattr(learned, "run_in_worlds", spy)
+    path = save_house(tiny.houses[1], tmp_path / "h.json")
+    args = ["adapt", str(path), "--policy", "expert", "--steps", "2", "--seed", "1"]
+    result = runner.invoke(app, [*args, "--generator", "learned", "--learned-checks", "2", "-o", str(tmp_path / "a")])
+    assert result.exit_code == 0, result.output
+    assert shown and set(shown) == {2}
+    result = runner.invoke(app, [*args, "--learned-checks", "2", "-o", str(tmp_path / "b")])
+    assert result.exit_code != 0 and "--learned-checks" in str(result.exception) and not (tmp_path / "b").exists()
+
+
 def test_collect_refuses_held_out_houses(tmp_path):
     result = runner.invoke(app, ["gdata", "collect", "--houses", "suite:large", "-o", str(tmp_path / "x")])
     assert isinstance(result.exception, ConfigError) and "not training data" in str(result.exception)

@@ -158,6 +158,9 @@ def adapt(
                                   "F's failure families), learned (offline, a trained scorer ranks edits), llm, or random."),
     door_edits: bool = typer.Option(False, "--door-edits", help="With --generator failure-modes or llm: G may also "
                                     "open or shut interior doors."),
+    learned_checks: int = typer.Option(0, "--learned-checks", min=0, max=64, help="With --generator learned: roll "
+                                       "--policy out on this many of the best-scored edits each step and make the "
+                                       "hardest for it (0: no rollout, the best-scored edit is made)."),
     analyzer: str = typer.Option("builtin", "--analyzer", help="builtin (offline) or llm."),
     model: str | None = MODEL_OPTION,
     base_url: str | None = BASE_URL_OPTION,
@@ -215,6 +218,9 @@ def adapt(
     if door_edits and generator not in ("failure-modes", "llm"):
         raise ConfigError(f"--door-edits: only the failure-modes and llm generators edit doors; add --generator "
                           f"failure-modes or drop --door-edits (got --generator {generator})")
+    if learned_checks and generator != "learned":
+        raise ConfigError(f"--learned-checks: only the learned generator checks its edits this way; add --generator "
+                          f"learned or drop --learned-checks (got --generator {generator})")
     if analyzer not in ("builtin", "llm"):
         raise ConfigError(f"--analyzer {analyzer!r}: unknown analyzer; use builtin or llm")
     check_llm_config(llm_config_file)
@@ -250,8 +256,9 @@ def adapt(
             d = backend.describe()
             console.print(f"LLM: {d['model']} at {d['base_url']} ({d['api']} API, prompts {d['prompts']})",
                           highlight=False)
-    doors = {"door_edits": True} if door_edits else {}
-    gen = make_generator(generator, backend=backend, **doors) if generator == "llm" else make_generator(generator, **doors)
+    options = {"door_edits": True} if door_edits else {"checks": learned_checks} if learned_checks else {}
+    gen = (make_generator(generator, backend=backend, **options) if generator == "llm"
+           else make_generator(generator, **options))
     if generator == "llm" and not as_json:
         gen.progress = lambda text: console.print(f"[dim]{text}[/]", highlight=False)
     f = LLMAnalyzer(backend) if analyzer == "llm" else BuiltinAnalyzer()
