@@ -3,6 +3,9 @@
     NUMBA_NUM_THREADS=1 nice -n 10 python docs/results/target-success/measure.py OUT.jsonl [HOUSES [STEPS]]
     python docs/results/target-success/measure.py OUT.jsonl table    # the table of the rows already there
 
+Options (before OUT.jsonl): ``--generators a,b`` (default ``builtin,random,failure-modes``; ``learned+checksK`` is
+the learned G with ``checks=K``), ``--patience N`` (default 3), ``--first K`` (start at the K-th house).
+
 For every G of ``GENERATORS``, every P of ``TARGETS`` and the first ``HOUSES`` houses of ``preset:validation``
 (held out from training), :func:`adaptenv.adapt.target.adapt_to_success` edits the house for the ``pretrained``
 agent, measured on ``EPISODES`` seeded episodes, until its success is within ``TOLERANCE`` of P or ``STEPS``
@@ -22,11 +25,20 @@ import numpy as np
 GENERATORS = ("builtin", "random", "failure-modes")
 TARGETS = (0.25, 0.5, 0.75)
 EPISODES, TOLERANCE, PATIENCE, SEED, POLICY = 20, 0.10, 3, 0, "pretrained"
+FIRST = 0
+
+
+def make(g: str):
+    """The generator ``g`` names (``learned+checksK``: the learned G with ``checks=K``)."""
+    from adaptenv.adapt.generators import make_generator
+
+    if g.startswith("learned+checks"):
+        return make_generator("learned", checks=int(g.removeprefix("learned+checks")))
+    return make_generator(g)
 
 
 def run(out: Path, houses: int, steps: int) -> None:
     """Every (G, P, house) not yet in ``out``: one row each."""
-    from adaptenv.adapt.generators import make_generator
     from adaptenv.adapt.target import adapt_to_success
     from adaptenv.agents.houses import load_house_set
     from adaptenv.agents.network import configure_torch
@@ -36,13 +48,13 @@ def run(out: Path, houses: int, steps: int) -> None:
     done = {(r["generator"], r["target"], r["house"]) for r in rows(out)}
     hs = load_house_set("preset:validation")
     policy = resolve_policy(POLICY, seed=SEED)
-    for name, house in list(zip(hs.names, hs.houses, strict=True))[:houses]:  # house by house: a cut run is a subset
+    for name, house in list(zip(hs.names, hs.houses, strict=True))[FIRST:houses]:  # house by house: a cut run is a subset
         for g in GENERATORS:
             for p in TARGETS:
                 if (g, p, name) in done:
                     continue
                 t0 = time.perf_counter()
-                res = adapt_to_success(house, policy, make_generator(g), p, tolerance=TOLERANCE, episodes=EPISODES,
+                res = adapt_to_success(house, policy, make(g), p, tolerance=TOLERANCE, episodes=EPISODES,
                                        max_edits=steps, patience=PATIENCE, seed=SEED, name=name)
                 row = {"generator": g, "target": p, "house": name, "steps": steps, "patience": PATIENCE, "seconds": time.perf_counter() - t0,
                        **{k: v for k, v in res.to_dict().items() if k != "trace"}}
@@ -81,6 +93,16 @@ def table(out: Path) -> None:
 
 
 if __name__ == "__main__":
+    while sys.argv[1].startswith("--"):  # --generators a,b / --patience N / --first K
+        flag, value = sys.argv.pop(1), sys.argv.pop(1)
+        if flag == "--generators":
+            GENERATORS = tuple(value.split(","))
+        elif flag == "--patience":
+            PATIENCE = int(value)
+        elif flag == "--first":
+            FIRST = int(value)
+        else:
+            sys.exit(f"unknown option {flag}")
     target = Path(sys.argv[1])
     if sys.argv[2:3] != ["table"]:  # `measure.py OUT.jsonl table` prints the table of the rows already there
         run(target, int(sys.argv[2]) if len(sys.argv) > 2 else 10, int(sys.argv[3]) if len(sys.argv) > 3 else 8)
