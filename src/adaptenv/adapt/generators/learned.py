@@ -42,7 +42,7 @@ from adaptenv.adapt.generators.base import (
     keep_render,
     render_scene,
 )
-from adaptenv.adapt.generators.builtin import MIN_MOVE
+from adaptenv.adapt.generators.builtin import MIN_MOVE, Candidate
 from adaptenv.adapt.generators.edit_features import (
     FEATURE_NAMES,
     Scene,
@@ -55,6 +55,7 @@ from adaptenv.agents.rollout import checking_episodes, mean_spl, run_in_worlds, 
 from adaptenv.errors import ConfigError
 from adaptenv.scene.house import House
 from adaptenv.sim.rollout import expert_policy, run_episode
+from adaptenv.sim.task import Episode
 from adaptenv.sim.world import NavWorld, compile_world
 
 FORMAT = "adaptenv-learned-g/1"
@@ -238,7 +239,7 @@ class LearnedGenerator:
         result.house = v.house
         return result
 
-    def _passes(self, v: EditValidator, c, ep, keep_world: bool) -> tuple[Proposal, NavWorld | None] | None:
+    def _passes(self, v: EditValidator, c: Candidate, ep: Episode, keep_world: bool) -> tuple[Proposal, NavWorld | None] | None:
         """The proposal of ``c`` (and, with ``keep_world``, its edited world) when it passes placement, validation,
         the plausibility rules and (``require_expert``) the expert; None otherwise."""
         p = v.propose(c.object_id, c.dx_units, c.dy_units, c.rotation, relocate=c.relocate)
