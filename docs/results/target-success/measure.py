@@ -57,7 +57,7 @@ def run(out: Path, houses: int, steps: int) -> None:
                 res = adapt_to_success(house, policy, make(g), p, tolerance=TOLERANCE, episodes=EPISODES,
                                        max_edits=steps, patience=PATIENCE, seed=SEED, name=name)
                 row = {"generator": g, "target": p, "house": name, "steps": steps, "patience": PATIENCE, "seconds": time.perf_counter() - t0,
-                       **{k: v for k, v in res.to_dict().items() if k != "trace"}}
+                       **{k: v for k, v in res.to_dict().items() if k not in ("trace", "generator")}}
                 with out.open("a", encoding="utf-8") as f:
                     f.write(json.dumps(row) + "\n")
                 print(f"{g:13s} P={p:.2f} {name}: {res.line()} ({row['seconds']:.0f} s)", flush=True)
