@@ -4,7 +4,8 @@
     python docs/results/target-success/measure.py OUT.jsonl table    # the table of the rows already there
 
 Options (before OUT.jsonl): ``--generators a,b`` (default ``builtin,random,failure-modes``; ``learned+checksK`` is
-the learned G with ``checks=K``), ``--patience N`` (default 3), ``--first K`` (start at the K-th house).
+the learned G with ``checks=K``), ``--patience N`` (default 3), ``--first K`` (start at the K-th house),
+``--rollout-episodes N`` (headings of G's own rollout check, default 3; rows then carry ``rollout_episodes``).
 
 For every G of ``GENERATORS``, every P of ``TARGETS`` and the first ``HOUSES`` houses of ``preset:validation``
 (held out from training), :func:`adaptenv.adapt.target.adapt_to_success` edits the house for the ``pretrained``
@@ -26,6 +27,7 @@ GENERATORS = ("builtin", "random", "failure-modes")
 TARGETS = (0.25, 0.5, 0.75)
 EPISODES, TOLERANCE, PATIENCE, SEED, POLICY = 20, 0.10, 3, 0, "pretrained"
 FIRST = 0
+ROLLOUT_EPISODES = 3
 
 
 def make(g: str):
@@ -55,8 +57,10 @@ def run(out: Path, houses: int, steps: int) -> None:
                     continue
                 t0 = time.perf_counter()
                 res = adapt_to_success(house, policy, make(g), p, tolerance=TOLERANCE, episodes=EPISODES,
-                                       max_edits=steps, patience=PATIENCE, seed=SEED, name=name)
-                row = {"generator": g, "target": p, "house": name, "steps": steps, "patience": PATIENCE, "seconds": time.perf_counter() - t0,
+                                       max_edits=steps, patience=PATIENCE, seed=SEED, name=name,
+                                       rollout_episodes=ROLLOUT_EPISODES)
+                row = {"generator": g, "target": p, "house": name, "steps": steps, "patience": PATIENCE,
+                       "rollout_episodes": ROLLOUT_EPISODES, "seconds": time.perf_counter() - t0,
                        **{k: v for k, v in res.to_dict().items() if k not in ("trace", "generator")}}
                 with out.open("a", encoding="utf-8") as f:
                     f.write(json.dumps(row) + "\n")
@@ -101,6 +105,8 @@ if __name__ == "__main__":
             PATIENCE = int(value)
         elif flag == "--first":
             FIRST = int(value)
+        elif flag == "--rollout-episodes":
+            ROLLOUT_EPISODES = int(value)
         else:
             sys.exit(f"unknown option {flag}")
     target = Path(sys.argv[1])
