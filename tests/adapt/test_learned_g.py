@@ -127,13 +127,18 @@ def test_shipped_scorer_loads_and_a_corrupt_one_is_refused_in_one_line(tmp_path)
         make_generator("learned", checkpoint=tmp_path / "missing.pt")
 
 
-def test_learned_g_edits_pass_validation_and_the_audit_deterministically(tiny):
-    house, world = tiny.houses[0], tiny.worlds[0]
-    ep = draw_episode(world, np.random.default_rng(0))
-    ctx = GenerationContext(episode=ep, trajectory=rollout(world, ep, ExpertPolicy()), render=False)
+def _context(tiny, policy=None):
     from adaptenv.adapt.analysis import analyze_trajectory
 
-    analysis = analyze_trajectory(ctx.trajectory, world)
+    house, world = tiny.houses[0], tiny.worlds[0]
+    ep = draw_episode(world, np.random.default_rng(0))
+    ctx = GenerationContext(episode=ep, trajectory=rollout(world, ep, ExpertPolicy()), policy=policy, render=False)
+    return house, ctx, analyze_trajectory(ctx.trajectory, world)
+
+
+def test_learned_g_edits_pass_validation_and_the_audit_deterministically(tiny):
+    house, ctx, analysis = _context(tiny)
+    ep = ctx.episode
     gen = LearnedGenerator()
     runs = [gen.generate(house, analysis, steps=2, context=ctx, rng=np.random.default_rng(5)) for _ in range(2)]
     a, b = runs
@@ -142,15 +147,6 @@ def test_learned_g_edits_pass_validation_and_the_audit_deterministically(tiny):
     assert all(e.accepted and e.changed and e.source == "learned" for e in a.applied)
     assert validate_scene(a.house, episode_targets=[ep.target_type], start=ep.start[:2], original=house) == []
     assert audit(house, a.house).total == 0
-
-
-def _context(tiny, policy=None):
-    from adaptenv.adapt.analysis import analyze_trajectory
-
-    house, world = tiny.houses[0], tiny.worlds[0]
-    ep = draw_episode(world, np.random.default_rng(0))
-    ctx = GenerationContext(episode=ep, trajectory=rollout(world, ep, ExpertPolicy()), policy=policy, render=False)
-    return house, ctx, analyze_trajectory(ctx.trajectory, world)
 
 
 def test_learned_g_edits_each_object_at_most_once(tiny):
