@@ -2,7 +2,7 @@
 
 Layers, lowest first (a module may import from its own layer and the layers below it, never above):
 
-    helpers (errors, progress, configfile, vocabulary, _numba_cache) -> scene -> sim -> agents
+    helpers (errors, progress, configfile, vocabulary, _numba_cache, limits, files) -> scene -> sim -> agents
     -> render -> adapt -> curriculum -> report -> cli and bench -> the package entry points
     (``adaptenv/__init__.py`` and ``_gym``, which wire the layers together when asked).
 
@@ -30,7 +30,7 @@ SRC = Path(__file__).resolve().parents[1] / "src"
 
 #: Layer of each top-level name under ``adaptenv`` (module or package), lowest first.
 LAYERS: dict[str, int] = {
-    **dict.fromkeys(("errors", "progress", "configfile", "vocabulary", "_numba_cache", "limits"), 0),
+    **dict.fromkeys(("errors", "progress", "configfile", "vocabulary", "_numba_cache", "limits", "files"), 0),
     "scene": 1, "sim": 2, "agents": 3, "render": 4, "adapt": 5, "curriculum": 6, "report": 7,
     "cli": 8, "bench": 8,
     "": 9, "_gym": 9,

@@ -45,6 +45,7 @@ from adaptenv.adapt.validation import EditValidator
 from adaptenv.agents.policy import Policy, as_policy
 from adaptenv.agents.rollout import checking_episodes, draw_episode, rollout, run_in_worlds
 from adaptenv.errors import ConfigError
+from adaptenv.files import atomic_write_text
 from adaptenv.scene.house import House
 from adaptenv.sim.rollout import expert_policy, run_episode
 from adaptenv.sim.world import compile_world
@@ -190,7 +191,7 @@ class Dataset:
             raise ConfigError(f"{self.folder}: a collection with other settings ({diff}: {old.get(diff)!r}, now "
                               f"{settings[diff]!r}); pass the same settings to continue it, or a new -o")
         if old is None:
-            _write_atomic(self.folder / META, json.dumps({**settings, "command": command}, indent=1) + "\n")
+            atomic_write_text(self.folder / META, json.dumps({**settings, "command": command}, indent=1) + "\n")
         done = self.finished()
         self._drop_unfinished(done)
         return set(done)
@@ -267,12 +268,6 @@ def load_rows(folder: Path) -> list[dict[str, Any]]:
     if not path.is_file():
         raise ConfigError(f"{p}: no {ROWS} there; collect one with `adaptenv gdata collect -o {p}`")
     return list(iter_rows(path))
-
-
-def _write_atomic(path: Path, text: str) -> None:
-    tmp = path.with_name(f".{path.name}.tmp-{os.getpid()}")
-    tmp.write_text(text, encoding="utf-8")
-    os.replace(tmp, path)
 
 
 def run_settings(policy: Policy, cfg: CollectConfig) -> dict[str, Any]:

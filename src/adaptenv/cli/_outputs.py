@@ -250,3 +250,11 @@ def recording(files: Iterable[Path], folder: OutputFolder | None, command: str) 
         for path, stat in before.items():
             if path.is_file() and _stat(path) != stat:
                 record_file(path, command)
+
+
+def command_line() -> str:
+    """The command being run, as ``adaptenv ...`` (kept in run folders, datasets and checkpoint cards)."""
+    import shlex
+    import sys
+
+    return shlex.join(["adaptenv", *sys.argv[1:]])

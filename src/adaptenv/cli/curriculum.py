@@ -6,7 +6,6 @@ torch or numba.
 
 from __future__ import annotations
 
-import shlex
 import sys
 from pathlib import Path
 
@@ -14,7 +13,7 @@ import typer
 
 from adaptenv.cli import _numbers as numbers
 from adaptenv.cli._common import interrupted
-from adaptenv.cli._outputs import output_folder
+from adaptenv.cli._outputs import command_line, output_folder
 from adaptenv.cli.adapt import (
     API_OPTION,
     CACHE_OPTION,
@@ -221,7 +220,7 @@ def loop(
     cfg.check("adaptenv loop")
     options = ExecutorOptions(executor, workers, address).check()
     check_house_sets([cfg.houses, *cfg.heldout.values()], strict, console.print)
-    command = shlex.join(["adaptenv", *sys.argv[1:]])
+    command = command_line()
     try:
         with folder, options.make() as ex:
             records = run_loop(cfg, out, resume=resume, executor=ex, progress=lambda text: console.print(f"[dim]{text}[/]"),

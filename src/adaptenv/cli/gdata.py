@@ -11,7 +11,7 @@ from pathlib import Path
 import typer
 
 from adaptenv.cli import _numbers as numbers
-from adaptenv.cli._outputs import output_folder
+from adaptenv.cli._outputs import command_line, output_folder
 from adaptenv.errors import ConfigError
 
 gdata_app = typer.Typer(help="Data for a learned G: collect candidate edits with their effect on an agent, train "
@@ -125,14 +125,6 @@ def train(
                     f"{len(card['data']['heldin_houses'])} held-in houses: drop of the chosen edit "
                     f"{sel['heldin']['chosen']:+.4f} (random pick {sel['heldin']['random']:+.4f}, best "
                     f"{sel['heldin']['best']:+.4f}); wrote {out} and {card_path}", highlight=False)
-
-
-def command_line() -> str:
-    """The command being run, as ``adaptenv ...`` (for the dataset's meta and the checkpoint's card)."""
-    import shlex
-    import sys
-
-    return shlex.join(["adaptenv", *sys.argv[1:]])
 
 
 def register(app: typer.Typer, bench: typer.Typer) -> None:

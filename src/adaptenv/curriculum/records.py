@@ -21,8 +21,6 @@ from __future__ import annotations
 
 import json
 import math
-import os
-import tempfile
 from pathlib import Path
 from typing import Any
 
@@ -30,6 +28,7 @@ from pydantic import BaseModel, Field, ValidationError, field_validator
 
 from adaptenv.configfile import field_path
 from adaptenv.errors import ConfigError
+from adaptenv.files import atomic_write_text
 from adaptenv.scene.house import House, load_house, save_house
 from adaptenv.sim.world import NavWorld, compile_world
 
@@ -130,24 +129,6 @@ class RunInfo(BaseModel):
     """Per house-set spec (training houses and held-out sets), the unusable houses left out of it."""
     weights: dict[str, str] | None = None
     """pi_0's weights: the ``--policy`` name, its file and sha256 (None for a run written before they were kept)."""
-
-
-def atomic_write_text(path: Path, text: str) -> Path:
-    """Write a file so that a crash leaves either the old or the new content, never a mix."""
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
-    try:
-        with os.fdopen(fd, "w", encoding="utf-8") as f:
-            f.write(text)
-            f.flush()
-            os.fsync(f.fileno())
-        os.chmod(tmp, 0o644)  # mkstemp creates 0600; run files are ordinary readable files
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
-    return path
 
 
 def read_iterations(run_dir: Path) -> list[IterationRecord]:
