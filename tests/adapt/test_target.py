@@ -119,6 +119,39 @@ def test_already_within_tolerance_needs_no_edit(tiny):
     assert res.stopped == "within tolerance" and res.edits == [] and g.calls == 0 and res.house is tiny
 
 
+class StridePusher(Pusher):
+    """A Pusher whose stride cycles through ``strides``, one per call."""
+
+    def __init__(self, strides: list[float]):
+        super().__init__(strides[0])
+        self.strides = strides
+
+    def generate(self, house, analysis, *, steps, context, rng):
+        self.stride = self.strides[self.calls % len(self.strides)]
+        return super().generate(house, analysis, steps=steps, context=context, rng=rng)
+
+
+def test_choices_measure_every_proposal_of_a_round_and_keep_the_closest(tiny):
+    g = StridePusher([2.0, 12.0, 6.0])
+    res = adapt_to_success(tiny, ShyExpert(home_of(tiny)), g, 0.5, tolerance=0.0, episodes=10, max_edits=1,
+                           seed=0, name="tiny", choices=3)
+    assert g.calls == 3 and res.round_count == 1 and len(res.rounds) == 3 and len(res.edits) == 1
+    gaps = [abs(r.success - 0.5) for r in res.rounds]
+    assert len(set(gaps)) > 1  # the three strides measure differently, so the choice matters
+    kept = next(r for r in res.rounds if r.kept)
+    assert abs(kept.success - 0.5) == min(gaps) == res.gap
+    assert res.to_dict()["rounds"] == 1 and res.to_dict()["proposed"] == 3
+    # with one choice the round's first proposal is kept as soon as it comes closer
+    one = adapt_to_success(tiny, ShyExpert(home_of(tiny)), StridePusher([2.0, 12.0, 6.0]), 0.5, tolerance=0.0,
+                           episodes=10, max_edits=1, seed=0, name="tiny")
+    assert one.round_count == len(one.rounds) == 1 and one.rounds[0].success == res.rounds[0].success
+
+
+def test_choices_below_one_are_refused(tiny):
+    with pytest.raises(ConfigError, match="choices"):
+        adapt_to_success(tiny, ShyExpert(home_of(tiny)), Pusher(3.0), 0.5, episodes=4, choices=0)
+
+
 def test_acceptance_rule_and_focus():
     m = lambda s, spl: Measurement(tuple([True] * int(s * 10) + [False] * (10 - int(s * 10))), (spl,) * 10, 0)  # noqa: E731
     assert closer(0.5, m(0.9, 0.8), m(0.7, 0.8))[0]

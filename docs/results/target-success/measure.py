@@ -3,12 +3,14 @@
     NUMBA_NUM_THREADS=1 nice -n 10 python docs/results/target-success/measure.py OUT.jsonl [HOUSES [STEPS]]
     python docs/results/target-success/measure.py OUT.jsonl table    # the table of the rows already there
 
-Options (before OUT.jsonl): ``--generators a,b`` (default ``builtin,random,failure-modes``; ``learned+checksK`` is
-the learned G with ``checks=K``), ``--patience N`` (default 3), ``--first K`` (start at the K-th house),
-``--rollout-episodes N`` (headings of G's own rollout check, default 3; rows then carry ``rollout_episodes``).
+Options (before OUT.jsonl): ``--generators a,b`` (default ``builtin,random,failure-modes``; a name may end in
+``+checksK``, the learned G with ``checks=K``, and in ``+choicesK``, K edits proposed and measured per round),
+``--patience N`` (default 3), ``--first K`` (start at the K-th house), ``--rollout-episodes N`` (headings of G's
+own rollout check, default 3; rows then carry ``rollout_episodes``), ``--houses SET`` (default
+``preset:validation``), ``--targets P,Q`` (default ``0.25,0.5,0.75``).
 
-For every G of ``GENERATORS``, every P of ``TARGETS`` and the first ``HOUSES`` houses of ``preset:validation``
-(held out from training), :func:`adaptenv.adapt.target.adapt_to_success` edits the house for the ``pretrained``
+For every G of ``GENERATORS``, every P of ``TARGETS`` and the first ``N`` houses (the second argument) of ``HOUSES``
+(default ``preset:validation``, held out from training), :func:`adaptenv.adapt.target.adapt_to_success` edits the house for the ``pretrained``
 agent, measured on ``EPISODES`` seeded episodes, until its success is within ``TOLERANCE`` of P or ``STEPS``
 edits are kept or ``PATIENCE`` rounds in a row keep none. One JSON row per run is appended to OUT.jsonl (a rerun skips the runs already there); the
 table per (G, P) is printed at the end: houses within 10 points of P, mean edits kept, mean final gap.
@@ -28,15 +30,18 @@ TARGETS = (0.25, 0.5, 0.75)
 EPISODES, TOLERANCE, PATIENCE, SEED, POLICY = 20, 0.10, 3, 0, "pretrained"
 FIRST = 0
 ROLLOUT_EPISODES = 3
+HOUSES = "preset:validation"
 
 
 def make(g: str):
-    """The generator ``g`` names (``learned+checksK``: the learned G with ``checks=K``)."""
+    """The generator ``g`` names and the choices per round (``learned+checks8+choices4``: the learned G with
+    ``checks=8``, 4 edits measured per round)."""
     from adaptenv.adapt.generators import make_generator
 
-    if g.startswith("learned+checks"):
-        return make_generator("learned", checks=int(g.removeprefix("learned+checks")))
-    return make_generator(g)
+    name, *mods = g.split("+")
+    checks = [int(m.removeprefix("checks")) for m in mods if m.startswith("checks")]
+    choices = [int(m.removeprefix("choices")) for m in mods if m.startswith("choices")]
+    return make_generator(name, **({"checks": checks[0]} if checks else {})), (choices or [1])[0]
 
 
 def run(out: Path, houses: int, steps: int) -> None:
@@ -48,7 +53,7 @@ def run(out: Path, houses: int, steps: int) -> None:
 
     configure_torch()
     done = {(r["generator"], r["target"], r["house"]) for r in rows(out)}
-    hs = load_house_set("preset:validation")
+    hs = load_house_set(HOUSES)
     policy = resolve_policy(POLICY, seed=SEED)
     for name, house in list(zip(hs.names, hs.houses, strict=True))[FIRST:houses]:  # house by house: a cut run is a subset
         for g in GENERATORS:
@@ -56,11 +61,12 @@ def run(out: Path, houses: int, steps: int) -> None:
                 if (g, p, name) in done:
                     continue
                 t0 = time.perf_counter()
-                res = adapt_to_success(house, policy, make(g), p, tolerance=TOLERANCE, episodes=EPISODES,
+                generator, choices = make(g)
+                res = adapt_to_success(house, policy, generator, p, tolerance=TOLERANCE, episodes=EPISODES,
                                        max_edits=steps, patience=PATIENCE, seed=SEED, name=name,
-                                       rollout_episodes=ROLLOUT_EPISODES)
+                                       rollout_episodes=ROLLOUT_EPISODES, choices=choices)
                 row = {"generator": g, "target": p, "house": name, "steps": steps, "patience": PATIENCE,
-                       "rollout_episodes": ROLLOUT_EPISODES, "seconds": time.perf_counter() - t0,
+                       "rollout_episodes": ROLLOUT_EPISODES, "choices": choices, "houses": HOUSES, "seconds": time.perf_counter() - t0,
                        **{k: v for k, v in res.to_dict().items() if k not in ("trace", "generator")}}
                 with out.open("a", encoding="utf-8") as f:
                     f.write(json.dumps(row) + "\n")
@@ -107,6 +113,10 @@ if __name__ == "__main__":
             FIRST = int(value)
         elif flag == "--rollout-episodes":
             ROLLOUT_EPISODES = int(value)
+        elif flag == "--houses":
+            HOUSES = value
+        elif flag == "--targets":
+            TARGETS = tuple(float(t) for t in value.split(","))
         else:
             sys.exit(f"unknown option {flag}")
     target = Path(sys.argv[1])

@@ -8,7 +8,9 @@ leaves success where it was and moves the mean SPL the way P lies); an edit that
 more than it gained is dropped and G is asked again, aimed at the next episode. It stops when
 ``|success - P| <= tolerance``, when ``max_edits`` edits are kept, or after ``patience`` rounds in a
 row without a kept edit. Since only edits that come closer are kept, the house returned is the
-closest the run reached::
+closest the run reached. With ``choices=K`` a round asks G for K edits instead, each aimed at the next
+episode in turn, measures every valid one and keeps the closest to P (smallest gap, then the SPL moved
+furthest the way P lies) when it comes closer::
 
     result = adapt_to_success(house, policy, make_generator("builtin"), 0.5, episodes=20, max_edits=10)
     result.success_trace   # [1.0, 0.95, 0.85, ...]: success before and after each kept edit
@@ -84,9 +86,11 @@ class Measurement:
 
 @dataclass(frozen=True)
 class TargetRound:
-    """One round: G's proposed edit, and whether it was kept and what the house measured with it."""
+    """One of G's proposed edits (one per round, or ``choices`` per round), whether it was kept and what the house
+    measured with it."""
 
     round: int
+    """The round it was proposed in (from 1)."""
     episode: int
     """Index of the measured episode G aimed at."""
     edit: Edit | None
@@ -151,6 +155,11 @@ class TargetResult:
         return [self.before.success] + [r.success for r in self.rounds if r.kept and r.success is not None]
 
     @property
+    def round_count(self) -> int:
+        """Rounds run (each proposed ``choices`` edits at most)."""
+        return len({r.round for r in self.rounds})
+
+    @property
     def env_steps(self) -> int:
         """pi_t's environment steps in all measurements and G's checks."""
         return self.measure_steps + self.check_steps
@@ -160,15 +169,16 @@ class TargetResult:
         return {"target": self.target, "tolerance": self.tolerance, "generator": self.generator,
                 "episodes": len(self.episodes), "success_before": self.before.success,
                 "spl_before": self.before.spl, "success": self.after.success, "spl": self.after.spl,
-                "gap": self.gap, "reached": self.reached, "edits": len(self.edits), "rounds": len(self.rounds),
+                "gap": self.gap, "reached": self.reached, "edits": len(self.edits), "rounds": self.round_count,
+                "proposed": len(self.rounds),
                 "stopped": self.stopped, "success_trace": self.success_trace,
                 "trace": [r.to_dict() for r in self.rounds]}
 
     def generation_log(self) -> dict[str, Any]:
-        """The rounds as a generator's log (``edits.json``: one step per round, kept edits ``applied``, the others
-        ``rejected`` or ``skipped``) with the figures of :meth:`to_dict` beside them."""
-        steps = [StepRecord(step=r.round - 1, status="applied" if r.kept else "rejected" if r.edit else "skipped",
-                            edit=r.edit, reason=r.reason).model_dump(mode="json") for r in self.rounds]
+        """The proposals as a generator's log (``edits.json``: one step per proposed edit, kept edits ``applied``, the
+        others ``rejected`` or ``skipped``) with the figures of :meth:`to_dict` beside them."""
+        steps = [StepRecord(step=i, status="applied" if r.kept else "rejected" if r.edit else "skipped",
+                            edit=r.edit, reason=r.reason).model_dump(mode="json") for i, r in enumerate(self.rounds)]
         return {"generator": self.generator, "steps": steps,
                 "target_success": {k: v for k, v in self.to_dict().items() if k != "trace"}}
 
@@ -216,6 +226,13 @@ def closer(target: float, before: Measurement, after: Measurement) -> tuple[bool
                    f"{target:.2f} (gap {g0:.2f} -> {g1:.2f})")
 
 
+def rank(target: float, before: Measurement, after: Measurement) -> tuple[float, float]:
+    """Sort key of a measured edit among a round's choices (smaller is better): the gap to the target, then the
+    mean SPL moved the way the target lies."""
+    toward = before.spl - after.spl if before.success > target else after.spl - before.spl
+    return abs(after.success - target), -toward
+
+
 def focus_order(target: float, m: Measurement) -> list[int]:
     """Episodes G aims at, in turn: the solved ones (lowest SPL first) when success is above the target, the
     failed ones when below; every episode when none qualifies."""
@@ -229,7 +246,7 @@ def adapt_to_success(house: House, policy: Policy, generator: Generator, target:
                      tolerance: float = TOLERANCE, episodes: int | list[Episode] = EPISODES, max_edits: int = 10,
                      patience: int = PATIENCE, analyzer: Analyzer | None = None, seed: int | Sequence[int] = 0,
                      target_type: str | None = None, name: str = "house",
-                     rollout_episodes: int = 3) -> TargetResult:
+                     rollout_episodes: int = 3, choices: int = 1) -> TargetResult:
     """Edit ``house`` with ``generator`` until the policy's success on fixed episodes is within ``tolerance`` of
     ``target`` (see the module docstring).
 
@@ -245,10 +262,13 @@ def adapt_to_success(house: House, policy: Policy, generator: Generator, target:
         analyzer: F for the episode G aims at (default the built-in).
         seed: seed (an int or seed words) of the episode draw and of G's random stream.
         target_type: draw only episodes of this target type.
+        rollout_episodes: headings of G's own rollout check of a candidate (for the G that make one).
+        choices: edits G is asked for per round, each aimed at the next episode in turn; every valid one is
+            measured and the closest to the target is kept (1: the first edit, kept when closer).
     """
     check_target(target, tolerance, what="target", tol_what="tolerance")
-    if max_edits < 0 or patience < 1:
-        raise ConfigError(f"max_edits must be >= 0 and patience >= 1, got {max_edits} and {patience}")
+    if max_edits < 0 or patience < 1 or choices < 1:
+        raise ConfigError(f"max_edits must be >= 0, patience and choices >= 1, got {max_edits}, {patience} and {choices}")
     policy = as_policy(policy)
     analyzer = analyzer or BuiltinAnalyzer()
     world = compile_world(house, name)
@@ -270,33 +290,36 @@ def adapt_to_success(house: House, policy: Policy, generator: Generator, target:
         if misses >= patience:
             result.stopped = f"no kept edit in {patience} rounds in a row"
             break
-        order = focus_order(target, cur)
-        k = order[turn % len(order)]
-        turn += 1
-        edit, reason, steps = _propose(result.usage, current, world, eps[k], trajs[k], policy, analyzer, generator,
-                                       g_steps, np.random.default_rng([*_words(seed), 5, len(result.rounds)]),
-                                       rollout_episodes)
-        result.check_steps += steps
-        n = len(result.rounds) + 1
-        if edit is None:
-            g_steps = min(g_steps + 1, MAX_G_STEPS)
-            result.rounds.append(TargetRound(n, k, None, False, reason))
+        order, n = focus_order(target, cur), len({r.round for r in result.rounds}) + 1
+        best: tuple | None = None
+        for _ in range(choices):
+            k = order[turn % len(order)]
+            turn += 1
+            edit, reason, steps = _propose(result.usage, current, world, eps[k], trajs[k], policy, analyzer, generator,
+                                           g_steps, np.random.default_rng([*_words(seed), 5, len(result.rounds)]),
+                                           rollout_episodes)
+            result.check_steps += steps
+            if edit is None:
+                g_steps = min(g_steps + 1, MAX_G_STEPS)
+                result.rounds.append(TargetRound(n, k, None, False, reason))
+                continue
+            candidate = replay(current, [edit])
+            problems, cworld = _checked(candidate, house, eps, k, name)
+            if problems:
+                result.rounds.append(TargetRound(n, k, edit, False, "invalid: " + "; ".join(problems[:3])))
+                continue
+            m, ctrajs = measure(cworld, eps, policy)
+            result.measure_steps += m.steps
+            keep, why = closer(target, cur, m)
+            result.rounds.append(TargetRound(n, k, edit, False, why, m.success, m.spl))
+            if keep and (best is None or rank(target, cur, m) < best[0]):
+                best = (rank(target, cur, m), len(result.rounds) - 1, candidate, cworld, m, ctrajs)
+        if best is None:
             misses += 1
             continue
-        candidate = replay(current, [edit])
-        problems, cworld = _checked(candidate, house, eps, k, name)
-        if problems:
-            result.rounds.append(TargetRound(n, k, edit, False, "invalid: " + "; ".join(problems[:3])))
-            misses += 1
-            continue
-        m, ctrajs = measure(cworld, eps, policy)
-        result.measure_steps += m.steps
-        keep, why = closer(target, cur, m)
-        result.rounds.append(TargetRound(n, k, edit, keep, why, m.success, m.spl))
-        if not keep:
-            misses += 1
-            continue
-        current, world, cur, trajs, misses, turn = candidate, cworld, m, ctrajs, 0, 0
+        _, i, current, world, cur, trajs = best
+        result.rounds[i] = replace(result.rounds[i], kept=True)
+        misses, turn = 0, 0
     result.house, result.after, result.trajectories_after = current, cur, trajs
     return result
 
