@@ -202,10 +202,12 @@ def test_cli_reports_target_reached_success_gap_and_edits(tiny, tmp_path):
 
     out = tmp_path / "out"
     result = CliRunner().invoke(app, ["adapt", _tiny_file(tiny, tmp_path), "--policy", "expert", "--target-success",
-                                      "0.5", "--target-episodes", "4", "--steps", "1", "-o", str(out), "--json"])
+                                      "0.5", "--target-episodes", "4", "--steps", "1", "--target-choices", "2", "-o", str(out),
+                                      "--json"])
     assert result.exit_code == 0, result.output
     doc = json.loads(result.output)["target_success"]
     assert doc["target"] == 0.5 and doc["episodes"] == 4 and doc["edits"] <= 1
+    assert doc["rounds"] <= doc["proposed"] <= 2 * doc["rounds"]  # two edits proposed per round
     assert doc["gap"] == pytest.approx(abs(doc["success"] - 0.5)) and len(doc["success_trace"]) == doc["edits"] + 1
     saved = json.loads((out / "summary.json").read_text())
     assert saved["target_success"]["success"] == doc["success"] and saved["edits_applied"] == doc["edits"]
@@ -214,3 +216,6 @@ def test_cli_reports_target_reached_success_gap_and_edits(tiny, tmp_path):
                                     "0.5", "--target-episodes", "4", "--steps", "1", "-o", str(out), "--force"])
     assert text.exit_code == 0, text.output
     assert f"target success 0.50 +/- 0.10: reached {doc['success']:.2f}" in text.output
+    bad = CliRunner().invoke(app, ["adapt", _tiny_file(tiny, tmp_path), "--target-success", "0.5",
+                                   "--target-choices", "0", "-o", str(tmp_path / "none")])
+    assert bad.exit_code == 2 and "--target-choices" in bad.output and not (tmp_path / "none").exists()

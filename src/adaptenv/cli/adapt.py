@@ -196,6 +196,9 @@ def adapt(
                                            "|success - P| is at most this."),
     target_episodes: int = typer.Option(20, "--target-episodes", min=1, max=500, help="With --target-success: "
                                         "episodes the success is measured on (the same after every edit)."),
+    target_choices: int = typer.Option(1, "--target-choices", min=1, max=64, metavar="K", help="With "
+                                       "--target-success: edits G proposes per round, each measured; the closest "
+                                       "to P is kept."),
     force: bool = FORCE_OPTION,
 ) -> None:
     """One closed-loop step: roll out the policy, analyze (F), edit the house (G), validate, write OUT.
@@ -270,7 +273,8 @@ def adapt(
             try:
                 if target_success is not None:
                     s = _target_one(h, name, where, pol, f, gen, steps=steps, seed=seed, target=target,
-                                    success=target_success, tolerance=target_tolerance, episodes=target_episodes)
+                                    success=target_success, tolerance=target_tolerance, episodes=target_episodes,
+                                    choices=target_choices)
                 else:
                     s = _adapt_one(h, name, where, pol, f, gen, steps=steps, seed=seed, target=target,
                                    diagnose=diagnose, before=before)
@@ -324,7 +328,7 @@ def _adapt_one(h, name: str, out: Path, policy, analyzer, generator, *, steps: i
 
 
 def _target_one(h, name: str, out: Path, policy, analyzer, generator, *, steps: int, seed: int, target: str | None,
-                success: float, tolerance: float, episodes: int) -> dict:
+                success: float, tolerance: float, episodes: int, choices: int = 1) -> dict:
     """Edit one house toward the policy's success rate ``success`` with
     :func:`~adaptenv.adapt.target.adapt_to_success`; write it into ``out`` and return its summary."""
     from adaptenv.adapt.edits import edit_counts
@@ -341,7 +345,7 @@ def _target_one(h, name: str, out: Path, policy, analyzer, generator, *, steps: 
     with ProgressBar(f"adapting {name} toward success {success:.2f}: measure, F, G, measure again ({steps} edits "
                      "at most)"):
         res = adapt_to_success(h, policy, generator, success, tolerance=tolerance, episodes=episodes, max_edits=steps,
-                               analyzer=analyzer, seed=seed, target_type=target, name=name)
+                               analyzer=analyzer, seed=seed, target_type=target, name=name, choices=choices)
     counts = edit_counts(res.edits, h, res.house)
     types = house_types(h)
     counts["objects"] = [{"type": types.get(o["id"]), **o} for o in counts["objects"]]
@@ -368,7 +372,7 @@ def _print_target_summary(console, s: dict, out: Path) -> None:
     console.print(f"policy {s['policy']}, analyzer {s['analyzer']}, generator {s['generator']}; success measured on "
                   f"{t['episodes']} fixed episodes", highlight=False, soft_wrap=True)
     console.print(f"target success {t['target']:.2f} +/- {t['tolerance']:.2f}: reached {t['success']:.2f} (from "
-                  f"{t['success_before']:.2f}), gap {t['gap']:.2f}, {t['edits']} edit(s) kept of {t['rounds']} "
+                  f"{t['success_before']:.2f}), gap {t['gap']:.2f}, {t['edits']} edit(s) kept of {t['proposed']} "
                   f"proposed; {t['stopped']}", highlight=False, soft_wrap=True)
     console.print("success after each kept edit: " + " -> ".join(f"{x:.2f}" for x in t["success_trace"]),
                   highlight=False, soft_wrap=True)

@@ -161,6 +161,9 @@ def loop(
                                            help="With --target-success: the tolerance."),
     target_episodes: int = typer.Option(20, "--target-episodes", min=1, max=500, help="With --target-success: "
                                         "episodes per scene the success is measured on."),
+    target_choices: int = typer.Option(1, "--target-choices", min=1, max=64, metavar="K", help="With "
+                                       "--target-success: edits G proposes per round, each measured; the closest "
+                                       "to P is kept."),
     heldout_episodes: int = typer.Option(100, "--heldout-episodes", callback=numbers.episodes, help="Episodes per held-out set."),
     heldout: list[str] = typer.Option(None, "--heldout", help="Held-out set NAME=HOUSES (repeatable); default: "
                                       "rearranged=preset:pretrain-rearranged and unseen=preset:pretrain-unseen."),
@@ -216,7 +219,7 @@ def loop(
                      relocate_targets=relocate_targets, door_edits=door_edits, focus_training=focus_training,
                      heldout_episodes=heldout_episodes, llm=llm, target_success=target_success,
                      target_tolerance=target_tolerance, target_episodes=target_episodes,
-                     **({"heldout": h} if (h := _heldout(heldout)) else {}))
+                     target_choices=target_choices, **({"heldout": h} if (h := _heldout(heldout)) else {}))
     cfg.check("adaptenv loop")
     options = ExecutorOptions(executor, workers, address).check()
     check_house_sets([cfg.houses, *cfg.heldout.values()], strict, console.print)

@@ -231,6 +231,7 @@ class GenerateJob:
     (:func:`~adaptenv.adapt.target.adapt_to_success`, ``edit_steps`` the budget) instead of the most difficulty."""
     target_tolerance: float = 0.10
     target_episodes: int = 20
+    target_choices: int = 1
 
 
 @dataclass
@@ -327,7 +328,7 @@ def _run_targeted(job: GenerateJob) -> Generated:
     analyzer, generator = make_fg(job.kind, job.llm, relocate_targets=job.relocate_targets, door_edits=job.door_edits)
     res = adapt_to_success(job.house, job.weights.policy(), generator, job.target_success,
                            tolerance=job.target_tolerance, episodes=job.target_episodes, max_edits=job.edit_steps,
-                           analyzer=analyzer, seed=job.seed, name=job.name)
+                           analyzer=analyzer, seed=job.seed, name=job.name, choices=job.target_choices)
     expert_before, _ = measure(compile_world(job.house, job.name), res.episodes, ExpertPolicy())
     expert_after, _ = measure(compile_world(res.house, job.name), res.episodes, ExpertPolicy()) if res.edits \
         else (expert_before, None)

@@ -154,6 +154,8 @@ class LoopConfig:
     """With target_success: stop editing a scene once |success - P| is at most this."""
     target_episodes: int = 20
     """With target_success: episodes pi_t's success on a scene is measured on (the same after every edit)."""
+    target_choices: int = 1
+    """With target_success: edits G proposes per round, each measured on those episodes; the closest to P is kept."""
 
     __pydantic_config__ = STRICT
 
@@ -208,6 +210,9 @@ class LoopConfig:
                                   f"({', '.join(ADAPTING_METHODS)}), not {self.method}; pick one or drop target_success")
             if self.target_episodes < 1:
                 raise ConfigError(f"{source}: target_episodes must be at least 1, got {self.target_episodes}")
+            if not 1 <= self.target_choices <= 64:
+                raise ConfigError(f"{source}: target_choices must be a whole number from 1 to 64, got "
+                                  f"{self.target_choices}")
         return self
 
 
@@ -718,4 +723,4 @@ def target_fields(cfg: LoopConfig) -> dict[str, Any]:
     if cfg.target_success is None:
         return {}
     return {"target_success": cfg.target_success, "target_tolerance": cfg.target_tolerance,
-            "target_episodes": cfg.target_episodes}
+            "target_episodes": cfg.target_episodes, "target_choices": cfg.target_choices}
