@@ -290,7 +290,7 @@ def adapt_to_success(house: House, policy: Policy, generator: Generator, target:
         if misses >= patience:
             result.stopped = f"no kept edit in {patience} rounds in a row"
             break
-        order, n = focus_order(target, cur), len({r.round for r in result.rounds}) + 1
+        order, n = focus_order(target, cur), result.round_count + 1
         best: tuple | None = None
         for _ in range(choices):
             k = order[turn % len(order)]
