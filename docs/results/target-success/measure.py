@@ -79,7 +79,7 @@ def rows(out: Path) -> list[dict]:
 
 def table(out: Path) -> None:
     """Per (G, P): houses within 10 points, mean edits kept, mean gap, mean success reached."""
-    everything = rows(out)
+    everything = [r for r in rows(out) if r["generator"] in GENERATORS and r["target"] in TARGETS]
     per_house = {h: sum(r["house"] == h for r in everything) for h in {r["house"] for r in everything}}
     full = len(GENERATORS) * len(TARGETS)
     rs = [r for r in everything if per_house[r["house"]] == full]  # houses with every (G, P) run
