@@ -147,9 +147,10 @@ def test_choices_measure_every_proposal_of_a_round_and_keep_the_closest(tiny):
     assert one.round_count == len(one.rounds) == 1 and one.rounds[0].success == res.rounds[0].success
 
 
-def test_choices_below_one_are_refused(tiny):
+@pytest.mark.parametrize("choices", [0, -1, 2.5])
+def test_choices_other_than_a_whole_number_from_one_are_refused(tiny, choices):
     with pytest.raises(ConfigError, match="choices"):
-        adapt_to_success(tiny, ShyExpert(home_of(tiny)), Pusher(3.0), 0.5, episodes=4, choices=0)
+        adapt_to_success(tiny, ShyExpert(home_of(tiny)), Pusher(3.0), 0.5, episodes=4, choices=choices)
 
 
 def test_acceptance_rule_and_focus():

@@ -267,7 +267,7 @@ def adapt_to_success(house: House, policy: Policy, generator: Generator, target:
             measured and the closest to the target is kept (1: the first edit, kept when closer).
     """
     check_target(target, tolerance, what="target", tol_what="tolerance")
-    if max_edits < 0 or patience < 1 or choices < 1:
+    if max_edits < 0 or patience < 1 or not isinstance(choices, (int, np.integer)) or choices < 1:
         raise ConfigError(f"max_edits must be >= 0, patience and choices >= 1, got {max_edits}, {patience} and {choices}")
     policy = as_policy(policy)
     analyzer = analyzer or BuiltinAnalyzer()
