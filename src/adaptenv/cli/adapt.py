@@ -58,6 +58,9 @@ MAX_COST_OPTION = typer.Option(None, "--max-cost", min=0.0, callback=numbers.fin
                                "(needs --price-in and --price-out).")
 TARGET_MOVES_OPTION = typer.Option(False, "--allow-target-moves", help="Let the LLM G move the episode's target "
                                    "objects (excluded by default, like the built-in G).")
+TARGET_CHOICES_OPTION = typer.Option(1, "--target-choices", min=1, max=64, metavar="K", help="With "
+                                     "--target-success: edits G proposes per round, each measured; the closest "
+                                     "to P is kept.")
 LLM_CONFIG_OPTION = typer.Option(None, "--llm-config", metavar="FILE", help="LLMConfig JSON file (docs/llm.md); "
                                  "the flags above override its fields.")
 
@@ -196,9 +199,7 @@ def adapt(
                                            "|success - P| is at most this."),
     target_episodes: int = typer.Option(20, "--target-episodes", min=1, max=500, help="With --target-success: "
                                         "episodes the success is measured on (the same after every edit)."),
-    target_choices: int = typer.Option(1, "--target-choices", min=1, max=64, metavar="K", help="With "
-                                       "--target-success: edits G proposes per round, each measured; the closest "
-                                       "to P is kept."),
+    target_choices: int = TARGET_CHOICES_OPTION,
     force: bool = FORCE_OPTION,
 ) -> None:
     """One closed-loop step: roll out the policy, analyze (F), edit the house (G), validate, write OUT.

@@ -24,6 +24,7 @@ from adaptenv.cli.adapt import (
     PRICE_IN_OPTION,
     PRICE_OUT_OPTION,
     PROMPTS_OPTION,
+    TARGET_CHOICES_OPTION,
     TARGET_MOVES_OPTION,
 )
 from adaptenv.curriculum.executor import ADDRESS_OPTION, EXECUTOR_OPTION, WORKERS_OPTION
@@ -161,9 +162,7 @@ def loop(
                                            help="With --target-success: the tolerance."),
     target_episodes: int = typer.Option(20, "--target-episodes", min=1, max=500, help="With --target-success: "
                                         "episodes per scene the success is measured on."),
-    target_choices: int = typer.Option(1, "--target-choices", min=1, max=64, metavar="K", help="With "
-                                       "--target-success: edits G proposes per round, each measured; the closest "
-                                       "to P is kept."),
+    target_choices: int = TARGET_CHOICES_OPTION,
     heldout_episodes: int = typer.Option(100, "--heldout-episodes", callback=numbers.episodes, help="Episodes per held-out set."),
     heldout: list[str] = typer.Option(None, "--heldout", help="Held-out set NAME=HOUSES (repeatable); default: "
                                       "rearranged=preset:pretrain-rearranged and unseen=preset:pretrain-unseen."),
