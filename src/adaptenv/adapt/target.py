@@ -312,8 +312,9 @@ def adapt_to_success(house: House, policy: Policy, generator: Generator, target:
             result.measure_steps += m.steps
             keep, why = closer(target, cur, m)
             result.rounds.append(TargetRound(n, k, edit, False, why, m.success, m.spl))
-            if keep and (best is None or rank(target, cur, m) < best[0]):
-                best = (rank(target, cur, m), len(result.rounds) - 1, candidate, cworld, m, ctrajs)
+            key = rank(target, cur, m)
+            if keep and (best is None or key < best[0]):
+                best = (key, len(result.rounds) - 1, candidate, cworld, m, ctrajs)
         if best is None:
             misses += 1
             continue
