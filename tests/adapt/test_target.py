@@ -217,6 +217,56 @@ def test_cli_reports_target_reached_success_gap_and_edits(tiny, tmp_path):
                                     "0.5", "--target-episodes", "4", "--steps", "1", "-o", str(out), "--force"])
     assert text.exit_code == 0, text.output
     assert f"target success 0.50 +/- 0.10: reached {doc['success']:.2f}" in text.output
+    assert f"on 3 fresh action draws per episode (not selected on): success {doc['fresh_success_before']:.2f}" \
+        in text.output
     bad = CliRunner().invoke(app, ["adapt", _tiny_file(tiny, tmp_path), "--target-success", "0.5",
                                    "--target-choices", "0", "-o", str(tmp_path / "none")])
     assert bad.exit_code == 2 and "--target-choices" in bad.output and not (tmp_path / "none").exists()
+
+
+class SeedLog(ExpertPolicy):
+    """The expert, noting the seed of every episode it starts."""
+
+    name = "seed-log"
+
+    def __init__(self):
+        super().__init__()
+        self.seeds: list[int] = []
+
+    def act(self, obs, state, done):
+        ctx = self.bound()
+        self.seeds += [int(ctx.seeds[i]) for i in np.flatnonzero(done)]
+        return super().act(obs, state, done)
+
+
+def test_the_run_ends_with_a_check_on_fresh_action_draws(tiny):
+    res = run(tiny, 0.7, tolerance=0.1)
+    # the shy expert decides by seed % 1000, which a fresh draw keeps: the fresh check agrees with the run
+    assert res.fresh_draws == 3 and len(res.fresh_after.successes) == 3 * len(res.episodes)
+    assert res.fresh_before.success == res.before.success and res.fresh_after.success == res.success
+    doc = res.to_dict()
+    assert (doc["fresh_draws"], doc["fresh_success_before"], doc["fresh_success"]) == (3, 1.0, res.success)
+    assert f"on fresh draws 1.00 -> {res.success:.2f}" in res.line()
+    skipped = adapt_to_success(tiny, ShyExpert(home_of(tiny)), Pusher(3.0), 0.7, episodes=10, seed=0, name="tiny",
+                               fresh_draws=0)
+    assert skipped.fresh_after is None and skipped.to_dict()["fresh_success"] is None
+    assert "fresh" not in skipped.line() and skipped.success == res.success
+
+
+def test_fresh_draws_use_new_seeds_for_the_same_episodes(tiny):
+    from adaptenv.adapt.target import fresh_measurement, measurement_episodes
+    from adaptenv.sim.world import compile_world
+
+    world = compile_world(tiny, "tiny")
+    eps = measurement_episodes(world, 4, 0)
+    policy = SeedLog()
+    m = fresh_measurement(world, eps, policy, 2)
+    assert len(m.successes) == 8 and len(set(policy.seeds)) == 8
+    assert not set(policy.seeds) & {e.seed for e in eps}
+    assert sorted(s % 1000 for s in policy.seeds) == sorted(2 * [e.seed % 1000 for e in eps])
+
+
+@pytest.mark.parametrize("draws", [-1, 1.5])
+def test_a_bad_number_of_fresh_draws_is_refused(tiny, draws):
+    with pytest.raises(ConfigError, match="fresh_draws"):
+        adapt_to_success(tiny, ExpertPolicy(), Pusher(3.0), 0.5, episodes=2, name="tiny", fresh_draws=draws)

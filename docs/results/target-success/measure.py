@@ -13,7 +13,8 @@ For every G of ``GENERATORS``, every P of ``TARGETS`` and the first ``N`` houses
 (default ``preset:validation``, held out from training), :func:`adaptenv.adapt.target.adapt_to_success` edits the house for the ``pretrained``
 agent, measured on ``EPISODES`` seeded episodes, until its success is within ``TOLERANCE`` of P or ``STEPS``
 edits are kept or ``PATIENCE`` rounds in a row keep none. One JSON row per run is appended to OUT.jsonl (a rerun skips the runs already there); the
-table per (G, P) is printed at the end: houses within 10 points of P, mean edits kept, mean final gap.
+table per (G, P) is printed at the end: houses within 10 points of P, mean edits kept, mean final gap, and the same
+on the run's closing check with fresh action draws (rows made before that check show "-").
 """
 
 from __future__ import annotations
@@ -67,7 +68,8 @@ def run(out: Path, houses: int, steps: int) -> None:
                                        rollout_episodes=ROLLOUT_EPISODES, choices=choices)
                 row = {"generator": g, "target": p, "house": name, "steps": steps, "patience": PATIENCE,
                        "rollout_episodes": ROLLOUT_EPISODES, "choices": choices, "houses": HOUSES, "seconds": time.perf_counter() - t0,
-                       **{k: v for k, v in res.to_dict().items() if k not in ("trace", "generator")}}
+                       **{k: v for k, v in res.to_dict().items() if k not in ("trace", "generator")},
+                       "kept_edits": [e.model_dump(mode="json") for e in res.edits]}
                 with out.open("a", encoding="utf-8") as f:
                     f.write(json.dumps(row) + "\n")
                 print(f"{g:13s} P={p:.2f} {name}: {res.line()} ({row['seconds']:.0f} s)", flush=True)
@@ -86,8 +88,8 @@ def table(out: Path) -> None:
     print(f"{len(per_house)} house(s) run, {sum(n == full for n in per_house.values())} with every (G, P) "
           "(the table counts these)")
     print("| G | P | houses within 0.10 | of them within before any edit | mean edits kept | mean gap | "
-          "mean success reached | mean wall s per run |")
-    print("|---|---|---|---|---|---|---|---|")
+          "mean success reached | mean wall s per run | within 0.10 on fresh draws | mean fresh success before, reached |")
+    print("|---|---|---|---|---|---|---|---|---|---|")
     for g in GENERATORS:
         for p in TARGETS:
             sel = [r for r in rs if r["generator"] == g and r["target"] == p]
@@ -97,9 +99,19 @@ def table(out: Path) -> None:
             already = sum(abs(r["success_before"] - p) <= 0.10 + 1e-9 for r in sel)
             print(f"| {g} | {p:.2f} | {within}/{len(sel)} | {already} | {np.mean([r['edits'] for r in sel]):.1f} | "
                   f"{np.mean([r['gap'] for r in sel]):.3f} | {np.mean([r['success'] for r in sel]):.3f} | "
-                  f"{np.mean([r['seconds'] for r in sel]):.0f} |")
+                  f"{np.mean([r['seconds'] for r in sel]):.0f} | {fresh(sel, p)} |")
     start = {r["house"]: r["success_before"] for r in rs}
     print(f"\nsuccess before any edit, per house: {', '.join(f'{h} {s:.2f}' for h, s in sorted(start.items()))}")
+
+
+def fresh(sel: list[dict], p: float) -> str:
+    """The runs' fresh check (houses within 0.10 of P on fresh draws; mean success before and reached), or "-"
+    for rows made before it existed."""
+    if not all(r.get("fresh_success") is not None for r in sel):
+        return "- | -"
+    within = sum(abs(r["fresh_success"] - p) <= 0.10 + 1e-9 for r in sel)
+    return (f"{within}/{len(sel)} | {np.mean([r['fresh_success_before'] for r in sel]):.3f}, "
+            f"{np.mean([r['fresh_success'] for r in sel]):.3f}")
 
 
 if __name__ == "__main__":

@@ -10,11 +10,17 @@ more than it gained is dropped and G is asked again, aimed at the next episode. 
 row without a kept edit. Since only edits that come closer are kept, the house returned is the
 closest the run reached. With ``choices=K`` a round asks G for K edits instead, each aimed at the next
 episode in turn, measures every valid one and keeps the closest to P (smallest gap, then the SPL moved
-furthest the way P lies) when it comes closer::
+furthest the way P lies) when it comes closer.
+
+The agent samples its actions, so success on the measured draws moves by an episode or two with any
+edit, and a run that keeps only the edits that come closer selects on that noise too. A run ends by
+measuring the original and the returned house again on ``fresh_draws`` fresh action draws per episode
+(the same starts and targets, new sampling seeds), which nothing was selected on::
 
     result = adapt_to_success(house, policy, make_generator("builtin"), 0.5, episodes=20, max_edits=10)
     result.success_trace   # [1.0, 0.95, 0.85, ...]: success before and after each kept edit
     result.edits, result.gap, result.stopped
+    result.fresh_after.success   # the returned house on fresh draws: the difficulty a user gets
 
 Every G works by name: the loop only calls :meth:`~adaptenv.adapt.generators.Generator.generate`.
 A G that makes no edit in one step is asked for one more step the next time (up to ``MAX_G_STEPS``;
@@ -54,6 +60,10 @@ PATIENCE = 6
 MAX_G_STEPS = 4
 #: A change of mean SPL smaller than this is no change.
 SPL_TOL = 1e-3
+#: Fresh action draws per measured episode in the check that ends a run.
+FRESH_DRAWS = 3
+#: Seed offset per fresh draw (a multiple of 1000, so ``seed % 1000`` still names the episode).
+FRESH_SEED_STRIDE = 1000 * 7919
 
 
 def check_target(target: float, tolerance: float = TOLERANCE, *, what: str = "--target-success",
@@ -130,6 +140,12 @@ class TargetResult:
     """pi_t's environment steps in every measurement (the first, and one per measured edit)."""
     usage: Usage = field(default_factory=Usage)
     """F's and G's LLM calls over all rounds (empty for the built-ins)."""
+    fresh_draws: int = 0
+    """Fresh action draws per episode in the check that ended the run (0: none made)."""
+    fresh_before: Measurement | None = None
+    """The original house on fresh action draws (:func:`fresh_measurement`; None when ``fresh_draws`` is 0)."""
+    fresh_after: Measurement | None = None
+    """The returned house on the same fresh draws."""
 
     @property
     def edits(self) -> list[Edit]:
@@ -172,6 +188,9 @@ class TargetResult:
                 "gap": self.gap, "reached": self.reached, "edits": len(self.edits), "rounds": self.round_count,
                 "proposed": len(self.rounds),
                 "stopped": self.stopped, "success_trace": self.success_trace,
+                "fresh_draws": self.fresh_draws,
+                "fresh_success_before": self.fresh_before.success if self.fresh_before else None,
+                "fresh_success": self.fresh_after.success if self.fresh_after else None,
                 "trace": [r.to_dict() for r in self.rounds]}
 
     def generation_log(self) -> dict[str, Any]:
@@ -184,9 +203,11 @@ class TargetResult:
 
     def line(self) -> str:
         """The one-line summary: target, reached success, gap and edits."""
+        fresh = (f"; on fresh draws {self.fresh_before.success:.2f} -> {self.fresh_after.success:.2f}"
+                 if self.fresh_before and self.fresh_after else "")
         return (f"target success {self.target:.2f} (tolerance {self.tolerance:.2f}): reached {self.after.success:.2f} "
                 f"from {self.before.success:.2f}, gap {self.gap:.2f}, {len(self.edits)} edit(s) kept of "
-                f"{len(self.rounds)} proposed, {len(self.episodes)} episodes; {self.stopped}")
+                f"{len(self.rounds)} proposed, {len(self.episodes)} episodes; {self.stopped}{fresh}")
 
 
 def measurement_episodes(world: NavWorld, n: int, seed: int | Sequence[int],
@@ -208,6 +229,14 @@ def measure(world: NavWorld, episodes: list[Episode], policy: Policy) -> tuple[M
     trajs = run_policy(world, episodes, policy)
     return (Measurement(tuple(bool(t.metrics.success) for t in trajs), tuple(float(t.metrics.spl) for t in trajs),
                         sum(len(t.steps) for t in trajs)), trajs)
+
+
+def fresh_measurement(world: NavWorld, episodes: list[Episode], policy: Policy,
+                      draws: int = FRESH_DRAWS) -> Measurement:
+    """The policy on each episode ``draws`` times with fresh action-sampling seeds (the same start and target):
+    a measurement no kept edit was selected on."""
+    fresh = [replace(e, seed=e.seed + FRESH_SEED_STRIDE * (d + 1)) for d in range(draws) for e in episodes]
+    return measure(world, fresh, policy)[0]
 
 
 def closer(target: float, before: Measurement, after: Measurement) -> tuple[bool, str]:
@@ -246,7 +275,7 @@ def adapt_to_success(house: House, policy: Policy, generator: Generator, target:
                      tolerance: float = TOLERANCE, episodes: int | list[Episode] = EPISODES, max_edits: int = 10,
                      patience: int = PATIENCE, analyzer: Analyzer | None = None, seed: int | Sequence[int] = 0,
                      target_type: str | None = None, name: str = "house",
-                     rollout_episodes: int = 3, choices: int = 1) -> TargetResult:
+                     rollout_episodes: int = 3, choices: int = 1, fresh_draws: int = FRESH_DRAWS) -> TargetResult:
     """Edit ``house`` with ``generator`` until the policy's success on fixed episodes is within ``tolerance`` of
     ``target`` (see the module docstring).
 
@@ -265,13 +294,17 @@ def adapt_to_success(house: House, policy: Policy, generator: Generator, target:
         rollout_episodes: headings of G's own rollout check of a candidate (for the G that make one).
         choices: edits G is asked for per round, each aimed at the next episode in turn; every valid one is
             measured and the closest to the target is kept (1: the first edit, kept when closer).
+        fresh_draws: fresh action draws per episode on which the original and the returned house are measured
+            once the run ends (``fresh_before``, ``fresh_after``); 0 skips it.
     """
     check_target(target, tolerance, what="target", tol_what="tolerance")
     if max_edits < 0 or patience < 1 or not isinstance(choices, (int, np.integer)) or choices < 1:
         raise ConfigError(f"max_edits must be >= 0, patience and choices >= 1, got {max_edits}, {patience} and {choices}")
+    if not isinstance(fresh_draws, (int, np.integer)) or fresh_draws < 0:
+        raise ConfigError(f"fresh_draws {fresh_draws}: must be a whole number >= 0 (0 skips the fresh check)")
     policy = as_policy(policy)
     analyzer = analyzer or BuiltinAnalyzer()
-    world = compile_world(house, name)
+    world = world0 = compile_world(house, name)
     eps = list(episodes) if not isinstance(episodes, int) else measurement_episodes(world, episodes, seed, target_type)
     if not eps:
         raise ConfigError("episodes: measure on at least one episode")
@@ -322,6 +355,12 @@ def adapt_to_success(house: House, policy: Policy, generator: Generator, target:
         result.rounds[i] = replace(result.rounds[i], kept=True)
         misses, turn = 0, 0
     result.house, result.after, result.trajectories_after = current, cur, trajs
+    if fresh_draws:
+        result.fresh_draws = int(fresh_draws)
+        result.fresh_before = fresh_measurement(world0, eps, policy, fresh_draws)
+        result.fresh_after = (fresh_measurement(world, eps, policy, fresh_draws) if result.edits
+                              else result.fresh_before)
+        result.measure_steps += result.fresh_before.steps + (result.fresh_after.steps if result.edits else 0)
     return result
 
 
