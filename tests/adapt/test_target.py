@@ -222,6 +222,11 @@ def test_cli_reports_target_reached_success_gap_and_edits(tiny, tmp_path):
     bad = CliRunner().invoke(app, ["adapt", _tiny_file(tiny, tmp_path), "--target-success", "0.5",
                                    "--target-choices", "0", "-o", str(tmp_path / "none")])
     assert bad.exit_code == 2 and "--target-choices" in bad.output and not (tmp_path / "none").exists()
+    drawn = CliRunner().invoke(app, ["adapt", _tiny_file(tiny, tmp_path), "--policy", "expert", "--target-success",
+                                     "0.5", "--target-episodes", "4", "--target-draws", "2", "--steps", "1", "-o",
+                                     str(tmp_path / "drawn"), "--json"])
+    assert drawn.exit_code == 0, drawn.output
+    assert json.loads(drawn.output)["target_success"]["draws"] == 2
 
 
 class SeedLog(ExpertPolicy):
@@ -270,3 +275,19 @@ def test_fresh_draws_use_new_seeds_for_the_same_episodes(tiny):
 def test_a_bad_number_of_fresh_draws_is_refused(tiny, draws):
     with pytest.raises(ConfigError, match="fresh_draws"):
         adapt_to_success(tiny, ExpertPolicy(), Pusher(3.0), 0.5, episodes=2, name="tiny", fresh_draws=draws)
+
+
+def test_several_draws_per_episode_measure_each_episode_with_its_own_seeds(tiny):
+    one = run(tiny, 0.7, tolerance=0.1)
+    two = adapt_to_success(tiny, ShyExpert(home_of(tiny)), Pusher(3.0), 0.7, tolerance=0.1, episodes=10,
+                           max_edits=8, patience=3, seed=0, name="tiny", draws=2)
+    # the shy expert decides by seed % 1000, the same in every draw: the same run, with twice the rollouts
+    assert two.draws == 2 and len(two.before.successes) == 20 and len(two.episodes) == 10
+    assert two.success_trace == one.success_trace and two.to_dict()["draws"] == 2
+    assert all(0 <= r.episode < 20 for r in two.rounds) and two.measure_steps > one.measure_steps
+
+
+@pytest.mark.parametrize("draws", [0, 17, 1.5])
+def test_a_bad_number_of_draws_is_refused(tiny, draws):
+    with pytest.raises(ConfigError, match="draws"):
+        adapt_to_success(tiny, ExpertPolicy(), Pusher(3.0), 0.5, episodes=2, name="tiny", draws=draws)

@@ -15,7 +15,9 @@ furthest the way P lies) when it comes closer.
 The agent samples its actions, so success on the measured draws moves by an episode or two with any
 edit, and a run that keeps only the edits that come closer selects on that noise too. A run ends by
 measuring the original and the returned house again on ``fresh_draws`` fresh action draws per episode
-(the same starts and targets, new sampling seeds), which nothing was selected on::
+(the same starts and targets, new sampling seeds), which nothing was selected on. With ``draws=D``
+each measured episode is run D times with its own sampling seeds, and success is the mean over all
+N x D runs, which one edit's noise moves less::
 
     result = adapt_to_success(house, policy, make_generator("builtin"), 0.5, episodes=20, max_edits=10)
     result.success_trace   # [1.0, 0.95, 0.85, ...]: success before and after each kept edit
@@ -62,8 +64,11 @@ MAX_G_STEPS = 4
 SPL_TOL = 1e-3
 #: Fresh action draws per measured episode in the check that ends a run.
 FRESH_DRAWS = 3
-#: Seed offset per fresh draw (a multiple of 1000, so ``seed % 1000`` still names the episode).
-FRESH_SEED_STRIDE = 1000 * 7919
+#: Seed offsets per measured and per fresh draw (multiples of 1000, so ``seed % 1000`` still names the episode;
+#: the two primes keep the measured and the fresh seeds apart).
+DRAW_SEED_STRIDE, FRESH_SEED_STRIDE = 1000 * 1009, 1000 * 7919
+#: Most action draws per measured episode.
+MAX_DRAWS = 16
 
 
 def check_target(target: float, tolerance: float = TOLERANCE, *, what: str = "--target-success",
@@ -102,7 +107,7 @@ class TargetRound:
     round: int
     """The round it was proposed in (from 1)."""
     episode: int
-    """Index of the measured episode G aimed at."""
+    """Index of the measured run G aimed at: episode ``k % N`` (of N), its draw ``k // N``."""
     edit: Edit | None
     """G's edit (None when G made none)."""
     kept: bool
@@ -140,6 +145,8 @@ class TargetResult:
     """pi_t's environment steps in every measurement (the first, and one per measured edit)."""
     usage: Usage = field(default_factory=Usage)
     """F's and G's LLM calls over all rounds (empty for the built-ins)."""
+    draws: int = 1
+    """Action draws per measured episode: ``before`` and ``after`` hold ``draws`` runs of each episode."""
     fresh_draws: int = 0
     """Fresh action draws per episode in the check that ended the run (0: none made)."""
     fresh_before: Measurement | None = None
@@ -183,7 +190,7 @@ class TargetResult:
     def to_dict(self) -> dict[str, Any]:
         """Plain figures for JSON: target, reached success, gap, edits, rounds and the trace."""
         return {"target": self.target, "tolerance": self.tolerance, "generator": self.generator,
-                "episodes": len(self.episodes), "success_before": self.before.success,
+                "episodes": len(self.episodes), "draws": self.draws, "success_before": self.before.success,
                 "spl_before": self.before.spl, "success": self.after.success, "spl": self.after.spl,
                 "gap": self.gap, "reached": self.reached, "edits": len(self.edits), "rounds": self.round_count,
                 "proposed": len(self.rounds),
@@ -235,8 +242,13 @@ def fresh_measurement(world: NavWorld, episodes: list[Episode], policy: Policy,
                       draws: int = FRESH_DRAWS) -> Measurement:
     """The policy on each episode ``draws`` times with fresh action-sampling seeds (the same start and target):
     a measurement no kept edit was selected on."""
-    fresh = [replace(e, seed=e.seed + FRESH_SEED_STRIDE * (d + 1)) for d in range(draws) for e in episodes]
-    return measure(world, fresh, policy)[0]
+    return measure(world, drawn(episodes, draws, FRESH_SEED_STRIDE, first=1), policy)[0]
+
+
+def drawn(episodes: list[Episode], draws: int, stride: int = DRAW_SEED_STRIDE, first: int = 0) -> list[Episode]:
+    """Each episode ``draws`` times, draw by draw, with its sampling seed offset by ``stride`` per draw (from the
+    ``first``-th offset; the first draw of the measured ones is the episode itself)."""
+    return [replace(e, seed=e.seed + stride * (first + d)) if first + d else e for d in range(draws) for e in episodes]
 
 
 def closer(target: float, before: Measurement, after: Measurement) -> tuple[bool, str]:
@@ -275,7 +287,8 @@ def adapt_to_success(house: House, policy: Policy, generator: Generator, target:
                      tolerance: float = TOLERANCE, episodes: int | list[Episode] = EPISODES, max_edits: int = 10,
                      patience: int = PATIENCE, analyzer: Analyzer | None = None, seed: int | Sequence[int] = 0,
                      target_type: str | None = None, name: str = "house",
-                     rollout_episodes: int = 3, choices: int = 1, fresh_draws: int = FRESH_DRAWS) -> TargetResult:
+                     rollout_episodes: int = 3, choices: int = 1, draws: int = 1,
+                     fresh_draws: int = FRESH_DRAWS) -> TargetResult:
     """Edit ``house`` with ``generator`` until the policy's success on fixed episodes is within ``tolerance`` of
     ``target`` (see the module docstring).
 
@@ -294,12 +307,16 @@ def adapt_to_success(house: House, policy: Policy, generator: Generator, target:
         rollout_episodes: headings of G's own rollout check of a candidate (for the G that make one).
         choices: edits G is asked for per round, each aimed at the next episode in turn; every valid one is
             measured and the closest to the target is kept (1: the first edit, kept when closer).
+        draws: action draws per measured episode (each with its own sampling seed); success is the mean over all
+            of them, which an edit's noise moves less (1 to ``MAX_DRAWS``).
         fresh_draws: fresh action draws per episode on which the original and the returned house are measured
             once the run ends (``fresh_before``, ``fresh_after``); 0 skips it.
     """
     check_target(target, tolerance, what="target", tol_what="tolerance")
     if max_edits < 0 or patience < 1 or not isinstance(choices, (int, np.integer)) or choices < 1:
         raise ConfigError(f"max_edits must be >= 0, patience and choices >= 1, got {max_edits}, {patience} and {choices}")
+    if not isinstance(draws, (int, np.integer)) or not 1 <= draws <= MAX_DRAWS:
+        raise ConfigError(f"draws {draws}: must be a whole number from 1 to {MAX_DRAWS}")
     if not isinstance(fresh_draws, (int, np.integer)) or fresh_draws < 0:
         raise ConfigError(f"fresh_draws {fresh_draws}: must be a whole number >= 0 (0 skips the fresh check)")
     policy = as_policy(policy)
@@ -308,9 +325,11 @@ def adapt_to_success(house: House, policy: Policy, generator: Generator, target:
     eps = list(episodes) if not isinstance(episodes, int) else measurement_episodes(world, episodes, seed, target_type)
     if not eps:
         raise ConfigError("episodes: measure on at least one episode")
-    first, trajs = measure(world, eps, policy)
+    runs = drawn(eps, int(draws))
+    first, trajs = measure(world, runs, policy)
     result = TargetResult(house, house, getattr(generator, "name", type(generator).__name__), float(target),
-                          float(tolerance), eps, first, first, trajectories_before=trajs, trajectories_after=trajs)
+                          float(tolerance), eps, first, first, trajectories_before=trajs, trajectories_after=trajs,
+                          draws=int(draws))
     result.measure_steps = first.steps
     current, cur, turn, misses, g_steps = house, first, 0, 0, 1
     while True:
@@ -328,7 +347,7 @@ def adapt_to_success(house: House, policy: Policy, generator: Generator, target:
         for _ in range(choices):
             k = order[turn % len(order)]
             turn += 1
-            edit, reason, steps = _propose(result.usage, current, world, eps[k], trajs[k], policy, analyzer, generator,
+            edit, reason, steps = _propose(result.usage, current, world, runs[k], trajs[k], policy, analyzer, generator,
                                            g_steps, np.random.default_rng([*_words(seed), 5, len(result.rounds)]),
                                            rollout_episodes)
             result.check_steps += steps
@@ -337,11 +356,11 @@ def adapt_to_success(house: House, policy: Policy, generator: Generator, target:
                 result.rounds.append(TargetRound(n, k, None, False, reason))
                 continue
             candidate = replay(current, [edit])
-            problems, cworld = _checked(candidate, house, eps, k, name)
+            problems, cworld = _checked(candidate, house, eps, k % len(eps), name)
             if problems:
                 result.rounds.append(TargetRound(n, k, edit, False, "invalid: " + "; ".join(problems[:3])))
                 continue
-            m, ctrajs = measure(cworld, eps, policy)
+            m, ctrajs = measure(cworld, runs, policy)
             result.measure_steps += m.steps
             keep, why = closer(target, cur, m)
             result.rounds.append(TargetRound(n, k, edit, False, why, m.success, m.spl))

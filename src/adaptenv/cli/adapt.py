@@ -200,6 +200,9 @@ def adapt(
     target_episodes: int = typer.Option(20, "--target-episodes", min=1, max=500, help="With --target-success: "
                                         "episodes the success is measured on (the same after every edit)."),
     target_choices: int = TARGET_CHOICES_OPTION,
+    target_draws: int = typer.Option(1, "--target-draws", min=1, max=16, metavar="D", help="With --target-success: "
+                                     "action draws per measured episode, each with its own sampling seed (more "
+                                     "draws, less noise in each measurement, D times the rollouts)."),
     force: bool = FORCE_OPTION,
 ) -> None:
     """One closed-loop step: roll out the policy, analyze (F), edit the house (G), validate, write OUT.
@@ -275,7 +278,7 @@ def adapt(
                 if target_success is not None:
                     s = _target_one(h, name, where, pol, f, gen, steps=steps, seed=seed, target=target,
                                     success=target_success, tolerance=target_tolerance, episodes=target_episodes,
-                                    choices=target_choices)
+                                    choices=target_choices, draws=target_draws)
                 else:
                     s = _adapt_one(h, name, where, pol, f, gen, steps=steps, seed=seed, target=target,
                                    diagnose=diagnose, before=before)
@@ -329,7 +332,7 @@ def _adapt_one(h, name: str, out: Path, policy, analyzer, generator, *, steps: i
 
 
 def _target_one(h, name: str, out: Path, policy, analyzer, generator, *, steps: int, seed: int, target: str | None,
-                success: float, tolerance: float, episodes: int, choices: int = 1) -> dict:
+                success: float, tolerance: float, episodes: int, choices: int = 1, draws: int = 1) -> dict:
     """Edit one house toward the policy's success rate ``success`` with
     :func:`~adaptenv.adapt.target.adapt_to_success`; write it into ``out`` and return its summary."""
     from adaptenv.adapt.edits import edit_counts
@@ -346,7 +349,8 @@ def _target_one(h, name: str, out: Path, policy, analyzer, generator, *, steps: 
     with ProgressBar(f"adapting {name} toward success {success:.2f}: measure, F, G, measure again ({steps} edits "
                      "at most)"):
         res = adapt_to_success(h, policy, generator, success, tolerance=tolerance, episodes=episodes, max_edits=steps,
-                               analyzer=analyzer, seed=seed, target_type=target, name=name, choices=choices)
+                               analyzer=analyzer, seed=seed, target_type=target, name=name, choices=choices,
+                               draws=draws)
     counts = edit_counts(res.edits, h, res.house)
     types = house_types(h)
     counts["objects"] = [{"type": types.get(o["id"]), **o} for o in counts["objects"]]
@@ -370,8 +374,9 @@ def _target_one(h, name: str, out: Path, policy, analyzer, generator, *, steps: 
 def _print_target_summary(console, s: dict, out: Path) -> None:
     """The human-readable summary of one house edited toward a success rate: target, reached, gap, edits."""
     t = s["target_success"]
+    draws = f" x {t['draws']} action draws" if t.get("draws", 1) > 1 else ""
     console.print(f"policy {s['policy']}, analyzer {s['analyzer']}, generator {s['generator']}; success measured on "
-                  f"{t['episodes']} fixed episodes", highlight=False, soft_wrap=True)
+                  f"{t['episodes']} fixed episodes{draws}", highlight=False, soft_wrap=True)
     console.print(f"target success {t['target']:.2f} +/- {t['tolerance']:.2f}: reached {t['success']:.2f} (from "
                   f"{t['success_before']:.2f}), gap {t['gap']:.2f}, {t['edits']} edit(s) kept of {t['proposed']} "
                   f"proposed; {t['stopped']}", highlight=False, soft_wrap=True)
