@@ -12,7 +12,8 @@ Jobs: the first ``HOUSES`` houses of ``preset:pretrain-unseen`` (procedural hous
 the real-format ProcTHOR house of tests/data on ``REAL_SEEDS`` episode seeds. Per job: an episode the agent solves
 (10 draws at most, seed ``[SEED, job]``), then ``STEPS`` edits by each G (seed ``[SEED, job, 1]``), then the agent
 again on that episode and on ``PAIRED`` other episodes of the same target in the same house (seed ``[SEED, job, 2]``,
-the same before and after). Each house G writes is audited against the original.
+the same before and after), and on ``FRESH`` fresh action draws of the adapted episode itself (the same start and
+target, new sampling seeds: draws no G's rollout check saw). Each house G writes is audited against the original.
 """
 
 from __future__ import annotations
@@ -27,7 +28,7 @@ from pathlib import Path
 
 import numpy as np
 
-HOUSES, REAL_SEEDS, STEPS, SEED, PAIRED = 40, 4, 3, 0, 8
+HOUSES, REAL_SEEDS, STEPS, SEED, PAIRED, FRESH = 40, 4, 3, 0, 8, 8
 GENERATORS = ("learned", "builtin", "random")
 REAL = Path(__file__).resolve().parents[3] / "tests" / "data" / "procthor-10k-train-1.json"
 
@@ -60,8 +61,9 @@ def one_job(args: tuple[int, str, str, tuple[str, ...], str | None]) -> list[dic
     from adaptenv.adapt.generators.random_perturbation import random_single_edits
     from adaptenv.adapt.plausibility import audit
     from adaptenv.adapt.step import adapt_scene
+    from adaptenv.adapt.target import FRESH_SEED_STRIDE, drawn
     from adaptenv.agents.registry import resolve_policy
-    from adaptenv.agents.rollout import draw_episode, find_solved_episode, rollout
+    from adaptenv.agents.rollout import draw_episode, find_solved_episode, rollout, run_policy
     from adaptenv.sim.world import compile_world
 
     house = dict(jobs())[name]
@@ -74,6 +76,8 @@ def one_job(args: tuple[int, str, str, tuple[str, ...], str | None]) -> list[dic
     rng = np.random.default_rng([SEED, n, 2])
     paired = [draw_episode(world, rng, episode.target_type) for _ in range(PAIRED)]
     paired_before = [rollout(world, ep, agent).metrics.success for ep in paired]
+    fresh = drawn([episode], FRESH, FRESH_SEED_STRIDE, first=1)
+    fresh_before = np.mean([t.metrics.success for t in run_policy(world, fresh, agent)])
     rows = []
     for gen in generators:
         t0 = time.perf_counter()
@@ -90,11 +94,13 @@ def one_job(args: tuple[int, str, str, tuple[str, ...], str | None]) -> list[dic
             new, edits, problems, new_world, after = res.house, int(res.edits_applied), res.problems, res.world, res.after
         seconds = time.perf_counter() - t0
         paired_after = [rollout(new_world, ep, agent).metrics.success for ep in paired]
+        fresh_after = np.mean([t.metrics.success for t in run_policy(new_world, fresh, agent)])
         violations = [str(v) for v in audit(house, new).violations]
         rows.append({"job": name, "agent": agent_name, "solved": True, "generator": gen, "target": episode.target_type,
                      "success_after": bool(after.metrics.success), "spl_before": float(before.metrics.spl),
                      "spl_after": float(after.metrics.spl), "edits": edits,
                      "paired_before": float(np.mean(paired_before)), "paired_after": float(np.mean(paired_after)),
+                     "fresh_before": float(fresh_before), "fresh_after": float(fresh_after),
                      "seconds": round(seconds, 3), "violations": violations, "problems": problems})
     return rows
 
@@ -129,9 +135,10 @@ def table(out: Path, agent: str, generators: tuple[str, ...], tag: str) -> None:
     solved = sorted({r["job"] for r in rows if r["solved"]})
     print(f"agent {agent}: {len(solved)} of {len({r['job'] for r in rows})} jobs with a solved episode; "
           f"{STEPS} edits per G")
+    fresh = all("fresh_after" in r for r in rows if r["solved"])
     print("| G | runs | edits accepted | success after | drop (points) | drop per edit | paired drop (points) | "
-          "audit violations | s per accepted edit |")
-    print("|---|---|---|---|---|---|---|---|---|")
+          "audit violations | s per accepted edit |" + (" fresh drop (points) |" if fresh else ""))
+    print("|---|---|---|---|---|---|---|---|---|" + ("---|" if fresh else ""))
     by = {g: {r["job"]: r for r in rows if r.get("generator") == g} for g in generators}
     for g in generators:
         mine = [by[g][j] for j in solved]
@@ -140,13 +147,19 @@ def table(out: Path, agent: str, generators: tuple[str, ...], tag: str) -> None:
         paired = 100 * np.mean([r["paired_before"] - r["paired_after"] for r in mine])
         secs = sum(r["seconds"] for r in mine) / max(edits, 1)
         print(f"| {g} | {len(mine)} | {edits} | {1 - drop / 100:.3f} | {drop:.1f} | {drop / max(edits / len(mine), 1e-9):.1f} "
-              f"| {paired:.1f} | {sum(len(r['violations']) for r in mine)} | {secs:.2f} |")
+              f"| {paired:.1f} | {sum(len(r['violations']) for r in mine)} | {secs:.2f} |"
+              + (f" {100 * np.mean([r['fresh_before'] - r['fresh_after'] for r in mine]):.1f} |" if fresh else ""))
     first = generators[0]
     for other in generators[1:]:
         d = np.array([float(by[other][j]["success_after"]) - float(by[first][j]["success_after"]) for j in solved])
         lo, hi = paired_interval(d)
         print(f"{first} - {other} drop: {100 * d.mean():+.1f} points, 95% interval [{100 * lo:+.1f}, {100 * hi:+.1f}] "
               f"over {len(d)} paired runs")
+        if fresh:  # a larger drop is a lower fresh_after (fresh_before is the same house for every G)
+            d = np.array([by[other][j]["fresh_after"] - by[first][j]["fresh_after"] for j in solved])
+            lo, hi = paired_interval(d)
+            print(f"{first} - {other} fresh drop: {100 * d.mean():+.1f} points, 95% interval "
+                  f"[{100 * lo:+.1f}, {100 * hi:+.1f}] over {len(d)} paired runs")
 
 
 if __name__ == "__main__":
