@@ -22,6 +22,7 @@ def test_adapting_methods_are_those_with_g():
     ({"target_success": 0.5, "target_tolerance": 1.5}, "target_tolerance 1.5"),
     ({"target_success": 0.5, "target_episodes": 0}, "target_episodes must be at least 1"),
     ({"target_success": 0.5, "target_choices": 0}, "target_choices must be a whole number from 1 to 64"),
+    ({"target_success": 0.5, "target_draws": 17}, "target_draws must be a whole number from 1 to 16"),
     ({"target_success": 0.5, "method": "dr"}, "target_success applies to the methods that adapt scenes"),
     ({"target_success": "half"}, "target_success"),
 ])
@@ -38,9 +39,10 @@ def test_loop_config_takes_a_target_and_off_is_the_default():
 
 def test_an_experiment_gives_the_target_to_its_adapting_methods_only():
     cfg = ExperimentConfig(methods=["none", "dr", "ours"], seeds=[0],
-                           loop={"target_success": 0.5, "target_episodes": 8, "target_choices": 3}).check()
+                           loop={"target_success": 0.5, "target_episodes": 8, "target_choices": 3,
+                                 "target_draws": 2}).check()
     assert cfg.loop_config("ours", 0).target_success == 0.5 and cfg.loop_config("ours", 0).target_episodes == 8
-    assert cfg.loop_config("ours", 0).target_choices == 3
+    assert cfg.loop_config("ours", 0).target_choices == 3 and cfg.loop_config("ours", 0).target_draws == 2
     assert cfg.loop_config("dr", 0).target_success is None and cfg.loop_config("none", 0).target_episodes == 20
     with pytest.raises(ConfigError, match="target_success"):
         ExperimentConfig(methods=["ours"], seeds=[0], loop={"target_success": 2.0}).check("exp.json")
@@ -57,9 +59,9 @@ def test_a_generation_job_edits_toward_the_target():
     house = hs.houses[hs.names.index("tiny_0002")]
     weights = PolicyWeights.of(load_pretrained("pretrained-scan"))
     made = run_generate(GenerateJob("builtin", house, "tiny", 1, (0, 1, 7), weights=weights, target_success=0.5,
-                                    target_tolerance=0.1, target_episodes=4, target_choices=2))
+                                    target_tolerance=0.1, target_episodes=4, target_choices=2, target_draws=2))
     t = made.edit_log["target_success"]
-    assert t["target"] == 0.5 and t["episodes"] == 4 and made.edits == t["edits"] <= 1
+    assert t["target"] == 0.5 and t["episodes"] == 4 and t["draws"] == 2 and made.edits == t["edits"] <= 1
     assert t["rounds"] <= t["proposed"] <= 2 * t["rounds"]  # two edits proposed per round
     assert made.success_before == t["success_before"] and made.success_after == t["success"]
     assert made.regret_before is not None and made.regret_after is not None and made.rollout_steps > 0

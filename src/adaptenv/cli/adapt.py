@@ -61,6 +61,9 @@ TARGET_MOVES_OPTION = typer.Option(False, "--allow-target-moves", help="Let the 
 TARGET_CHOICES_OPTION = typer.Option(1, "--target-choices", min=1, max=64, metavar="K", help="With "
                                      "--target-success: edits G proposes per round, each measured; the closest "
                                      "to P is kept.")
+TARGET_DRAWS_OPTION = typer.Option(1, "--target-draws", min=1, max=16, metavar="D", help="With --target-success: "
+                                   "action draws per measured episode, each with its own sampling seed (less noise "
+                                   "in each measurement, D times the rollouts).")
 LLM_CONFIG_OPTION = typer.Option(None, "--llm-config", metavar="FILE", help="LLMConfig JSON file (docs/llm.md); "
                                  "the flags above override its fields.")
 
@@ -200,9 +203,7 @@ def adapt(
     target_episodes: int = typer.Option(20, "--target-episodes", min=1, max=500, help="With --target-success: "
                                         "episodes the success is measured on (the same after every edit)."),
     target_choices: int = TARGET_CHOICES_OPTION,
-    target_draws: int = typer.Option(1, "--target-draws", min=1, max=16, metavar="D", help="With --target-success: "
-                                     "action draws per measured episode, each with its own sampling seed (more "
-                                     "draws, less noise in each measurement, D times the rollouts)."),
+    target_draws: int = TARGET_DRAWS_OPTION,
     force: bool = FORCE_OPTION,
 ) -> None:
     """One closed-loop step: roll out the policy, analyze (F), edit the house (G), validate, write OUT.

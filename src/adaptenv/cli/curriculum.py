@@ -25,6 +25,7 @@ from adaptenv.cli.adapt import (
     PRICE_OUT_OPTION,
     PROMPTS_OPTION,
     TARGET_CHOICES_OPTION,
+    TARGET_DRAWS_OPTION,
     TARGET_MOVES_OPTION,
 )
 from adaptenv.curriculum.executor import ADDRESS_OPTION, EXECUTOR_OPTION, WORKERS_OPTION
@@ -163,6 +164,7 @@ def loop(
     target_episodes: int = typer.Option(20, "--target-episodes", min=1, max=500, help="With --target-success: "
                                         "episodes per scene the success is measured on."),
     target_choices: int = TARGET_CHOICES_OPTION,
+    target_draws: int = TARGET_DRAWS_OPTION,
     heldout_episodes: int = typer.Option(100, "--heldout-episodes", callback=numbers.episodes, help="Episodes per held-out set."),
     heldout: list[str] = typer.Option(None, "--heldout", help="Held-out set NAME=HOUSES (repeatable); default: "
                                       "rearranged=preset:pretrain-rearranged and unseen=preset:pretrain-unseen."),
@@ -218,7 +220,7 @@ def loop(
                      relocate_targets=relocate_targets, door_edits=door_edits, focus_training=focus_training,
                      heldout_episodes=heldout_episodes, llm=llm, target_success=target_success,
                      target_tolerance=target_tolerance, target_episodes=target_episodes,
-                     target_choices=target_choices, **({"heldout": h} if (h := _heldout(heldout)) else {}))
+                     target_choices=target_choices, target_draws=target_draws, **({"heldout": h} if (h := _heldout(heldout)) else {}))
     cfg.check("adaptenv loop")
     options = ExecutorOptions(executor, workers, address).check()
     check_house_sets([cfg.houses, *cfg.heldout.values()], strict, console.print)

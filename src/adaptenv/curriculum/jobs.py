@@ -232,6 +232,7 @@ class GenerateJob:
     target_tolerance: float = 0.10
     target_episodes: int = 20
     target_choices: int = 1
+    target_draws: int = 1
 
 
 @dataclass
@@ -328,7 +329,8 @@ def _run_targeted(job: GenerateJob) -> Generated:
     analyzer, generator = make_fg(job.kind, job.llm, relocate_targets=job.relocate_targets, door_edits=job.door_edits)
     res = adapt_to_success(job.house, job.weights.policy(), generator, job.target_success,
                            tolerance=job.target_tolerance, episodes=job.target_episodes, max_edits=job.edit_steps,
-                           analyzer=analyzer, seed=job.seed, name=job.name, choices=job.target_choices)
+                           analyzer=analyzer, seed=job.seed, name=job.name, choices=job.target_choices,
+                           draws=job.target_draws)
     expert_before, _ = measure(compile_world(job.house, job.name), res.episodes, ExpertPolicy())
     expert_after, _ = measure(compile_world(res.house, job.name), res.episodes, ExpertPolicy()) if res.edits \
         else (expert_before, None)

@@ -28,7 +28,7 @@ from typing import Any, ClassVar
 import numpy as np
 
 from adaptenv.adapt.llm.accounting import check_llm_section
-from adaptenv.adapt.target import check_target
+from adaptenv.adapt.target import MAX_DRAWS, check_target
 from adaptenv.agents.config import FinetuneConfig
 from adaptenv.agents.teachers import TEACHERS
 from adaptenv.agents.train import check_precision
@@ -156,6 +156,8 @@ class LoopConfig:
     """With target_success: episodes pi_t's success on a scene is measured on (the same after every edit)."""
     target_choices: int = 1
     """With target_success: edits G proposes per round, each measured on those episodes; the closest to P is kept."""
+    target_draws: int = 1
+    """With target_success: action draws per measured episode, each with its own sampling seed."""
 
     __pydantic_config__ = STRICT
 
@@ -213,6 +215,9 @@ class LoopConfig:
             if not 1 <= self.target_choices <= 64:
                 raise ConfigError(f"{source}: target_choices must be a whole number from 1 to 64, got "
                                   f"{self.target_choices}")
+            if not 1 <= self.target_draws <= MAX_DRAWS:
+                raise ConfigError(f"{source}: target_draws must be a whole number from 1 to {MAX_DRAWS}, got "
+                                  f"{self.target_draws}")
         return self
 
 
@@ -723,4 +728,5 @@ def target_fields(cfg: LoopConfig) -> dict[str, Any]:
     if cfg.target_success is None:
         return {}
     return {"target_success": cfg.target_success, "target_tolerance": cfg.target_tolerance,
-            "target_episodes": cfg.target_episodes, "target_choices": cfg.target_choices}
+            "target_episodes": cfg.target_episodes, "target_choices": cfg.target_choices,
+            "target_draws": cfg.target_draws}
