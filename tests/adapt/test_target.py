@@ -291,3 +291,14 @@ def test_several_draws_per_episode_measure_each_episode_with_its_own_seeds(tiny)
 def test_a_bad_number_of_draws_is_refused(tiny, draws):
     with pytest.raises(ConfigError, match="draws"):
         adapt_to_success(tiny, ExpertPolicy(), Pusher(3.0), 0.5, episodes=2, name="tiny", draws=draws)
+
+
+def test_an_episode_without_a_seed_draws_from_seed_zero():
+    from dataclasses import replace as with_
+
+    from adaptenv.adapt.target import FRESH_SEED_STRIDE, drawn
+    from adaptenv.sim.task import Episode
+
+    ep = Episode("Bed", (1.0, 2.0, 0.0), None)
+    assert [e.seed for e in drawn([ep], 2, FRESH_SEED_STRIDE, first=1)] == [FRESH_SEED_STRIDE, 2 * FRESH_SEED_STRIDE]
+    assert drawn([with_(ep, seed=5)], 2)[0].seed == 5

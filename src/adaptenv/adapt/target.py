@@ -247,8 +247,10 @@ def fresh_measurement(world: NavWorld, episodes: list[Episode], policy: Policy,
 
 def drawn(episodes: list[Episode], draws: int, stride: int = DRAW_SEED_STRIDE, first: int = 0) -> list[Episode]:
     """Each episode ``draws`` times, draw by draw, with its sampling seed offset by ``stride`` per draw (from the
-    ``first``-th offset; the first draw of the measured ones is the episode itself)."""
-    return [replace(e, seed=e.seed + stride * (first + d)) if first + d else e for d in range(draws) for e in episodes]
+    ``first``-th offset; the first draw of the measured ones is the episode itself). An episode without a seed is
+    run with seed 0, as the harness runs it."""
+    return [replace(e, seed=int(e.seed or 0) + stride * (first + d)) if first + d else e
+            for d in range(draws) for e in episodes]
 
 
 def closer(target: float, before: Measurement, after: Measurement) -> tuple[bool, str]:
