@@ -102,8 +102,9 @@ def table(out: Path) -> None:
             print(f"| {g} | {p:.2f} | {within}/{len(sel)} | {already} | {np.mean([r['edits'] for r in sel]):.1f} | "
                   f"{np.mean([r['gap'] for r in sel]):.3f} | {np.mean([r['success'] for r in sel]):.3f} | "
                   f"{np.mean([r['seconds'] for r in sel]):.0f} | {fresh(sel, p)} |")
-    start = {r["house"]: r["success_before"] for r in rs}
-    print(f"\nsuccess before any edit, per house: {', '.join(f'{h} {s:.2f}' for h, s in sorted(start.items()))}")
+    start = {r["house"]: r["success_before"] for r in rs if r["generator"] == GENERATORS[0]}
+    print(f"\nsuccess before any edit with {GENERATORS[0]}'s measurement, per house: "
+          f"{', '.join(f'{h} {s:.2f}' for h, s in sorted(start.items()))}")
 
 
 def fresh(sel: list[dict], p: float) -> str:
