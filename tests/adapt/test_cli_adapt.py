@@ -36,6 +36,10 @@ def test_adapt_writes_a_house_that_validates(adapted):
     check = runner.invoke(app, ["validate", str(out / "house.json")])
     assert check.exit_code == 0, check.output
     assert (out / "before.png").is_file() and (out / "after.png").is_file()
+    # both houses measured again on 8 fresh draws of the episode: the expert solves every draw of a solvable house
+    fresh = json.loads((out / "summary.json").read_text())["fresh"]
+    assert fresh == {"draws": 8, "success_before": 1.0, "success_after": 1.0}
+    assert "on 8 fresh action draws of the episode (no G rolled them out): success 1.00 -> 1.00" in text
 
 
 def test_analyze_text_and_json(house_file, adapted):
