@@ -14,7 +14,9 @@ re-run the policy from the same start on the same target. Reported:
   :mod:`adaptenv.bench.adapt_edits` (target: at least 1,000 on one core for a 5-room house), and
   the wall time per adapted house;
 - the learned G (``--generator learned``, the shipped scorer) on the same episodes: its success drop,
-  audit violations and wall time per adapted house beside the built-in G's.
+  audit violations and wall time per adapted house beside the built-in G's;
+- each G's success drop on ``FRESH`` fresh action draws of the episode (the same start and target, new
+  sampling seeds): the built-in G's rollout checks include the episode's own draw, and these no G rolled out.
 
 Imports sit inside the functions: this module is loaded by its ``adaptenv bench`` command, and a
 benchmark loads what it measures (torch, numba, ray) only when it runs.
@@ -27,6 +29,8 @@ from typing import Any
 
 import numpy as np
 
+#: Fresh action draws of each adapted episode.
+FRESH = 8
 NOTES = ["targets: success drop >= 30 points; expert success after = 100%; realism builtin > random; "
          ">= 1,000 validated edits/s",
          "before = 100% success by construction (only houses the policy solves are adapted)"]
@@ -42,6 +46,7 @@ def run(*, houses: int = 50, steps: int = 5, policy: str = "pretrained-scan", se
     from adaptenv.adapt.objectives import realism_score
     from adaptenv.adapt.plausibility import audit
     from adaptenv.adapt.step import adapt_scene
+    from adaptenv.adapt.target import fresh_measurement
     from adaptenv.agents.policy import ExpertPolicy
     from adaptenv.agents.registry import resolve_policy
     from adaptenv.agents.rollout import find_solved_episode, rollout
@@ -78,6 +83,7 @@ def run(*, houses: int = 50, steps: int = 5, policy: str = "pretrained-scan", se
         lrn = adapt_scene(house, episode, policy=agent, analyzer=analyzer, generator=learned, steps=steps,
                           rng=np.random.default_rng([seed, k, 1]), before=before, name=f"bench-{k}")
         t_learned += time.perf_counter() - t
+        fresh = [fresh_measurement(w, [episode], agent, FRESH).success for w in (world, res.world, lrn.world)]
         rnd = random_g.generate(house, res.analysis, steps=steps,
                                 context=GenerationContext(episode=episode, render=False),
                                 rng=np.random.default_rng([seed, k, 2]))
@@ -90,6 +96,7 @@ def run(*, houses: int = 50, steps: int = 5, policy: str = "pretrained-scan", se
             "realism_random": realism_score(rnd.house, house),
             "violations_builtin": audit(house, res.house).total, "violations_random": audit(house, rnd.house).total,
             "success_after_learned": lrn.after.metrics.success, "violations_learned": audit(house, lrn.house).total,
+            "fresh_before": fresh[0], "fresh_after": fresh[1], "fresh_after_learned": fresh[2],
         })
     n = len(rows)
 
@@ -103,6 +110,8 @@ def run(*, houses: int = 50, steps: int = 5, policy: str = "pretrained-scan", se
         "edits applied (mean)": mean("edits"), "edits verified (mean)": mean("verified"),
         "agent success before": mean("success_before"), "agent success after": mean("success_after"),
         "success drop (points)": 100.0 * (mean("success_before") - mean("success_after")),
+        f"agent success on {FRESH} fresh draws before": mean("fresh_before"),
+        f"success drop on {FRESH} fresh draws (points)": 100.0 * (mean("fresh_before") - mean("fresh_after")),
         "agent SPL before": mean("spl_before"), "agent SPL after": mean("spl_after"),
         "expert success after": mean("expert_after"),
         "realism original": mean("realism_original"), "realism builtin": mean("realism_builtin"), "realism random": mean("realism_random"),
@@ -113,6 +122,8 @@ def run(*, houses: int = 50, steps: int = 5, policy: str = "pretrained-scan", se
         "adapt s per house (adapt_scene: F, G with rollout checks, validation, after-rollout)": t_adapt / max(n, 1),
         "learned G: agent success after": mean("success_after_learned"),
         "learned G: success drop (points)": 100.0 * (mean("success_before") - mean("success_after_learned")),
+        f"learned G: success drop on {FRESH} fresh draws (points)":
+            100.0 * (mean("fresh_before") - mean("fresh_after_learned")),
         "learned G: plausibility violations (sum)": int(sum(r["violations_learned"] for r in rows)),
         "learned G: adapt s per house (one-pass proposals, validation, after-rollout)": t_learned / max(n, 1),
     }
