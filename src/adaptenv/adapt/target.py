@@ -64,6 +64,8 @@ MAX_G_STEPS = 4
 SPL_TOL = 1e-3
 #: Fresh action draws per measured episode in the check that ends a run.
 FRESH_DRAWS = 3
+#: Fresh action draws of the one episode an adaptation step works on (``adaptenv adapt``, ``adaptenv bench adapt``).
+EPISODE_FRESH_DRAWS = 8
 #: Seed offsets per measured and per fresh draw (multiples of 1000, so ``seed % 1000`` still names the episode;
 #: the two primes keep the measured and the fresh seeds apart).
 DRAW_SEED_STRIDE, FRESH_SEED_STRIDE = 1000 * 1009, 1000 * 7919

@@ -15,7 +15,7 @@ re-run the policy from the same start on the same target. Reported:
   the wall time per adapted house;
 - the learned G (``--generator learned``, the shipped scorer) on the same episodes: its success drop,
   audit violations and wall time per adapted house beside the built-in G's;
-- each G's success drop on ``FRESH`` fresh action draws of the episode (the same start and target, new
+- each G's success drop on ``EPISODE_FRESH_DRAWS`` (8) fresh action draws of the episode (the same start and target, new
   sampling seeds): the built-in G's rollout checks include the episode's own draw, and these no G rolled out.
 
 Imports sit inside the functions: this module is loaded by its ``adaptenv bench`` command, and a
@@ -29,8 +29,6 @@ from typing import Any
 
 import numpy as np
 
-#: Fresh action draws of each adapted episode.
-FRESH = 8
 NOTES = ["targets: success drop >= 30 points; expert success after = 100%; realism builtin > random; "
          ">= 1,000 validated edits/s",
          "before = 100% success by construction (only houses the policy solves are adapted)"]
@@ -46,6 +44,7 @@ def run(*, houses: int = 50, steps: int = 5, policy: str = "pretrained-scan", se
     from adaptenv.adapt.objectives import realism_score
     from adaptenv.adapt.plausibility import audit
     from adaptenv.adapt.step import adapt_scene
+    from adaptenv.adapt.target import EPISODE_FRESH_DRAWS as FRESH
     from adaptenv.adapt.target import fresh_measurement
     from adaptenv.agents.policy import ExpertPolicy
     from adaptenv.agents.registry import resolve_policy

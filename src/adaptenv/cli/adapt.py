@@ -64,8 +64,6 @@ TARGET_CHOICES_OPTION = typer.Option(1, "--target-choices", min=1, max=64, metav
 TARGET_DRAWS_OPTION = typer.Option(1, "--target-draws", min=1, max=16, metavar="D", help="With --target-success: "
                                    "action draws per measured episode, each with its own sampling seed (less noise "
                                    "in each measurement, D times the rollouts).")
-#: Fresh action draws of the adapted episode that ``adapt`` measures both houses on (draws no G has rolled out).
-FRESH_EPISODE_DRAWS = 8
 LLM_CONFIG_OPTION = typer.Option(None, "--llm-config", metavar="FILE", help="LLMConfig JSON file (docs/llm.md); "
                                  "the flags above override its fields.")
 
@@ -312,7 +310,7 @@ def _adapt_one(h, name: str, out: Path, policy, analyzer, generator, *, steps: i
     """
     from adaptenv.adapt.diagnosis import hard_episodes
     from adaptenv.adapt.step import adapt_scene, summarize, write_outputs
-    from adaptenv.adapt.target import fresh_measurement
+    from adaptenv.adapt.target import EPISODE_FRESH_DRAWS, fresh_measurement
     from adaptenv.agents.rollout import draw_episode
     from adaptenv.progress import ProgressBar
     from adaptenv.sim.task import Episode
@@ -330,8 +328,8 @@ def _adapt_one(h, name: str, out: Path, policy, analyzer, generator, *, steps: i
                              episodes=episodes, before=before)
     s = summarize(result, analyzer=analyzer, seed=seed)
     if result.valid and result.world is not None:  # G's own rollouts include the episode's draw; these do not
-        fresh = [fresh_measurement(w, [episode], policy, FRESH_EPISODE_DRAWS) for w in (world, result.world)]
-        s["fresh"] = {"draws": FRESH_EPISODE_DRAWS, "success_before": fresh[0].success,
+        fresh = [fresh_measurement(w, [episode], policy, EPISODE_FRESH_DRAWS) for w in (world, result.world)]
+        s["fresh"] = {"draws": EPISODE_FRESH_DRAWS, "success_before": fresh[0].success,
                       "success_after": fresh[1].success}
     if before is not None:
         s["trajectory"] = {"policy": before.policy, "after_policy": result.after.policy}
