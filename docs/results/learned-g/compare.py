@@ -61,9 +61,9 @@ def one_job(args: tuple[int, str, str, tuple[str, ...], str | None]) -> list[dic
     from adaptenv.adapt.generators.random_perturbation import random_single_edits
     from adaptenv.adapt.plausibility import audit
     from adaptenv.adapt.step import adapt_scene
-    from adaptenv.adapt.target import FRESH_SEED_STRIDE, drawn
+    from adaptenv.adapt.target import fresh_measurement
     from adaptenv.agents.registry import resolve_policy
-    from adaptenv.agents.rollout import draw_episode, find_solved_episode, rollout, run_policy
+    from adaptenv.agents.rollout import draw_episode, find_solved_episode, rollout
     from adaptenv.sim.world import compile_world
 
     house = dict(jobs())[name]
@@ -76,8 +76,7 @@ def one_job(args: tuple[int, str, str, tuple[str, ...], str | None]) -> list[dic
     rng = np.random.default_rng([SEED, n, 2])
     paired = [draw_episode(world, rng, episode.target_type) for _ in range(PAIRED)]
     paired_before = [rollout(world, ep, agent).metrics.success for ep in paired]
-    fresh = drawn([episode], FRESH, FRESH_SEED_STRIDE, first=1)
-    fresh_before = np.mean([t.metrics.success for t in run_policy(world, fresh, agent)])
+    fresh_before = fresh_measurement(world, [episode], agent, FRESH).success
     rows = []
     for gen in generators:
         t0 = time.perf_counter()
@@ -94,7 +93,7 @@ def one_job(args: tuple[int, str, str, tuple[str, ...], str | None]) -> list[dic
             new, edits, problems, new_world, after = res.house, int(res.edits_applied), res.problems, res.world, res.after
         seconds = time.perf_counter() - t0
         paired_after = [rollout(new_world, ep, agent).metrics.success for ep in paired]
-        fresh_after = np.mean([t.metrics.success for t in run_policy(new_world, fresh, agent)])
+        fresh_after = fresh_measurement(new_world, [episode], agent, FRESH).success
         violations = [str(v) for v in audit(house, new).violations]
         rows.append({"job": name, "agent": agent_name, "solved": True, "generator": gen, "target": episode.target_type,
                      "success_after": bool(after.metrics.success), "spl_before": float(before.metrics.spl),

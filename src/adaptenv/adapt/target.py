@@ -149,12 +149,15 @@ class TargetResult:
     """F's and G's LLM calls over all rounds (empty for the built-ins)."""
     draws: int = 1
     """Action draws per measured episode: ``before`` and ``after`` hold ``draws`` runs of each episode."""
-    fresh_draws: int = 0
-    """Fresh action draws per episode in the check that ended the run (0: none made)."""
     fresh_before: Measurement | None = None
     """The original house on fresh action draws (:func:`fresh_measurement`; None when ``fresh_draws`` is 0)."""
     fresh_after: Measurement | None = None
     """The returned house on the same fresh draws."""
+
+    @property
+    def fresh_draws(self) -> int:
+        """Fresh action draws per episode in the check that ended the run (0: none made)."""
+        return len(self.fresh_before.successes) // len(self.episodes) if self.fresh_before else 0
 
     @property
     def edits(self) -> list[Edit]:
@@ -379,7 +382,6 @@ def adapt_to_success(house: House, policy: Policy, generator: Generator, target:
         misses, turn = 0, 0
     result.house, result.after, result.trajectories_after = current, cur, trajs
     if fresh_draws:
-        result.fresh_draws = int(fresh_draws)
         result.fresh_before = fresh_measurement(world0, eps, policy, fresh_draws)
         result.fresh_after = (fresh_measurement(world, eps, policy, fresh_draws) if result.edits
                               else result.fresh_before)
