@@ -4,8 +4,9 @@
     python compare.py table OUT [--agent NAME]               # the declared table, with paired 95% intervals
 
 ``--generators`` names the generators (default ``learned,builtin,random``): ``learned`` is the shipped scorer,
-``learned+checksK`` the same scorer with ``checks=K`` (the agent shown its K best edits), and ``--checkpoint FILE``
-replaces the shipped scorer. ``--tag T`` writes ``rows-AGENT-T.jsonl`` instead, so a second comparison keeps its own
+``learned+checksK`` the same scorer with ``checks=K`` (the agent shown its K best edits), ``learned+objectivesK``
+with ``objectives=K`` (its K best edits measured on the route objectives, no rollout), ``builtin+rolloutsK`` the
+built-in G with ``rollout_candidates=K``, and ``--checkpoint FILE`` replaces the shipped scorer. ``--tag T`` writes ``rows-AGENT-T.jsonl`` instead, so a second comparison keeps its own
 rows. The first generator is the one the intervals compare with the others.
 
 Jobs: the first ``HOUSES`` houses of ``preset:pretrain-unseen`` (procedural houses no G was built or trained on) and
@@ -14,6 +15,8 @@ the real-format ProcTHOR house of tests/data on ``REAL_SEEDS`` episode seeds. Pe
 again on that episode and on ``PAIRED`` other episodes of the same target in the same house (seed ``[SEED, job, 2]``,
 the same before and after), and on ``FRESH`` fresh action draws of the adapted episode itself (the same start and
 target, new sampling seeds: draws no G's rollout check saw). Each house G writes is audited against the original.
+``--jobs heldin`` runs on the first ``HOUSES`` houses of ``preset:pretrain-train`` instead (held-in houses, the
+learned G's data houses: for choosing settings, never for the comparison).
 """
 
 from __future__ import annotations
@@ -34,11 +37,13 @@ REAL = Path(__file__).resolve().parents[3] / "tests" / "data" / "procthor-10k-tr
 
 
 @functools.cache
-def jobs() -> list[tuple[str, object]]:
-    """(job name, house) for every job, in a fixed order."""
+def jobs(which: str = "heldout") -> list[tuple[str, object]]:
+    """(job name, house) for every job of ``which`` (``heldout`` or ``heldin``), in a fixed order."""
     from adaptenv.agents.houses import load_house_set
     from adaptenv.scene.house import load_house
 
+    if which == "heldin":
+        return [(f"train-{k:02d}", h) for k, h in enumerate(list(load_house_set("preset:pretrain-train").houses)[:HOUSES])]
     out = [(f"unseen-{k:02d}", h) for k, h in enumerate(list(load_house_set("preset:pretrain-unseen").houses)[:HOUSES])]
     real = load_house(REAL, validate=False)
     return out + [(f"real-seed{s}", real) for s in range(REAL_SEEDS)]
@@ -48,15 +53,19 @@ def make(gen: str, checkpoint: str | None):
     """The generator ``gen`` names (see the module docstring)."""
     from adaptenv.adapt.generators import make_generator
 
-    if gen.startswith("learned"):
-        checks = int(gen.split("+checks")[1]) if "+checks" in gen else 0
-        return make_generator("learned", checkpoint=checkpoint, checks=checks)
+    base, _, mod = gen.partition("+")
+    value = int("".join(ch for ch in mod if ch.isdigit()) or 0)
+    if base == "learned":
+        return make_generator("learned", checkpoint=checkpoint, checks=value if mod.startswith("checks") else 0,
+                              objectives=value if mod.startswith("objectives") else 0)
+    if base == "builtin" and mod.startswith("rollouts"):
+        return make_generator("builtin", rollout_candidates=value)
     return make_generator(gen)
 
 
 def one_job(args: tuple[int, str, str, tuple[str, ...], str | None]) -> list[dict]:
     """Every G's row for job ``n`` with agent ``agent``."""
-    n, name, agent_name, generators, checkpoint = args
+    n, name, agent_name, generators, checkpoint, which = args
     from adaptenv.adapt.analysis import BuiltinAnalyzer
     from adaptenv.adapt.generators.random_perturbation import random_single_edits
     from adaptenv.adapt.plausibility import audit
@@ -66,7 +75,7 @@ def one_job(args: tuple[int, str, str, tuple[str, ...], str | None]) -> list[dic
     from adaptenv.agents.rollout import draw_episode, find_solved_episode, rollout
     from adaptenv.sim.world import compile_world
 
-    house = dict(jobs())[name]
+    house = dict(jobs(which))[name]
     agent, analyzer = resolve_policy(agent_name, seed=SEED), BuiltinAnalyzer()
     world = compile_world(house, name)
     found = find_solved_episode(world, agent, np.random.default_rng([SEED, n]), tries=10)
@@ -108,12 +117,14 @@ def rows_path(out: Path, agent: str, tag: str) -> Path:
     return out / (f"rows-{agent}-{tag}.jsonl" if tag else f"rows-{agent}.jsonl")
 
 
-def run(out: Path, agent: str, workers: int, generators: tuple[str, ...], checkpoint: str | None, tag: str) -> None:
+def run(out: Path, agent: str, workers: int, generators: tuple[str, ...], checkpoint: str | None, tag: str,
+        which: str = "heldout") -> None:
     """Run every job not yet in ``OUT/rows-AGENT[-TAG].jsonl`` (append-only, so a stopped run resumes)."""
     out.mkdir(parents=True, exist_ok=True)
     path = rows_path(out, agent, tag)
     done = {json.loads(line)["job"] for line in path.open()} if path.exists() else set()
-    todo = [(n, name, agent, generators, checkpoint) for n, (name, _) in enumerate(jobs()) if name not in done]
+    todo = [(n, name, agent, generators, checkpoint, which) for n, (name, _) in enumerate(jobs(which))
+            if name not in done]
     with ProcessPoolExecutor(workers) as pool, path.open("a") as f:
         for rows in pool.map(one_job, todo):
             f.write("".join(json.dumps(r) + "\n" for r in rows))
@@ -170,9 +181,10 @@ if __name__ == "__main__":
     ap.add_argument("--generators", default=",".join(GENERATORS))
     ap.add_argument("--checkpoint", default=None, help="a learned-G scorer instead of the shipped one")
     ap.add_argument("--tag", default="")
+    ap.add_argument("--jobs", choices=("heldout", "heldin"), default="heldout")
     a = ap.parse_args()
     gens = tuple(a.generators.split(","))
     if a.step == "run":
-        run(a.out, a.agent, a.workers, gens, a.checkpoint, a.tag)
+        run(a.out, a.agent, a.workers, gens, a.checkpoint, a.tag, a.jobs)
     else:
         table(a.out, a.agent, gens, a.tag)

@@ -16,6 +16,10 @@ Per step (offline, deterministic for a given rng):
    instead rolled out with the agent in one batch (the episode's start and target, a few headings) and
    the one it succeeds on least often, then with the lowest mean SPL, is made: the network only chooses
    which K edits the agent is shown.
+5. With ``objectives`` K > 0 (and no ``checks``), the first K that pass (distinct objects) are instead
+   measured on the built-in G's route objectives in their edited worlds (no rollout: a distance field
+   and a few line-of-sight walks each) and the one with the largest gain, weighted as the built-in G
+   weighs the analysis' suggestions, is made.
 
 The scorer is trained by ``adaptenv gdata train`` on rows of ``adaptenv gdata collect``; the package ships
 one (``agents/data/learned-g.pt``, its card ``learned-g.json``). Its file is a ``torch.save`` dictionary
@@ -42,14 +46,14 @@ from adaptenv.adapt.generators.base import (
     keep_render,
     render_scene,
 )
-from adaptenv.adapt.generators.builtin import MIN_MOVE, Candidate
+from adaptenv.adapt.generators.builtin import MIN_MOVE, Candidate, _rotation
 from adaptenv.adapt.generators.edit_features import (
     FEATURE_NAMES,
     Scene,
     candidate_features,
     enumerate_candidates,
 )
-from adaptenv.adapt.objectives import RouteSpec
+from adaptenv.adapt.objectives import ObjectiveValues, RouteSpec, gain, measure
 from adaptenv.adapt.validation import EditValidator, Proposal
 from adaptenv.agents.rollout import checking_episodes, mean_spl, run_in_worlds, total_steps
 from adaptenv.errors import ConfigError
@@ -182,15 +186,20 @@ class LearnedGenerator:
     name = "learned"
 
     def __init__(self, *, checkpoint: str | Path | None = None, candidates: int = CANDIDATES,
-                 require_expert: bool = True, checks: int = 0, scorer: Scorer | None = None):
+                 require_expert: bool = True, checks: int = 0, objectives: int = 0, scorer: Scorer | None = None):
         """``checks``: with a policy in the context, roll the agent out on the best this many edits that pass every
-        check and make the hardest for it (0: no rollout, the best-scored edit is made)."""
-        if not 0 <= int(checks) <= candidates:
-            raise ConfigError(f"checks {checks}: must be a whole number from 0 to the candidates per step ({candidates})")
+        check and make the hardest for it (0: no rollout, the best-scored edit is made). ``objectives``: measure the
+        route objectives of the best this many instead and make the one with the largest weighted gain."""
+        for name, k in (("checks", checks), ("objectives", objectives)):
+            if not 0 <= int(k) <= candidates:
+                raise ConfigError(f"{name} {k}: must be a whole number from 0 to the candidates per step ({candidates})")
+        if checks and objectives:
+            raise ConfigError("checks and objectives: give at most one of them a value above 0")
         self.scorer = scorer or load_scorer(checkpoint)
         self.candidates = candidates
         self.require_expert = require_expert
         self.checks = int(checks)
+        self.objectives = int(objectives)
         self._expert = expert_policy()
 
     def generate(self, house: House, analysis: Analysis, *, steps: int, context: GenerationContext,
@@ -199,11 +208,13 @@ class LearnedGenerator:
         route = RouteSpec.from_episode(ep.target_type, ep.start, context.trajectory)
         v = EditValidator(house, episode_targets=[ep.target_type], start=ep.start[:2])
         result = GenerationResult(house=v.house, steps=[], edit_log=v.log, generator=self.name)
-        want = self.checks if self.checks and context.policy is not None else 1
+        want = self.checks if self.checks and context.policy is not None else max(1, self.objectives)
+        suggestions = sorted(analysis.suggestions, key=lambda s: -s.priority)
         edited: set[str] = set()
         for step in range(steps):
             world = compile_world(v.house, "candidate")
             scene = Scene.of(v, world, route)
+            values = measure(world, route) if self.objectives else None
             cands = [c for c in enumerate_candidates(v, world, route, rng, self.candidates, scene=scene)
                      if c.object_id not in edited]
             scores = self.scorer.score(candidate_features(v, scene, cands, analysis))
@@ -222,7 +233,12 @@ class LearnedGenerator:
                                  "check" if cands else "no movable object left to edit")
                 result.steps.append(record)
                 continue
-            tried, k, p, _ = self._check(passed, context, record) if len(passed) > 1 else passed[0]
+            if len(passed) == 1:
+                tried, k, p, _ = passed[0]
+            elif self.checks:
+                tried, k, p, _ = self._check(passed, context, record)
+            else:
+                tried, k, p, _ = self._by_objectives(passed, route, values, _rotation(step, suggestions), suggestions)
             c = cands[k]
             edit = v.commit(p, source=self.name,
                             intent=f"learned: {c.kind} move, expected drop {scores[k]:+.3f} (rank {tried})")
@@ -231,6 +247,8 @@ class LearnedGenerator:
             record.reason = (f"the best-scored of {len(cands)} candidates that passed every check (tried {tried})"
                              if len(passed) == 1 else
                              f"the hardest for the agent of the {len(passed)} best-scored candidates that passed "
+                             f"every check (rank {tried} of {len(cands)})" if self.checks else
+                             f"the largest objective gain of the {len(passed)} best-scored candidates that passed "
                              f"every check (rank {tried} of {len(cands)})")
             if context.render:
                 record.render = keep_render(result, render_scene(v.house, context, highlight={edit.object_id: "gold"}),
@@ -252,6 +270,20 @@ class LearnedGenerator:
             if self.require_expert and not run_episode(cw, ep, self._expert, record=False).metrics.success:
                 return None
         return p, cw
+
+    def _by_objectives(self, passed: list, route: RouteSpec, before: ObjectiveValues | None, order: list,
+                       suggestions: list) -> tuple:
+        """The passed candidate with the largest gain in the route objectives: the step's suggestion (``order[0]``)
+        at weight 1, the others at a quarter of their priority, as the built-in G scores; the best scored on ties."""
+        if not order or before is None:
+            return passed[0]
+        weights = {s.kind: 0.25 * s.priority for s in suggestions if s.kind != order[0].kind}
+        weights[order[0].kind] = 1.0
+        scores = []
+        for *_, cw in passed:
+            after = measure(cw, route)
+            scores.append(sum(w * gain(kind, before, after) for kind, w in weights.items()))
+        return passed[int(np.argmax(scores))]
 
     def _check(self, passed: list, context: GenerationContext, record: StepRecord) -> tuple:
         """The passed candidate the policy succeeds on least often, then with the lowest mean SPL, then the best
