@@ -180,6 +180,37 @@ def test_learned_g_with_checks_makes_the_edit_the_agent_fails_on(tiny, monkeypat
         LearnedGenerator(checks=99)
 
 
+def test_learned_g_with_objectives_makes_the_edit_with_the_largest_objective_gain(tiny, monkeypatch):
+    import adaptenv.adapt.generators.learned as learned
+    from adaptenv.adapt.objectives import ObjectiveValues
+
+    calls = []
+
+    def fake_measure(world, route):  # the scene first, then each passed edit; only the second passed edit is harder
+        calls.append(world)
+        hard = len(calls) == 3
+        return ObjectiveValues(narrow_passage=0.5 if hard else 1.0, lengthen_route=8.0 if hard else 5.0,
+                               occlude_target=0.2 if hard else 0.5, add_clutter=0.4 if hard else 0.1)
+
+    def no_rollout(*a, **k):
+        raise AssertionError("objectives must not roll the agent out")
+
+    monkeypatch.setattr(learned, "measure", fake_measure)
+    monkeypatch.setattr(learned, "run_in_worlds", no_rollout)
+    house, ctx, analysis = _context(tiny, ExpertPolicy())
+    assert analysis.suggestions
+    plain = LearnedGenerator().generate(house, analysis, steps=1, context=ctx, rng=np.random.default_rng(2))
+    calls.clear()
+    chosen = LearnedGenerator(objectives=3).generate(house, analysis, steps=1, context=ctx,
+                                                     rng=np.random.default_rng(2))
+    assert len(calls) == 4 and "largest objective gain of the 3" in chosen.steps[0].reason
+    assert chosen.applied[0].object_id != plain.applied[0].object_id
+    with pytest.raises(ConfigError, match="at most one"):
+        LearnedGenerator(checks=2, objectives=2)
+    with pytest.raises(ConfigError, match="objectives 99"):
+        LearnedGenerator(objectives=99)
+
+
 def test_adapt_with_the_learned_generator_end_to_end(tiny, tmp_path):
     from adaptenv.scene.house import save_house
 
@@ -225,7 +256,8 @@ def test_chosen_drop_scores_the_edit_the_g_would_make():
     # two tasks; in task 0 the best-scored candidate is unusable, so the G makes the second-best one
     a = Arrays(x=np.zeros((5, 1), np.float32), usable=np.array([0, 1, 1, 1, 1], np.float32),
                drops=np.array([[1, 1], [0, 0.2], [0, 0.1], [0, 0.3], [0, -0.1]], np.float32),
-               measured=np.ones(5, np.float32), group=np.array([0, 0, 0, 1, 1]), heldin=np.ones(5, bool))
+               measured=np.ones(5, np.float32), weights=np.ones((5, 2), np.float32), group=np.array([0, 0, 0, 1, 1]),
+               heldin=np.ones(5, bool))
     got = chosen_drop(np.array([9.0, 2.0, 1.0, 0.0, 5.0]), a, a.heldin)
     assert got["groups"] == 2
     assert got["chosen"] == pytest.approx((0.2 - 0.1) / 2) and got["best"] == pytest.approx((0.2 + 0.3) / 2)

@@ -6,7 +6,9 @@ runs F (the built-in analyzer), draws candidate edits without rollouts
 collision-aware placement and validation (with the plausibility rules), and rolls the agent out on
 the same ``episodes`` paired episodes (the task's start and target, headings spread evenly) in the
 house before and after every candidate that validation accepted and the shortest-path expert still
-solves. One :class:`dict` row per candidate; :data:`SCHEMA` names the format, and docs/adapt.md
+solves (``episodes=0``: no rollout after F's). Those candidates also carry the built-in G's route
+objectives before and after the edit (:func:`~adaptenv.adapt.objectives.measure`: no rollout, and no
+sampling noise). One :class:`dict` row per candidate; :data:`SCHEMA` names the format, and docs/adapt.md
 ("Data for a learned G") lists its fields.
 
 :class:`Dataset` is the folder ``adaptenv gdata collect`` writes: ``edits.jsonl.gz`` (the rows, one
@@ -40,7 +42,7 @@ from adaptenv.adapt.generators.edit_features import (
     candidate_features,
     enumerate_candidates,
 )
-from adaptenv.adapt.objectives import RouteSpec
+from adaptenv.adapt.objectives import RouteSpec, measure
 from adaptenv.adapt.validation import EditValidator
 from adaptenv.agents.policy import Policy, as_policy
 from adaptenv.agents.rollout import checking_episodes, draw_episode, rollout, run_in_worlds
@@ -56,7 +58,8 @@ ROWS, HOUSES, META = "edits.jsonl.gz", "houses.jsonl", "meta.json"
 
 @dataclass(frozen=True)
 class CollectConfig:
-    """How much to collect per house: tasks (F's episodes), candidates per task, paired episodes per edit."""
+    """How much to collect per house: tasks (F's episodes), candidates per task, paired episodes per edit (0: the
+    route objectives only, no agent rollout per edit)."""
 
     tasks: int = 2
     candidates: int = 24
@@ -115,6 +118,7 @@ def collect_task(house: House, ref: dict[str, Any], task: int, policy: Policy, c
     cands = enumerate_candidates(v, world, route, rng, cfg.candidates, scene=scene)
     feats = candidate_features(v, scene, cands, analysis)
     types, expert = house_object_types(house), expert_policy()
+    objectives_before = measure(world, route).as_dict()
     rows, worlds, measured = [], [], []
     for k, c in enumerate(cands):
         p = v.propose(c.object_id, c.dx_units, c.dy_units, c.rotation, relocate=c.relocate)
@@ -142,8 +146,11 @@ def collect_task(house: House, ref: dict[str, Any], task: int, policy: Policy, c
                           "yaw_before": round(float(res.yaw_before), 3), "yaw_after": round(float(res.yaw_after), 3)},
             "accepted": accepted, "problems": kinds, "plausibility": rules, "plausible": not rules,
             "expert_success": solved, "effect": None,
+            "objectives": {"before": objectives_before, "after": measure(cw, route).as_dict()} if solved else None,
             "features": [round(float(x), 5) for x in feats[k]],
         })
+    if cfg.episodes == 0:
+        return rows
     episodes = checking_episodes(ep, cfg.episodes)
     runs = run_in_worlds([world, *worlds], episodes, policy)
     base = {"episodes": len(episodes), "success_before": _mean(runs[0], "success"), "spl_before": _mean(runs[0], "spl")}

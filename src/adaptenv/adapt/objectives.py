@@ -22,6 +22,7 @@ roughly unit-free improvement: positive means harder in the suggestion's intende
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
 from dataclasses import asdict, dataclass
 
 import numpy as np
@@ -194,6 +195,22 @@ def gain(kind: str, before: ObjectiveValues, after: ObjectiveValues) -> float:
         return (b - a) / max(a, 1.0)
     delta = (b - a) * DIRECTION[kind]
     return delta / CLEARANCE_CAP if kind == "narrow_passage" else delta
+
+
+#: The weight per unit of priority of the other suggestions' objectives, beside the targeted one's 1.
+OTHER_WEIGHT = 0.25
+
+
+def suggestion_weights(first: str, priorities: Mapping[str, float], other: float = OTHER_WEIGHT) -> dict[str, float]:
+    """Weight per objective when ``first`` is targeted: 1 for it, ``other`` times the priority for the others."""
+    weights = {k: other * float(p) for k, p in priorities.items() if k in DIRECTION and k != first}
+    weights[first] = 1.0
+    return weights
+
+
+def weighted_gain(weights: Mapping[str, float], before: ObjectiveValues, after: ObjectiveValues) -> float:
+    """The sum of each objective's :func:`gain` times its weight."""
+    return sum(w * gain(kind, before, after) for kind, w in weights.items())
 
 
 def suggestion_kind(kind: str) -> SuggestionKind:

@@ -45,8 +45,9 @@ def collect(
     tasks: int = typer.Option(2, "--tasks", min=1, max=20, help="Episodes per house that F analyses and G edits for."),
     candidates: int = typer.Option(24, "--candidates", min=2, max=256, help="Candidate edits per task (half the "
                                    "built-in G's route moves, half random moves)."),
-    episodes: int = typer.Option(3, "--episodes", min=1, max=16, help="Paired episodes (the task's start and target, "
-                                 "headings spread evenly) each accepted edit is measured on, before and after."),
+    episodes: int = typer.Option(3, "--episodes", min=0, max=16, help="Paired episodes (the task's start and target, "
+                                 "headings spread evenly) each accepted edit is measured on, before and after (0: "
+                                 "only the route objectives, for `gdata train --target objectives`)."),
     seed: int = typer.Option(0, "--seed", callback=numbers.seed, help="Seed of the episode and candidate draws."),
     limit: int = typer.Option(0, "--limit", min=0, help="Use only the first N houses of each --houses (0: all)."),
 ) -> None:
@@ -95,6 +96,9 @@ def train(
     lr: float = typer.Option(3e-3, "--lr", min=1e-6, max=1.0, callback=numbers.finite, help="AdamW learning rate."),
     heldin: int = typer.Option(5, "--heldin", min=2, max=100, help="Hold in one house in this many (by a hash of "
                                "its name) to choose the epoch on; those houses are never trained on."),
+    target: str = typer.Option("agent", "--target", help="What the scorer predicts beside acceptance: the agent's measured drops in success "
+                               "and SPL (agent), or the gain of each of the built-in G's route objectives, measured "
+                               "without rollouts (objectives)."),
     force: bool = typer.Option(False, "--force", help="Replace an output file adaptenv did not write."),
 ) -> None:
     """Train the learned G's scorer (an MLP over each candidate edit's features) and keep the epoch that ranks edits
@@ -109,6 +113,8 @@ def train(
     from adaptenv.cli._outputs import output_file, recording
     from adaptenv.progress import ProgressBar
 
+    if target not in ("agent", "objectives"):
+        raise ConfigError(f"--target {target!r}: unknown target; use agent or objectives")
     if out.suffix != ".pt":
         raise ConfigError(f"-o {out}: a scorer checkpoint ends in .pt; pass e.g. -o learned-g.pt")
     card_path = out.with_suffix(".json")
@@ -116,13 +122,14 @@ def train(
     output_file(card_path, "-o", "gdata train", force=force, inputs=data, name=f"the card {card_path}")
     configure_torch()
     cfg = TrainConfig(data=[str(d) for d in data], out=str(out), seed=seed, epochs=epochs, hidden=hidden,
-                      layers=layers, lr=lr, heldin=heldin)
+                      layers=layers, lr=lr, heldin=heldin, target=target)
     with recording([out, card_path], None, "gdata train"), ProgressBar("training the scorer", epochs) as bar:
         card = run_train(cfg, progress=lambda epoch: bar.update(epoch), command=command_line())
         card_path.write_text(json.dumps(card, indent=1) + "\n", encoding="utf-8")
     sel = card["selection"]
+    what = "drop" if target == "agent" else "objective gain"
     Console().print(f"{card['data']['rows']} rows from {card['data']['houses']} houses; epoch {sel['epoch']} chosen on "
-                    f"{len(card['data']['heldin_houses'])} held-in houses: drop of the chosen edit "
+                    f"{len(card['data']['heldin_houses'])} held-in houses: {what} of the chosen edit "
                     f"{sel['heldin']['chosen']:+.4f} (random pick {sel['heldin']['random']:+.4f}, best "
                     f"{sel['heldin']['best']:+.4f}); wrote {out} and {card_path}", highlight=False)
 

@@ -50,12 +50,15 @@ from adaptenv.adapt.generators.base import (
 )
 from adaptenv.adapt.objectives import (
     OBJECTIVE_KINDS,
+    OTHER_WEIGHT,
     ObjectiveValues,
     RouteSpec,
     gain,
     measure,
     realism_score,
     route_points,
+    suggestion_weights,
+    weighted_gain,
 )
 from adaptenv.adapt.plausibility import OVERHANG, check_move
 from adaptenv.adapt.realism import RealismReference
@@ -187,7 +190,7 @@ def _distinct_head(ranked: list[Candidate], k: int) -> list[Candidate]:
     return head
 
 
-def _rotation(step: int, suggestions: list[Suggestion]) -> list[Suggestion]:
+def suggestion_order(step: int, suggestions: list[Suggestion]) -> list[Suggestion]:
     """Suggestions (one per kind, by priority) starting with the step's round-robin choice."""
     usable, kinds = [], set()
     for s in suggestions:
@@ -207,7 +210,7 @@ class BuiltinGenerator:
     move_targets = False
     """Whether the validator lets the episode's target instances move (only edit kinds that relocate the target)."""
 
-    def __init__(self, *, max_candidates: int = 24, realism_weight: float = 0.5, other_weight: float = 0.25,
+    def __init__(self, *, max_candidates: int = 24, realism_weight: float = 0.5, other_weight: float = OTHER_WEIGHT,
                  rollout_candidates: int = 5, max_revisions: int = 2, require_expert: bool = True,
                  fit_to_rules: bool = True):
         """``fit_to_rules``: fit every move to the plausibility rules before its dry run (:func:`fit_rules`; off only
@@ -229,7 +232,7 @@ class BuiltinGenerator:
         suggestions = sorted(analysis.suggestions, key=lambda s: -s.priority)
         targets = {t.object_id for t in world.instances_of(ep.target_type)}
         for step in range(steps):
-            order = _rotation(step, suggestions)
+            order = suggestion_order(step, suggestions)
             if not order:
                 result.steps.append(StepRecord(step=step, status="skipped",
                                                reason="the analysis has no suggestion with an objective"))
@@ -410,10 +413,9 @@ class BuiltinGenerator:
     def _rank(self, tried: list[Candidate], sug: Suggestion, suggestions: list[Suggestion], before: ObjectiveValues,
               realism_before: float | None) -> list[Candidate]:
         """Candidates sorted by score for this suggestion: its gain, the others' (weighted), realism change."""
-        weights = {s.kind: self.other_weight * s.priority for s in suggestions if s.kind != sug.kind}
-        weights[sug.kind] = 1.0
+        weights = suggestion_weights(sug.kind, {s.kind: s.priority for s in suggestions}, self.other_weight)
         for c in tried:
-            c.score = sum(w * gain(kind, before, c.values) for kind, w in weights.items())
+            c.score = weighted_gain(weights, before, c.values)
             if c.realism is not None and realism_before is not None:
                 c.score += self.realism_weight * (c.realism - realism_before)
             c.policy_score = None
@@ -467,4 +469,4 @@ class BuiltinGenerator:
         return chosen
 
 
-__all__ = ["BuiltinGenerator", "Candidate", "Edit"]
+__all__ = ["BuiltinGenerator", "Candidate", "Edit", "suggestion_order"]

@@ -4,10 +4,12 @@ Per step (offline, deterministic for a given rng):
 
 1. Draw candidate edits without rollouts, as the built-in and random G do
    (:func:`~adaptenv.adapt.generators.edit_features.enumerate_candidates`).
-2. Score all of them in one forward pass of the scorer (:class:`Scorer`, a two-layer MLP over
+2. Score all of them in one forward pass of the scorer (:class:`Scorer`, a small MLP over
    :data:`~adaptenv.adapt.generators.edit_features.FEATURE_NAMES`): it predicts whether the edit survives
-   placement, validation, the plausibility rules and the expert check, and how much the agent's success
-   and SPL drop after it; the score is the first times the sum of the others.
+   placement, validation, the plausibility rules and the expert check, and either how much the agent's
+   success and SPL drop after it (a scorer of target ``agent``) or how much each of the built-in G's
+   route objectives gains (target ``objectives``, weighted per step as the built-in G weighs the
+   analysis' suggestions); the score is the first times the (weighted) sum of the others.
 3. Try them best first through collision-aware placement, validation with the plausibility rules
    (:meth:`~adaptenv.adapt.validation.EditValidator.propose`) and the shortest-path expert, and commit
    the first that passes. No rollout of the agent is made. An object is edited at most once per
@@ -46,14 +48,21 @@ from adaptenv.adapt.generators.base import (
     keep_render,
     render_scene,
 )
-from adaptenv.adapt.generators.builtin import MIN_MOVE, Candidate, _rotation
+from adaptenv.adapt.generators.builtin import MIN_MOVE, Candidate, suggestion_order
 from adaptenv.adapt.generators.edit_features import (
     FEATURE_NAMES,
     Scene,
     candidate_features,
     enumerate_candidates,
 )
-from adaptenv.adapt.objectives import ObjectiveValues, RouteSpec, gain, measure
+from adaptenv.adapt.objectives import (
+    OBJECTIVE_KINDS,
+    ObjectiveValues,
+    RouteSpec,
+    measure,
+    suggestion_weights,
+    weighted_gain,
+)
 from adaptenv.adapt.validation import EditValidator, Proposal
 from adaptenv.agents.rollout import checking_episodes, mean_spl, run_in_worlds, total_steps
 from adaptenv.errors import ConfigError
@@ -65,8 +74,12 @@ from adaptenv.sim.world import NavWorld, compile_world
 FORMAT = "adaptenv-learned-g/1"
 SHIPPED = "learned-g"
 """The shipped scorer's file stem in ``adaptenv/agents/data`` (beside the shipped agents)."""
-OUTPUTS = ("accept", "success_drop", "spl_drop")
-"""What the scorer predicts per candidate: the logit that it passes every check, the drops in success and SPL."""
+TARGETS: dict[str, tuple[str, ...]] = {
+    "agent": ("accept", "success_drop", "spl_drop"),
+    "objectives": ("accept", *(f"gain_{k}" for k in OBJECTIVE_KINDS)),
+}
+"""What a scorer of each target predicts per candidate: the logit that it passes every check, then the agent's drops
+in success and SPL (``agent``) or the gain of each route objective (``objectives``)."""
 #: Candidate edits drawn and scored per step.
 CANDIDATES = 64
 
@@ -78,22 +91,32 @@ class ScorerConfig:
     n_features: int = len(FEATURE_NAMES)
     hidden: int = 64
     layers: int = 2
+    target: str = "agent"
+    """What it predicts beside acceptance: a key of :data:`TARGETS`."""
 
 
 def build_net(cfg: ScorerConfig):
-    """The MLP: ``layers`` hidden ReLU layers of width ``hidden``, then one output per :data:`OUTPUTS`."""
+    """The MLP: ``layers`` hidden ReLU layers of width ``hidden``, then one output per name of its target."""
     import torch.nn as nn
 
     mods, width = [], cfg.n_features
     for _ in range(cfg.layers):
         mods += [nn.Linear(width, cfg.hidden), nn.ReLU()]
         width = cfg.hidden
-    return nn.Sequential(*mods, nn.Linear(width, len(OUTPUTS)))
+    return nn.Sequential(*mods, nn.Linear(width, len(TARGETS[cfg.target])))
 
 
-def expected_gain(out: np.ndarray) -> np.ndarray:
-    """The score of each candidate from the net's outputs: P(passes every check) x (success drop + SPL drop)."""
-    return (1.0 / (1.0 + np.exp(-out[:, 0]))) * (out[:, 1] + out[:, 2])
+def expected_gain(out: np.ndarray, weights: np.ndarray | None = None) -> np.ndarray:
+    """The score of each candidate from the net's outputs: P(passes every check) times the sum of the predicted
+    drops or gains, each times its entry of ``weights`` (one per output, or one row per candidate; default 1 each)."""
+    w = 1.0 if weights is None else np.asarray(weights, dtype=np.float64)
+    return (1.0 / (1.0 + np.exp(-out[:, 0]))) * (out[:, 1:] * w).sum(axis=1)
+
+
+def objective_weights(weights: dict[str, float]) -> np.ndarray:
+    """A weight per route objective (:func:`~adaptenv.adapt.objectives.suggestion_weights`) as a vector in the
+    order of a scorer of target ``objectives``."""
+    return np.array([float(weights.get(k, 0.0)) for k in OBJECTIVE_KINDS])
 
 
 @dataclass
@@ -105,20 +128,22 @@ class Scorer:
     std: np.ndarray
     meta: dict[str, Any]
     path: Path | None = None
+    target: str = "agent"
+    """What it predicts beside acceptance (a key of :data:`TARGETS`)."""
 
     def outputs(self, features: np.ndarray) -> np.ndarray:
-        """(N, 3) raw outputs for (N, F) features, in one forward pass."""
+        """(N, outputs) raw outputs for (N, F) features, in one forward pass."""
         import torch
 
         x = torch.as_tensor((np.asarray(features, dtype=np.float32) - self.mean) / self.std)
         with torch.no_grad():
             return self.net(x).numpy().astype(np.float64)
 
-    def score(self, features: np.ndarray) -> np.ndarray:
-        """(N,) expected gain of each candidate (higher: try first)."""
+    def score(self, features: np.ndarray, weights: np.ndarray | None = None) -> np.ndarray:
+        """(N,) expected gain of each candidate (higher: try first); ``weights``: one per predicted drop or gain."""
         if len(features) == 0:
             return np.zeros(0)
-        return expected_gain(self.outputs(features))
+        return expected_gain(self.outputs(features), weights)
 
 
 def shipped_path() -> Path:
@@ -163,7 +188,8 @@ def load_scorer(path: str | Path | None = None) -> Scorer:
         raise ConfigError(f"{p}: scores other candidate features than this version of adaptenv computes; {fix}")
     try:
         cfg = ScorerConfig(**doc["config"])
-        if cfg.n_features != len(FEATURE_NAMES) or not (1 <= cfg.hidden <= 4096 and 0 <= cfg.layers <= 8):
+        if (cfg.n_features != len(FEATURE_NAMES) or cfg.target not in TARGETS
+                or not (1 <= cfg.hidden <= 4096 and 0 <= cfg.layers <= 8)):
             raise ValueError("shape")
         net = build_net(cfg)
         net.load_state_dict(doc["state_dict"])
@@ -177,7 +203,7 @@ def load_scorer(path: str | Path | None = None) -> Scorer:
         raise ConfigError(f"{p}: holds NaN, infinite or zero-scale values; {fix}")
     net.eval()
     meta = doc.get("meta") if isinstance(doc.get("meta"), dict) else {}
-    return Scorer(net, mean, std, meta, p)
+    return Scorer(net, mean, std, meta, p, cfg.target)
 
 
 class LearnedGenerator:
@@ -217,7 +243,9 @@ class LearnedGenerator:
             values = measure(world, route) if self.objectives else None
             cands = [c for c in enumerate_candidates(v, world, route, rng, self.candidates, scene=scene)
                      if c.object_id not in edited]
-            scores = self.scorer.score(candidate_features(v, scene, cands, analysis))
+            weights = self._weights(step, suggestions)
+            scores = self.scorer.score(candidate_features(v, scene, cands, analysis),
+                                       objective_weights(weights) if self.scorer.target == "objectives" and weights else None)
             record = StepRecord(step=step, status="skipped", candidates=len(cands))
             passed: list[tuple[int, int, Proposal, NavWorld | None]] = []
             for tried, k in enumerate(np.argsort(-scores, kind="stable"), start=1):
@@ -238,7 +266,7 @@ class LearnedGenerator:
             elif self.checks:
                 tried, k, p, _ = self._check(passed, context, record)
             else:
-                tried, k, p, _ = self._by_objectives(passed, route, values, _rotation(step, suggestions), suggestions)
+                tried, k, p, _ = self._by_objectives(passed, route, values, weights)
             c = cands[k]
             edit = v.commit(p, source=self.name,
                             intent=f"learned: {c.kind} move, expected drop {scores[k]:+.3f} (rank {tried})")
@@ -271,19 +299,21 @@ class LearnedGenerator:
                 return None
         return p, cw
 
-    def _by_objectives(self, passed: list, route: RouteSpec, before: ObjectiveValues | None, order: list,
-                       suggestions: list) -> tuple:
-        """The passed candidate with the largest gain in the route objectives: the step's suggestion (``order[0]``)
-        at weight 1, the others at a quarter of their priority, as the built-in G scores; the best scored on ties."""
-        if not order or before is None:
+    @staticmethod
+    def _weights(step: int, suggestions: list) -> dict[str, float]:
+        """The step's weight per route objective, as the built-in G weighs them: its round-robin suggestion at 1,
+        the others by priority (empty when the analysis suggests nothing)."""
+        order = suggestion_order(step, suggestions)
+        return suggestion_weights(order[0].kind, {s.kind: s.priority for s in suggestions}) if order else {}
+
+    @staticmethod
+    def _by_objectives(passed: list, route: RouteSpec, before: ObjectiveValues | None,
+                       weights: dict[str, float]) -> tuple:
+        """The passed candidate with the largest weighted gain in the route objectives (the best scored on ties)."""
+        if not weights or before is None:
             return passed[0]
-        weights = {s.kind: 0.25 * s.priority for s in suggestions if s.kind != order[0].kind}
-        weights[order[0].kind] = 1.0
-        scores = []
-        for *_, cw in passed:
-            after = measure(cw, route)
-            scores.append(sum(w * gain(kind, before, after) for kind, w in weights.items()))
-        return passed[int(np.argmax(scores))]
+        gains = [weighted_gain(weights, before, measure(cw, route)) for *_, cw in passed]
+        return passed[int(np.argmax(gains))]
 
     def _check(self, passed: list, context: GenerationContext, record: StepRecord) -> tuple:
         """The passed candidate the policy succeeds on least often, then with the lowest mean SPL, then the best
@@ -299,5 +329,5 @@ class LearnedGenerator:
         return passed[best[2]]
 
 
-__all__ = ["CANDIDATES", "FORMAT", "LearnedGenerator", "Scorer", "ScorerConfig", "build_net", "expected_gain",
-           "load_scorer", "save_scorer", "shipped_path"]
+__all__ = ["CANDIDATES", "FORMAT", "TARGETS", "LearnedGenerator", "Scorer", "ScorerConfig", "build_net",
+           "expected_gain", "load_scorer", "objective_weights", "save_scorer", "shipped_path"]
