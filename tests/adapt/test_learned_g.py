@@ -24,6 +24,7 @@ from adaptenv.adapt.gdata import (
 from adaptenv.adapt.generators import GenerationContext, make_generator
 from adaptenv.adapt.generators.edit_features import FEATURE_NAMES
 from adaptenv.adapt.generators.learned import LearnedGenerator, load_scorer, shipped_path
+from adaptenv.adapt.objectives import OBJECTIVE_KINDS
 from adaptenv.adapt.plausibility import audit
 from adaptenv.adapt.validation import validate_scene
 from adaptenv.agents.houses import load_house_set
@@ -68,6 +69,17 @@ def test_rows_follow_the_documented_schema(collected, tiny):
             assert r["effect"]["spl_drop"] == pytest.approx(r["effect"]["spl_before"] - r["effect"]["spl_after"])
         if not r["accepted"]:
             assert r["effect"] is None
+        # the route objectives go with every candidate the expert still solves, before and after the edit
+        assert (r["objectives"] is not None) == bool(r["expert_success"])
+        if r["objectives"] is not None:
+            assert set(r["objectives"]["after"]) == set(OBJECTIVE_KINDS)
+    befores = {}
+    for r in rows:
+        if r["objectives"] is not None:
+            befores.setdefault((r["house"]["name"], r["task"]), []).append(r["objectives"]["before"])
+    assert befores and all(all(b == v[0] for b in v) for v in befores.values())
+    moved = [r for r in rows if r["objectives"] is not None and r["objectives"]["after"] != r["objectives"]["before"]]
+    assert moved, "no measured edit changed any route objective"
     assert any(r["effect"] is not None for r in rows) and any(not r["accepted"] for r in rows)
     # the house reference rebuilds the house exactly
     ref = rows[0]["house"]
@@ -114,6 +126,43 @@ def test_train_writes_a_scorer_and_its_card(collected, tmp_path):
     assert scorer.score(np.zeros((4, len(FEATURE_NAMES)), np.float32)).shape == (4,)
 
 
+def test_objectives_target_trains_on_rows_without_agent_rollouts(tiny, tmp_path):
+    out = tmp_path / "obj"
+    cfg = CollectConfig(tasks=2, candidates=8, episodes=0, seed=3)
+    collect(_pairs(tiny, 2), ExpertPolicy(), cfg, out)
+    rows = load_rows(out)
+    assert all(r["effect"] is None for r in rows) and any(r["objectives"] is not None for r in rows)
+    ckpt = tmp_path / "g.pt"
+    args = ["gdata", "train", str(out), "-o", str(ckpt), "--epochs", "3", "--heldin", "2"]
+    result = runner.invoke(app, args)  # the agent target has nothing to learn from
+    assert result.exit_code != 0 and "--episodes 1 or more" in str(result.exception) and not ckpt.exists()
+    result = runner.invoke(app, [*args, "--target", "objectives"])
+    assert result.exit_code == 0, result.output
+    card = json.loads(ckpt.with_suffix(".json").read_text())
+    assert card["config"]["target"] == "objectives" and "objective gain" in card["selection"]["metric"]
+    scorer = load_scorer(ckpt)
+    assert scorer.target == "objectives"
+    assert scorer.outputs(np.zeros((3, len(FEATURE_NAMES)), np.float32)).shape == (3, 1 + len(OBJECTIVE_KINDS))
+    house, ctx, analysis = _context(tiny)
+    res = LearnedGenerator(scorer=scorer).generate(house, analysis, steps=2, context=ctx, rng=np.random.default_rng(1))
+    assert res.applied and audit(house, res.house).total == 0
+    result = runner.invoke(app, [*args, "--target", "regret"])
+    assert result.exit_code != 0 and "--target" in str(result.exception)
+
+
+def test_objective_labels_are_the_weighted_gains_of_the_first_step():
+    from adaptenv.adapt.gtrain import objective_labels
+
+    before = {"narrow_passage": 1.0, "lengthen_route": 4.0, "occlude_target": 0.5, "add_clutter": 0.1}
+    after = {"narrow_passage": 0.5, "lengthen_route": 6.0, "occlude_target": 0.5, "add_clutter": 0.1}
+    row = {"objectives": {"before": before, "after": after},
+           "analysis": {"suggestions": {"lengthen_route": 0.9, "narrow_passage": 0.4}}}
+    gains, weights = objective_labels(row)
+    assert gains == pytest.approx([0.5, 0.5, 0.0, 0.0])  # clearance 0.5 m narrower; route 2 m longer of 4
+    assert weights == pytest.approx([0.25 * 0.4, 1.0, 0.0, 0.0])  # the top suggestion at 1, the other by priority
+    assert objective_labels({**row, "objectives": None}) is None
+
+
 def test_shipped_scorer_loads_and_a_corrupt_one_is_refused_in_one_line(tmp_path):
     scorer = load_scorer()
     assert scorer.path == shipped_path() and scorer.meta["data"]["houses"] >= 2
@@ -149,11 +198,18 @@ def test_learned_g_edits_pass_validation_and_the_audit_deterministically(tiny):
     assert audit(house, a.house).total == 0
 
 
-def test_learned_g_edits_each_object_at_most_once(tiny):
+def test_a_g_ranked_by_agent_drops_edits_each_object_at_most_once(tiny, collected, tmp_path):
+    ckpt = tmp_path / "agent.pt"  # an agent-target scorer: a second move of an object could undo its first
+    result = runner.invoke(app, ["gdata", "train", str(collected[0]), "-o", str(ckpt), "--epochs", "2", "--heldin", "2"])
+    assert result.exit_code == 0, result.output
     house, ctx, analysis = _context(tiny)
-    res = LearnedGenerator().generate(house, analysis, steps=4, context=ctx, rng=np.random.default_rng(2))
+    gen = LearnedGenerator(checkpoint=ckpt)
+    assert gen.scorer.target == "agent" and not gen.repeat
+    res = gen.generate(house, analysis, steps=4, context=ctx, rng=np.random.default_rng(2))
     moved = [e.object_id for e in res.applied]
     assert len(moved) >= 2 and len(set(moved)) == len(moved)
+    # ranked by route-objective gains (the shipped scorer, or measured), an object may be moved again
+    assert LearnedGenerator().repeat and LearnedGenerator(checkpoint=ckpt, objectives=2).repeat
 
 
 def test_learned_g_with_checks_makes_the_edit_the_agent_fails_on(tiny, monkeypatch):
@@ -204,7 +260,7 @@ def test_learned_g_with_objectives_makes_the_edit_with_the_largest_objective_gai
     chosen = LearnedGenerator(objectives=3).generate(house, analysis, steps=1, context=ctx,
                                                      rng=np.random.default_rng(2))
     assert len(calls) == 4 and "largest objective gain of the 3" in chosen.steps[0].reason
-    assert chosen.applied[0].object_id != plain.applied[0].object_id
+    assert chosen.steps[0].attempts > plain.steps[0].attempts  # the second that passed, not the first
     with pytest.raises(ConfigError, match="at most one"):
         LearnedGenerator(checks=2, objectives=2)
     with pytest.raises(ConfigError, match="objectives 99"):

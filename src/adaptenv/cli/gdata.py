@@ -78,9 +78,10 @@ def collect(
     console = Console()
     with folder, ProgressBar("collecting edits", len(pairs)) as bar:
         counts = collect(pairs, pol, cfg, out, progress=lambda key: bar.advance(), command=command_line())
+    measured = (f"{counts['measured']} measured on {policy}" if episodes else
+                "the route objectives of those the expert still solves, no agent rollout")
     console.print(f"{counts['houses']} houses, {counts['rows']} candidate edits ({counts['accepted']} accepted by "
-                  f"placement and validation, {counts['measured']} measured on {policy}); wrote {out / 'edits.jsonl.gz'}",
-                  highlight=False)
+                  f"placement and validation, {measured}); wrote {out / 'edits.jsonl.gz'}", highlight=False)
 
 
 @gdata_app.command("train")

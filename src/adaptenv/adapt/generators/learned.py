@@ -226,6 +226,9 @@ class LearnedGenerator:
         self.require_expert = require_expert
         self.checks = int(checks)
         self.objectives = int(objectives)
+        self.repeat = self.objectives > 0 or self.scorer.target == "objectives"
+        """Whether an object may be edited again in a later step: when edits are ranked by route-objective gains (a move
+        that undoes an earlier one loses what it gained), not by the agent's drops."""
         self._expert = expert_policy()
 
     def generate(self, house: House, analysis: Analysis, *, steps: int, context: GenerationContext,
@@ -242,7 +245,7 @@ class LearnedGenerator:
             scene = Scene.of(v, world, route)
             values = measure(world, route) if self.objectives else None
             cands = [c for c in enumerate_candidates(v, world, route, rng, self.candidates, scene=scene)
-                     if c.object_id not in edited]
+                     if self.repeat or c.object_id not in edited]
             weights = self._weights(step, suggestions)
             scores = self.scorer.score(candidate_features(v, scene, cands, analysis),
                                        objective_weights(weights) if self.scorer.target == "objectives" and weights else None)
@@ -250,7 +253,7 @@ class LearnedGenerator:
             passed: list[tuple[int, int, Proposal, NavWorld | None]] = []
             for tried, k in enumerate(np.argsort(-scores, kind="stable"), start=1):
                 c = cands[int(k)]
-                if any(cands[j].object_id == c.object_id for _, j, _, _ in passed):
+                if self.checks and any(cands[j].object_id == c.object_id for _, j, _, _ in passed):
                     continue
                 if (found := self._passes(v, c, ep, want > 1)) is not None:
                     passed.append((tried, int(k), *found))
