@@ -12,13 +12,15 @@ Per step (offline, deterministic for a given rng):
    analysis' suggestions); the score is the first times the (weighted) sum of the others.
 3. Try them best first through collision-aware placement, validation with the plausibility rules
    (:meth:`~adaptenv.adapt.validation.EditValidator.propose`) and the shortest-path expert, and commit
-   the first that passes. No rollout of the agent is made. An object is edited at most once per
-   generation (a second move of the same object can undo the first).
+   the first that passes. No rollout of the agent is made. With a scorer of target ``agent`` an object
+   is edited at most once per generation (a second move of the same object can undo the first, and
+   that score cannot tell); ranked by objective gains, a move that undoes an earlier one loses what it
+   gained, so objects may be moved again.
 4. With ``checks`` K > 0 and a policy in the context, the first K that pass (distinct objects) are
    instead rolled out with the agent in one batch (the episode's start and target, a few headings) and
    the one it succeeds on least often, then with the lowest mean SPL, is made: the network only chooses
    which K edits the agent is shown.
-5. With ``objectives`` K > 0 (and no ``checks``), the first K that pass (distinct objects) are instead
+5. With ``objectives`` K > 0 (and no ``checks``), the first K that pass are instead
    measured on the built-in G's route objectives in their edited worlds (no rollout: a distance field
    and a few line-of-sight walks each) and the one with the largest gain, weighted as the built-in G
    weighs the analysis' suggestions, is made.
@@ -229,6 +231,7 @@ class LearnedGenerator:
         self.repeat = self.objectives > 0 or self.scorer.target == "objectives"
         """Whether an object may be edited again in a later step: when edits are ranked by route-objective gains (a move
         that undoes an earlier one loses what it gained), not by the agent's drops."""
+        self._expects = "gain" if self.scorer.target == "objectives" else "drop"
         self._expert = expert_policy()
 
     def generate(self, house: House, analysis: Analysis, *, steps: int, context: GenerationContext,
@@ -272,7 +275,7 @@ class LearnedGenerator:
                 tried, k, p, _ = self._by_objectives(passed, route, values, weights)
             c = cands[k]
             edit = v.commit(p, source=self.name,
-                            intent=f"learned: {c.kind} move, expected drop {scores[k]:+.3f} (rank {tried})")
+                            intent=f"learned: {c.kind} move, expected {self._expects} {scores[k]:+.3f} (rank {tried})")
             edited.add(c.object_id)
             record.status, record.edit, record.attempts = "applied", edit, tried
             record.reason = (f"the best-scored of {len(cands)} candidates that passed every check (tried {tried})"
