@@ -26,7 +26,7 @@ from adaptenv.adapt.generators.edit_features import FEATURE_NAMES
 from adaptenv.adapt.generators.learned import LearnedGenerator, load_scorer, shipped_path
 from adaptenv.adapt.objectives import OBJECTIVE_KINDS
 from adaptenv.adapt.plausibility import audit
-from adaptenv.adapt.validation import validate_scene
+from adaptenv.adapt.validation import EditValidator, validate_scene
 from adaptenv.agents.houses import load_house_set
 from adaptenv.agents.policy import ExpertPolicy
 from adaptenv.agents.rollout import draw_episode, rollout
@@ -196,6 +196,23 @@ def test_learned_g_edits_pass_validation_and_the_audit_deterministically(tiny):
     assert all(e.accepted and e.changed and e.source == "learned" for e in a.applied)
     assert validate_scene(a.house, episode_targets=[ep.target_type], start=ep.start[:2], original=house) == []
     assert audit(house, a.house).total == 0
+
+
+def test_candidate_pool_takes_the_requested_share_of_random_moves(tiny):
+    from adaptenv.adapt.generators.edit_features import enumerate_candidates
+    from adaptenv.adapt.objectives import RouteSpec
+    from adaptenv.sim.world import compile_world
+
+    house, ctx, _ = _context(tiny)
+    ep = ctx.episode
+    v = EditValidator(house, episode_targets=[ep.target_type], start=ep.start[:2])
+    world, route = compile_world(v.house, "c"), RouteSpec.from_episode(ep.target_type, ep.start, ctx.trajectory)
+    kinds = {share: [c.kind for c in enumerate_candidates(v, world, route, np.random.default_rng(0), 16,
+                                                          random_share=share)] for share in (0.0, 0.5, 1.0)}
+    assert set(kinds[1.0]) == {"random"} and len(kinds[1.0]) == 16
+    assert kinds[0.5].count("random") >= 8 > kinds[0.0].count("random")
+    with pytest.raises(ConfigError, match="random_share"):
+        LearnedGenerator(random_share=1.5)
 
 
 def test_a_g_ranked_by_agent_drops_edits_each_object_at_most_once(tiny, collected, tmp_path):

@@ -5,7 +5,8 @@
 
 ``--generators`` names the generators (default ``learned,builtin,random``): ``learned`` is the shipped scorer,
 ``learned+checksK`` the same scorer with ``checks=K`` (the agent shown its K best edits), ``learned+objectivesK``
-with ``objectives=K`` (its K best edits measured on the route objectives, no rollout), ``builtin+rolloutsK`` the
+with ``objectives=K`` (its K best edits measured on the route objectives, no rollout), ``learned+randomP`` with
+``random_share=P/100`` (P percent of its candidates random moves, the rest the built-in G's route moves), ``builtin+rolloutsK`` the
 built-in G with ``rollout_candidates=K``, and ``--checkpoint FILE`` replaces the shipped scorer. ``--tag T`` writes ``rows-AGENT-T.jsonl`` instead, so a second comparison keeps its own
 rows. The first generator is the one the intervals compare with the others.
 
@@ -57,7 +58,8 @@ def make(gen: str, checkpoint: str | None):
     value = int("".join(ch for ch in mod if ch.isdigit()) or 0)
     if base == "learned":
         return make_generator("learned", checkpoint=checkpoint, checks=value if mod.startswith("checks") else 0,
-                              objectives=value if mod.startswith("objectives") else 0)
+                              objectives=value if mod.startswith("objectives") else 0,
+                              random_share=value / 100 if mod.startswith("random") else 0.5)
     if base == "builtin" and mod.startswith("rollouts"):
         return make_generator("builtin", rollout_candidates=value)
     return make_generator(gen)

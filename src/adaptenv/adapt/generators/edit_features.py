@@ -21,6 +21,7 @@ from adaptenv.adapt.generators.builtin import BuiltinGenerator, Candidate
 from adaptenv.adapt.generators.random_perturbation import random_move
 from adaptenv.adapt.objectives import RouteSpec, route_points
 from adaptenv.adapt.validation import EditValidator
+from adaptenv.errors import ConfigError
 from adaptenv.sim.world import NavWorld
 
 KINDS = ("toward", "across", "sideways", "toward_target", "turn", "to_wall", "random")
@@ -33,6 +34,8 @@ SUGGESTION_KINDS = ("narrow_passage", "occlude_target", "lengthen_route", "add_c
 DIST_SCALE = 10.0
 #: Largest displacement (grid units) of the random candidates (the random G's).
 RANDOM_UNITS = 15.0
+#: The share of candidates drawn as random moves by default (the rest are the built-in G's route moves).
+RANDOM_SHARE = 0.5
 
 FEATURE_NAMES: tuple[str, ...] = (
     "dx", "dy", "move_m", "rotates", "turn_sin", "turn_cos", "relocate",
@@ -67,11 +70,15 @@ class Scene:
 
 
 def enumerate_candidates(v: EditValidator, world: NavWorld, route: RouteSpec, rng: np.random.Generator, n: int,
-                         *, scene: Scene | None = None) -> list[Candidate]:
-    """Up to ``n`` distinct candidate edits: half the built-in G's route moves, half random moves (no rollouts)."""
+                         *, scene: Scene | None = None, random_share: float = RANDOM_SHARE) -> list[Candidate]:
+    """Up to ``n`` distinct candidate edits (no rollouts): the built-in G's route moves, then random moves for
+    ``random_share`` of ``n`` (or to fill what the route moves leave)."""
     scene = scene or Scene.of(v, world, route)
-    half = max(1, n // 2)
-    out = BuiltinGenerator(max_candidates=half)._candidates(v, world, route, set(scene.target_ids), rng, limit=half)
+    if not 0.0 <= random_share <= 1.0:
+        raise ConfigError(f"random_share {random_share}: must be from 0 to 1")
+    routed = max(1, int(n * (1.0 - random_share))) if random_share < 1.0 else 0
+    out = (BuiltinGenerator(max_candidates=routed)._candidates(v, world, route, set(scene.target_ids), rng, limit=routed)
+           if routed else [])
     ids = [oid for oid, m in zip(v.ctx.ids, v.ctx.movable, strict=True) if m and oid not in scene.target_ids]
     seen = {(c.object_id, c.dx_units, c.dy_units, c.rotation) for c in out}
     for _ in range(3 * n):

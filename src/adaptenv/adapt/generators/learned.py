@@ -53,6 +53,7 @@ from adaptenv.adapt.generators.base import (
 from adaptenv.adapt.generators.builtin import MIN_MOVE, Candidate, suggestion_order
 from adaptenv.adapt.generators.edit_features import (
     FEATURE_NAMES,
+    RANDOM_SHARE,
     Scene,
     candidate_features,
     enumerate_candidates,
@@ -214,10 +215,14 @@ class LearnedGenerator:
     name = "learned"
 
     def __init__(self, *, checkpoint: str | Path | None = None, candidates: int = CANDIDATES,
-                 require_expert: bool = True, checks: int = 0, objectives: int = 0, scorer: Scorer | None = None):
+                 require_expert: bool = True, checks: int = 0, objectives: int = 0, scorer: Scorer | None = None,
+                 random_share: float = RANDOM_SHARE):
         """``checks``: with a policy in the context, roll the agent out on the best this many edits that pass every
         check and make the hardest for it (0: no rollout, the best-scored edit is made). ``objectives``: measure the
-        route objectives of the best this many instead and make the one with the largest weighted gain."""
+        route objectives of the best this many instead and make the one with the largest weighted gain.
+        ``random_share``: the share of candidates drawn as random moves rather than the built-in G's route moves."""
+        if not 0.0 <= float(random_share) <= 1.0:
+            raise ConfigError(f"random_share {random_share}: must be from 0 to 1")
         for name, k in (("checks", checks), ("objectives", objectives)):
             if not 0 <= int(k) <= candidates:
                 raise ConfigError(f"{name} {k}: must be a whole number from 0 to the candidates per step ({candidates})")
@@ -228,6 +233,7 @@ class LearnedGenerator:
         self.require_expert = require_expert
         self.checks = int(checks)
         self.objectives = int(objectives)
+        self.random_share = float(random_share)
         self.repeat = self.objectives > 0 or self.scorer.target == "objectives"
         """Whether an object may be edited again in a later step: when edits are ranked by route-objective gains (a move
         that undoes an earlier one loses what it gained), not by the agent's drops."""
@@ -247,7 +253,8 @@ class LearnedGenerator:
             world = compile_world(v.house, "candidate")
             scene = Scene.of(v, world, route)
             values = measure(world, route) if self.objectives else None
-            cands = [c for c in enumerate_candidates(v, world, route, rng, self.candidates, scene=scene)
+            cands = [c for c in enumerate_candidates(v, world, route, rng, self.candidates, scene=scene,
+                                                      random_share=self.random_share)
                      if self.repeat or c.object_id not in edited]
             weights = self._weights(step, suggestions)
             scores = self.scorer.score(candidate_features(v, scene, cands, analysis),
