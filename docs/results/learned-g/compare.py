@@ -8,7 +8,7 @@
 with ``objectives=K`` (its K best edits measured on the route objectives, no rollout), ``learned+randomP`` with
 ``random_share=P/100`` (P percent of its candidates random moves, the rest the built-in G's route moves), ``builtin+rolloutsK`` the
 built-in G with ``rollout_candidates=K``, and ``--checkpoint FILE`` replaces the shipped scorer. ``--tag T`` writes ``rows-AGENT-T.jsonl`` instead, so a second comparison keeps its own
-rows. The first generator is the one the intervals compare with the others.
+rows. Options chain: ``learned+random0+objectives64``. The first generator is the one the intervals compare with the others.
 
 Jobs: the first ``HOUSES`` houses of ``preset:pretrain-unseen`` (procedural houses no G was built or trained on) and
 the real-format ProcTHOR house of tests/data on ``REAL_SEEDS`` episode seeds. Per job: an episode the agent solves
@@ -54,14 +54,14 @@ def make(gen: str, checkpoint: str | None):
     """The generator ``gen`` names (see the module docstring)."""
     from adaptenv.adapt.generators import make_generator
 
-    base, _, mod = gen.partition("+")
-    value = int("".join(ch for ch in mod if ch.isdigit()) or 0)
+    base, *mods = gen.split("+")
+    opts = {m.rstrip("abcdefghijklmnopqrstuvwxyz").rstrip("0123456789"):
+            int("".join(ch for ch in m if ch.isdigit()) or 0) for m in mods}
     if base == "learned":
-        return make_generator("learned", checkpoint=checkpoint, checks=value if mod.startswith("checks") else 0,
-                              objectives=value if mod.startswith("objectives") else 0,
-                              random_share=value / 100 if mod.startswith("random") else 0.5)
-    if base == "builtin" and mod.startswith("rollouts"):
-        return make_generator("builtin", rollout_candidates=value)
+        return make_generator("learned", checkpoint=checkpoint, checks=opts.get("checks", 0),
+                              objectives=opts.get("objectives", 0), random_share=opts.get("random", 50) / 100)
+    if base == "builtin" and "rollouts" in opts:
+        return make_generator("builtin", rollout_candidates=opts["rollouts"])
     return make_generator(gen)
 
 
