@@ -3,12 +3,14 @@
     python compare.py run OUT [--agent NAME] [--workers N]   # resumable: OUT/rows-AGENT.jsonl, one row per (job, G)
     python compare.py table OUT [--agent NAME]               # the declared table, with paired 95% intervals
 
-``--generators`` names the generators (default ``learned,builtin,random``): ``learned`` is the shipped scorer,
-``learned+checksK`` the same scorer with ``checks=K`` (the agent shown its K best edits), ``learned+objectivesK``
-with ``objectives=K`` (its K best edits measured on the route objectives, no rollout), ``learned+randomP`` with
-``random_share=P/100`` (P percent of its candidates random moves, the rest the built-in G's route moves), ``builtin+rolloutsK`` the
-built-in G with ``rollout_candidates=K``, and ``--checkpoint FILE`` replaces the shipped scorer. ``--tag T`` writes ``rows-AGENT-T.jsonl`` instead, so a second comparison keeps its own
-rows. Options chain: ``learned+random0+objectives64``. The first generator is the one the intervals compare with the others.
+``--generators`` names the generators (default ``learned,builtin,random``): ``learned`` is the shipped scorer with
+the library's defaults, and options, chained with ``+``, change one setting each: ``checksK`` (the agent shown its K
+best edits), ``objectivesK`` (its K best edits measured on the route objectives, no rollout; ``objectives0`` is the
+one-pass G), ``randomP`` (P percent of its candidates random moves, the rest the built-in G's route moves), as in
+``learned+random50+objectives0``. ``builtin+rolloutsK`` is the built-in G with ``rollout_candidates=K``, and
+``--checkpoint FILE`` replaces the shipped scorer. ``--tag T`` writes ``rows-AGENT-T.jsonl`` instead, so a second
+comparison keeps its own rows. The first generator is the one the intervals compare with the others. Rows of runs
+made before a default changed name their G as it was then (see each ``DECLARED-*.md``).
 
 Jobs: the first ``HOUSES`` houses of ``preset:pretrain-unseen`` (procedural houses no G was built or trained on) and
 the real-format ProcTHOR house of tests/data on ``REAL_SEEDS`` episode seeds. Per job: an episode the agent solves
@@ -57,9 +59,10 @@ def make(gen: str, checkpoint: str | None):
     base, *mods = gen.split("+")
     opts = {m.rstrip("abcdefghijklmnopqrstuvwxyz").rstrip("0123456789"):
             int("".join(ch for ch in m if ch.isdigit()) or 0) for m in mods}
-    if base == "learned":
-        return make_generator("learned", checkpoint=checkpoint, checks=opts.get("checks", 0),
-                              objectives=opts.get("objectives", 0), random_share=opts.get("random", 50) / 100)
+    if base == "learned":  # options not named keep the library's defaults
+        if "random" in opts:
+            opts["random_share"] = opts.pop("random") / 100
+        return make_generator("learned", checkpoint=checkpoint, **opts)
     if base == "builtin" and "rollouts" in opts:
         return make_generator("builtin", rollout_candidates=opts["rollouts"])
     return make_generator(gen)

@@ -2,8 +2,9 @@
 
 Per step (offline, deterministic for a given rng):
 
-1. Draw candidate edits without rollouts, as the built-in and random G do
-   (:func:`~adaptenv.adapt.generators.edit_features.enumerate_candidates`).
+1. Draw candidate edits without rollouts, as the built-in G does (its moves toward, across and along the
+   route; ``random_share`` of them random moves, as the random G draws them, default none:
+   :func:`~adaptenv.adapt.generators.edit_features.enumerate_candidates`).
 2. Score all of them in one forward pass of the scorer (:class:`Scorer`, a small MLP over
    :data:`~adaptenv.adapt.generators.edit_features.FEATURE_NAMES`): it predicts whether the edit survives
    placement, validation, the plausibility rules and the expert check, and either how much the agent's
@@ -20,10 +21,11 @@ Per step (offline, deterministic for a given rng):
    instead rolled out with the agent in one batch (the episode's start and target, a few headings) and
    the one it succeeds on least often, then with the lowest mean SPL, is made: the network only chooses
    which K edits the agent is shown.
-5. With ``objectives`` K > 0 (and no ``checks``), the first K that pass are instead
-   measured on the built-in G's route objectives in their edited worlds (no rollout: a distance field
-   and a few line-of-sight walks each) and the one with the largest gain, weighted as the built-in G
-   weighs the analysis' suggestions, is made.
+5. With ``objectives`` K > 0 (the default, :data:`OBJECTIVES`, unless ``checks`` is given), the first K
+   that pass are instead measured on the built-in G's route objectives in their edited worlds (no
+   rollout: a distance field and a few line-of-sight walks each) and the one with the largest gain,
+   weighted as the built-in G weighs the analysis' suggestions, is made. ``objectives=0`` is the
+   one-pass G of step 3.
 
 The scorer is trained by ``adaptenv gdata train`` on rows of ``adaptenv gdata collect``; the package ships
 one (``agents/data/learned-g.pt``, its card ``learned-g.json``). Its file is a ``torch.save`` dictionary
@@ -53,7 +55,6 @@ from adaptenv.adapt.generators.base import (
 from adaptenv.adapt.generators.builtin import MIN_MOVE, Candidate, suggestion_order
 from adaptenv.adapt.generators.edit_features import (
     FEATURE_NAMES,
-    RANDOM_SHARE,
     Scene,
     candidate_features,
     enumerate_candidates,
@@ -85,6 +86,8 @@ TARGETS: dict[str, tuple[str, ...]] = {
 in success and SPL (``agent``) or the gain of each route objective (``objectives``)."""
 #: Candidate edits drawn and scored per step.
 CANDIDATES = 64
+#: The best-scored edits that pass every check whose route objectives are measured per step, by default.
+OBJECTIVES = 4
 
 
 @dataclass(frozen=True)
@@ -215,12 +218,14 @@ class LearnedGenerator:
     name = "learned"
 
     def __init__(self, *, checkpoint: str | Path | None = None, candidates: int = CANDIDATES,
-                 require_expert: bool = True, checks: int = 0, objectives: int = 0, scorer: Scorer | None = None,
-                 random_share: float = RANDOM_SHARE):
+                 require_expert: bool = True, checks: int = 0, objectives: int | None = None,
+                 scorer: Scorer | None = None, random_share: float = 0.0):
         """``checks``: with a policy in the context, roll the agent out on the best this many edits that pass every
         check and make the hardest for it (0: no rollout, the best-scored edit is made). ``objectives``: measure the
-        route objectives of the best this many instead and make the one with the largest weighted gain.
-        ``random_share``: the share of candidates drawn as random moves rather than the built-in G's route moves."""
+        route objectives of the best this many instead and make the one with the largest weighted gain (default
+        :data:`OBJECTIVES`, or 0 with ``checks``; 0: the best-scored edit is made). ``random_share``: the share of
+        candidates drawn as random moves rather than the built-in G's route moves (the data drew half)."""
+        objectives = (0 if checks else OBJECTIVES) if objectives is None else objectives
         if not 0.0 <= float(random_share) <= 1.0:
             raise ConfigError(f"random_share {random_share}: must be from 0 to 1")
         for name, k in (("checks", checks), ("objectives", objectives)):
@@ -342,5 +347,5 @@ class LearnedGenerator:
         return passed[best[2]]
 
 
-__all__ = ["CANDIDATES", "FORMAT", "TARGETS", "LearnedGenerator", "Scorer", "ScorerConfig", "build_net",
+__all__ = ["CANDIDATES", "FORMAT", "OBJECTIVES", "TARGETS", "LearnedGenerator", "Scorer", "ScorerConfig", "build_net",
            "expected_gain", "load_scorer", "objective_weights", "save_scorer", "shipped_path"]
