@@ -220,7 +220,7 @@ def test_a_g_ranked_by_agent_drops_edits_each_object_at_most_once(tiny, collecte
     result = runner.invoke(app, ["gdata", "train", str(collected[0]), "-o", str(ckpt), "--epochs", "2", "--heldin", "2"])
     assert result.exit_code == 0, result.output
     house, ctx, analysis = _context(tiny)
-    gen = LearnedGenerator(checkpoint=ckpt)
+    gen = LearnedGenerator(checkpoint=ckpt, objectives=0)  # one pass: ranked by the scorer alone
     assert gen.scorer.target == "agent" and not gen.repeat
     res = gen.generate(house, analysis, steps=4, context=ctx, rng=np.random.default_rng(2))
     moved = [e.object_id for e in res.applied]
@@ -243,7 +243,7 @@ def test_learned_g_with_checks_makes_the_edit_the_agent_fails_on(tiny, monkeypat
 
     monkeypatch.setattr(learned, "run_in_worlds", fake_runs)
     house, ctx, analysis = _context(tiny, ExpertPolicy())
-    plain = LearnedGenerator().generate(house, analysis, steps=1, context=ctx, rng=np.random.default_rng(2))
+    plain = LearnedGenerator(objectives=0).generate(house, analysis, steps=1, context=ctx, rng=np.random.default_rng(2))
     checked = LearnedGenerator(checks=3).generate(house, analysis, steps=1, context=ctx, rng=np.random.default_rng(2))
     step = checked.steps[0]
     assert len(shown) == 1 and len(shown[0]) == step.checked == 3
@@ -272,7 +272,7 @@ def test_learned_g_with_objectives_makes_the_edit_with_the_largest_objective_gai
     monkeypatch.setattr(learned, "run_in_worlds", no_rollout)
     house, ctx, analysis = _context(tiny, ExpertPolicy())
     assert analysis.suggestions
-    plain = LearnedGenerator().generate(house, analysis, steps=1, context=ctx, rng=np.random.default_rng(2))
+    plain = LearnedGenerator(objectives=0).generate(house, analysis, steps=1, context=ctx, rng=np.random.default_rng(2))
     calls.clear()
     chosen = LearnedGenerator(objectives=3).generate(house, analysis, steps=1, context=ctx,
                                                      rng=np.random.default_rng(2))
