@@ -124,6 +124,6 @@ def run(*, houses: int = 50, steps: int = 5, policy: str = "pretrained-scan", se
         f"learned G: success drop on {FRESH} fresh draws (points)":
             100.0 * (mean("fresh_before") - mean("fresh_after_learned")),
         "learned G: plausibility violations (sum)": int(sum(r["violations_learned"] for r in rows)),
-        "learned G: adapt s per house (one-pass proposals, validation, after-rollout)": t_learned / max(n, 1),
+        "learned G: adapt s per house (scored proposals, their route objectives, validation, after-rollout)": t_learned / max(n, 1),
     }
     return figures

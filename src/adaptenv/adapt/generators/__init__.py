@@ -16,7 +16,8 @@ token usage (LLM) and the objective trace.
 - ``random`` (:class:`~adaptenv.adapt.generators.random_perturbation.RandomPerturbation`): every
   movable object displaced and rotated at random (the paper's comparison point).
 - ``learned`` (:class:`~adaptenv.adapt.generators.learned.LearnedGenerator`, offline): a trained network
-  scores candidate edits in one forward pass; the best that passes the checks is made.
+  scores candidate edits in one forward pass; of the best that pass the checks, the one with the largest
+  measured route-objective gain is made (no agent rollout).
 
 Moves are on the normalized 100x100 grid (+x right, +y up); ``rotation`` is the object's new
 absolute yaw in degrees (0 faces up on the map, 90 faces right).

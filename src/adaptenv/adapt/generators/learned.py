@@ -1,4 +1,5 @@
-"""The learned G: a small network scores candidate edits in one forward pass; the best that passes the checks is made.
+"""The learned G: a small network scores candidate edits in one forward pass; of the best few that pass the checks,
+the one whose measured route objectives gain most is made.
 
 Per step (offline, deterministic for a given rng):
 
@@ -213,7 +214,8 @@ def load_scorer(path: str | Path | None = None) -> Scorer:
 
 
 class LearnedGenerator:
-    """G that scores candidate edits with a trained network and makes the best one that passes the checks."""
+    """G that scores candidate edits with a trained network and makes, of the best few that pass the checks, the one
+    with the largest measured route-objective gain (``objectives``; 0: the best-scored one)."""
 
     name = "learned"
 
