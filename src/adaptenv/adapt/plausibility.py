@@ -180,26 +180,28 @@ class _Walls:
         """
         if not len(self.lines):
             return 0.0
-        pts = fp.outline
+        a = fp.outline
+        b = np.roll(a, -1, axis=0)
+        le = np.array([float(np.linalg.norm(e)) for e in b - a])  # per edge, as a scalar norm rounds
+        ok = le >= 1e-6
+        a, b, le = a[ok], b[ok], le[ok]
+        ue = np.array([e / n for e, n in zip(b - a, le, strict=True)]).reshape(-1, 2)
         d = self.p1 - self.p0
-        length = np.maximum(np.linalg.norm(d, axis=1), 1e-12)
-        us = d / length[:, None]
+        us = d / np.maximum(np.linalg.norm(d, axis=1), 1e-12)[:, None]
         max_sin = math.sin(math.radians(AGAINST_WALL_ANGLE))
+        near = np.abs(us[None, :, 0] * ue[:, None, 1] - us[None, :, 1] * ue[:, None, 0]) <= max_sin
+        rows = np.flatnonzero(near.any(axis=1))
+        if not len(rows):
+            return 0.0
+        edges = shapely.linestrings(np.stack([a[rows], b[rows]], axis=1))
+        near[rows] &= shapely.distance(edges[:, None], self.lines[None, :]) <= AGAINST_WALL_DISTANCE
         worst = 0.0
-        for a, b in zip(pts, np.roll(pts, -1, axis=0), strict=True):
-            le = float(np.linalg.norm(b - a))
-            if le < 1e-6:
-                continue
-            ue = (b - a) / le
-            parallel = np.abs(us[:, 0] * ue[1] - us[:, 1] * ue[0]) <= max_sin
-            if not parallel.any():
-                continue
-            k = np.flatnonzero(parallel)
-            k = k[shapely.distance(shapely.LineString([a, b]), self.lines[k]) <= AGAINST_WALL_DISTANCE]
+        for e in rows:  # the part of each edge along a wall that no parallel wall segment covers
+            k = np.flatnonzero(near[e])
             if not len(k):
                 continue
-            t0, t1 = (self.p0[k] - a) @ ue, (self.p1[k] - a) @ ue
-            spans = sorted(zip(np.clip(np.minimum(t0, t1), 0.0, le), np.clip(np.maximum(t0, t1), 0.0, le),
+            t0, t1 = (self.p0[k] - a[e]) @ ue[e], (self.p1[k] - a[e]) @ ue[e]
+            spans = sorted(zip(np.clip(np.minimum(t0, t1), 0.0, le[e]), np.clip(np.maximum(t0, t1), 0.0, le[e]),
                                strict=True))
             covered, end = 0.0, 0.0
             for lo, hi in spans:
@@ -207,7 +209,7 @@ class _Walls:
                     covered += hi - max(lo, end)
                     end = hi
             if covered >= MIN_WALL_OVERLAP:
-                worst = max(worst, le - covered)
+                worst = max(worst, float(le[e]) - covered)
         return worst
 
 
