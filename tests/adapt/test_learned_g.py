@@ -23,7 +23,12 @@ from adaptenv.adapt.gdata import (
 )
 from adaptenv.adapt.generators import GenerationContext, make_generator
 from adaptenv.adapt.generators.edit_features import FEATURE_NAMES
-from adaptenv.adapt.generators.learned import LearnedGenerator, load_scorer, shipped_path
+from adaptenv.adapt.generators.learned import (
+    OBJECTIVES,
+    LearnedGenerator,
+    load_scorer,
+    shipped_path,
+)
 from adaptenv.adapt.objectives import OBJECTIVE_KINDS
 from adaptenv.adapt.plausibility import audit
 from adaptenv.adapt.validation import EditValidator, validate_scene
@@ -278,6 +283,7 @@ def test_learned_g_with_objectives_makes_the_edit_with_the_largest_objective_gai
                                                      rng=np.random.default_rng(2))
     assert len(calls) == 4 and "largest objective gain of the 3" in chosen.steps[0].reason
     assert chosen.steps[0].attempts > plain.steps[0].attempts  # the second that passed, not the first
+    assert LearnedGenerator().objectives == OBJECTIVES and LearnedGenerator(checks=2).objectives == 0
     with pytest.raises(ConfigError, match="at most one"):
         LearnedGenerator(checks=2, objectives=2)
     with pytest.raises(ConfigError, match="objectives 99"):
