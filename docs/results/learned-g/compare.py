@@ -6,8 +6,8 @@
 ``--generators`` names the generators (default ``learned,builtin,random``): ``learned`` is the shipped scorer with
 the library's defaults, and options, chained with ``+``, change one setting each: ``checksK`` (the agent shown its K
 best edits), ``objectivesK`` (its K best edits measured on the route objectives, no rollout; ``objectives0`` is the
-one-pass G), ``randomP`` (P percent of its candidates random moves, the rest the built-in G's route moves), as in
-``learned+random50+objectives0``. ``builtin+rolloutsK`` is the built-in G with ``rollout_candidates=K``, and
+one-pass G), ``randomP`` (P percent of its candidates random moves, the rest the built-in G's route moves), ``lazy1`` (route moves fitted to the
+plausibility rules in score order, when their turn comes), as in ``learned+random50+objectives0``. ``builtin+rolloutsK`` is the built-in G with ``rollout_candidates=K``, and
 ``--checkpoint FILE`` replaces the shipped scorer. ``--tag T`` writes ``rows-AGENT-T.jsonl`` instead, so a second
 comparison keeps its own rows. The first generator is the one the intervals compare with the others. Rows of runs
 made before a default changed name their G as it was then (see each ``DECLARED-*.md``).
@@ -62,6 +62,8 @@ def make(gen: str, checkpoint: str | None):
     if base == "learned":  # options not named keep the library's defaults
         if "random" in opts:
             opts["random_share"] = opts.pop("random") / 100
+        if "lazy" in opts:
+            opts["lazy_fit"] = bool(opts.pop("lazy"))
         return make_generator("learned", checkpoint=checkpoint, **opts)
     if base == "builtin" and "rollouts" in opts:
         return make_generator("builtin", rollout_candidates=opts["rollouts"])

@@ -70,14 +70,17 @@ class Scene:
 
 
 def enumerate_candidates(v: EditValidator, world: NavWorld, route: RouteSpec, rng: np.random.Generator, n: int,
-                         *, scene: Scene | None = None, random_share: float = RANDOM_SHARE) -> list[Candidate]:
+                         *, scene: Scene | None = None, random_share: float = RANDOM_SHARE,
+                         fit: bool = True) -> list[Candidate]:
     """Up to ``n`` distinct candidate edits (no rollouts): the built-in G's route moves, then random moves for
-    ``random_share`` of ``n`` (or to fill what the route moves leave)."""
+    ``random_share`` of ``n`` (or to fill what the route moves leave). ``fit=False`` leaves the route moves unfitted
+    to the plausibility rules (:func:`~adaptenv.adapt.generators.builtin.fit_rules`), for a caller that fits them
+    later."""
     scene = scene or Scene.of(v, world, route)
     if not 0.0 <= random_share <= 1.0:
         raise ConfigError(f"random_share {random_share}: must be from 0 to 1")
     routed = max(1, int(n * (1.0 - random_share))) if random_share < 1.0 else 0
-    out = (BuiltinGenerator(max_candidates=routed)._candidates(v, world, route, set(scene.target_ids), rng, limit=routed)
+    out = (BuiltinGenerator(max_candidates=routed, fit_to_rules=fit)._candidates(v, world, route, set(scene.target_ids), rng, limit=routed)
            if routed else [])
     ids = [oid for oid, m in zip(v.ctx.ids, v.ctx.movable, strict=True) if m and oid not in scene.target_ids]
     seen = {(c.object_id, c.dx_units, c.dy_units, c.rotation) for c in out}

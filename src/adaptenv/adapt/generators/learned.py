@@ -37,7 +37,7 @@ other file in one line.
 from __future__ import annotations
 
 import math
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, replace
 from importlib import resources
 from pathlib import Path
 from typing import Any
@@ -53,7 +53,7 @@ from adaptenv.adapt.generators.base import (
     keep_render,
     render_scene,
 )
-from adaptenv.adapt.generators.builtin import MIN_MOVE, Candidate, suggestion_order
+from adaptenv.adapt.generators.builtin import MIN_MOVE, Candidate, fit_rules, suggestion_order
 from adaptenv.adapt.generators.edit_features import (
     FEATURE_NAMES,
     Scene,
@@ -213,6 +213,31 @@ def load_scorer(path: str | Path | None = None) -> Scorer:
     return Scorer(net, mean, std, meta, p, cfg.target)
 
 
+class _LazyFit:
+    """``lazy_fit``: a route move fitted to the plausibility rules when its turn comes (written back into the candidate
+    list); None when no fraction of it fits or it fits to a move already fitted this step."""
+
+    def __init__(self, v: EditValidator):
+        self.v, self.upm = v, v.ctx.grid.units_per_meter
+        self.current = {f.object_id: f for f in v.geometry.footprints}
+        self.seen: set[tuple] = set()
+
+    def __call__(self, cands: list[Candidate], k: int) -> Candidate | None:
+        c = cands[k]
+        if c.kind == "random":  # random moves are never fitted
+            return c
+        d = fit_rules(self.v, self.current, c.object_id, np.array([c.dx_units, c.dy_units]) / self.upm, c.rotation,
+                      shrink=not c.relocate)
+        if d is None:
+            return None
+        dx, dy = round(float(d[0] * self.upm), 1), round(float(d[1] * self.upm), 1)
+        if (key := (c.object_id, dx, dy, c.rotation)) in self.seen:
+            return None
+        self.seen.add(key)
+        cands[k] = replace(c, dx_units=dx, dy_units=dy)
+        return cands[k]
+
+
 class LearnedGenerator:
     """G that scores candidate edits with a trained network and makes, of the best few that pass the checks, the one
     with the largest measured route-objective gain (``objectives``; 0: the best-scored one)."""
@@ -221,12 +246,14 @@ class LearnedGenerator:
 
     def __init__(self, *, checkpoint: str | Path | None = None, candidates: int = CANDIDATES,
                  require_expert: bool = True, checks: int = 0, objectives: int | None = None,
-                 scorer: Scorer | None = None, random_share: float = 0.0):
+                 scorer: Scorer | None = None, random_share: float = 0.0, lazy_fit: bool = False):
         """``checks``: with a policy in the context, roll the agent out on the best this many edits that pass every
         check and make the hardest for it (0: no rollout, the best-scored edit is made). ``objectives``: measure the
         route objectives of the best this many instead and make the one with the largest weighted gain (default
         :data:`OBJECTIVES`, or 0 with ``checks``; 0: the best-scored edit is made). ``random_share``: the share of
-        candidates drawn as random moves rather than the built-in G's route moves (the data drew half)."""
+        candidates drawn as random moves rather than the built-in G's route moves (the data drew half). ``lazy_fit``:
+        score the route moves as drawn and fit each to the plausibility rules only when its turn comes, in score order
+        (:func:`~adaptenv.adapt.generators.builtin.fit_rules`), instead of fitting every one before scoring."""
         objectives = (0 if checks else OBJECTIVES) if objectives is None else objectives
         if not 0.0 <= float(random_share) <= 1.0:
             raise ConfigError(f"random_share {random_share}: must be from 0 to 1")
@@ -241,6 +268,7 @@ class LearnedGenerator:
         self.checks = int(checks)
         self.objectives = int(objectives)
         self.random_share = float(random_share)
+        self.lazy_fit = bool(lazy_fit)
         self.repeat = self.objectives > 0 or self.scorer.target == "objectives"
         """Whether an object may be edited again in a later step: when edits are ranked by route-objective gains (a move
         that undoes an earlier one loses what it gained), not by the agent's drops."""
@@ -261,15 +289,18 @@ class LearnedGenerator:
             scene = Scene.of(v, world, route)
             values = measure(world, route) if self.objectives else None
             cands = [c for c in enumerate_candidates(v, world, route, rng, self.candidates, scene=scene,
-                                                      random_share=self.random_share)
+                                                      random_share=self.random_share, fit=not self.lazy_fit)
                      if self.repeat or c.object_id not in edited]
+            fitted = _LazyFit(v) if self.lazy_fit else None
             weights = self._weights(step, suggestions)
             scores = self.scorer.score(candidate_features(v, scene, cands, analysis),
                                        objective_weights(weights) if self.scorer.target == "objectives" and weights else None)
             record = StepRecord(step=step, status="skipped", candidates=len(cands))
             passed: list[tuple[int, int, Proposal, NavWorld | None]] = []
             for tried, k in enumerate(np.argsort(-scores, kind="stable"), start=1):
-                c = cands[int(k)]
+                c = cands[int(k)] if fitted is None else fitted(cands, int(k))
+                if c is None:
+                    continue
                 if self.checks and any(cands[j].object_id == c.object_id for _, j, _, _ in passed):
                     continue
                 if (found := self._passes(v, c, ep, want > 1)) is not None:
