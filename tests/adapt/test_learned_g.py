@@ -203,6 +203,34 @@ def test_learned_g_edits_pass_validation_and_the_audit_deterministically(tiny):
     assert audit(house, a.house).total == 0
 
 
+def test_lazy_fit_fits_only_the_moves_whose_turn_comes_and_its_edits_pass_the_audit(tiny, monkeypatch):
+    import adaptenv.adapt.generators.builtin as builtin
+    import adaptenv.adapt.generators.learned as learned
+
+    calls = {"builtin": 0, "learned": 0}
+
+    def counting(where, fit):
+        def wrapped(*a, **k):
+            calls[where] += 1
+            return fit(*a, **k)
+        return wrapped
+
+    monkeypatch.setattr(builtin, "fit_rules", counting("builtin", builtin.fit_rules))
+    monkeypatch.setattr(learned, "fit_rules", counting("learned", learned.fit_rules))
+    house, ctx, analysis = _context(tiny)
+    ep = ctx.episode
+    gen = LearnedGenerator(lazy_fit=True)
+    runs = [gen.generate(house, analysis, steps=2, context=ctx, rng=np.random.default_rng(5)) for _ in range(2)]
+    assert [s.edit for s in runs[0].steps] == [s.edit for s in runs[1].steps]
+    assert runs[0].applied, [s.reason for s in runs[0].steps]
+    assert calls["builtin"] == 0 and 0 < calls["learned"] < 2 * sum(s.candidates for s in runs[0].steps) * 2
+    assert validate_scene(runs[0].house, episode_targets=[ep.target_type], start=ep.start[:2], original=house) == []
+    assert audit(house, runs[0].house).total == 0
+    calls["builtin"] = 0
+    LearnedGenerator().generate(house, analysis, steps=1, context=ctx, rng=np.random.default_rng(5))
+    assert calls["builtin"] >= 1  # the default fits every route move before scoring
+
+
 def test_candidate_pool_takes_the_requested_share_of_random_moves(tiny):
     from adaptenv.adapt.generators.edit_features import enumerate_candidates
     from adaptenv.adapt.objectives import RouteSpec

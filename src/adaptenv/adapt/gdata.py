@@ -38,6 +38,7 @@ from adaptenv.adapt.generators._trial import moved_geometry
 from adaptenv.adapt.generators.base import house_object_types
 from adaptenv.adapt.generators.edit_features import (
     FEATURE_NAMES,
+    RANDOM_SHARE,
     Scene,
     candidate_features,
     enumerate_candidates,
@@ -59,12 +60,13 @@ ROWS, HOUSES, META = "edits.jsonl.gz", "houses.jsonl", "meta.json"
 @dataclass(frozen=True)
 class CollectConfig:
     """How much to collect per house: tasks (F's episodes), candidates per task, paired episodes per edit (0: the
-    route objectives only, no agent rollout per edit)."""
+    route objectives only, no agent rollout per edit), and the share of the candidates drawn as random moves."""
 
     tasks: int = 2
     candidates: int = 24
     episodes: int = 3
     seed: int = 0
+    random_share: float = RANDOM_SHARE
 
 
 def house_sha256(house: House) -> str:
@@ -115,7 +117,7 @@ def collect_task(house: House, ref: dict[str, Any], task: int, policy: Policy, c
     v = EditValidator(house, episode_targets=[ep.target_type], start=ep.start[:2])
     route = RouteSpec.from_episode(ep.target_type, ep.start, before)
     scene = Scene.of(v, world, route)
-    cands = enumerate_candidates(v, world, route, rng, cfg.candidates, scene=scene)
+    cands = enumerate_candidates(v, world, route, rng, cfg.candidates, scene=scene, random_share=cfg.random_share)
     feats = candidate_features(v, scene, cands, analysis)
     types, expert = house_object_types(house), expert_policy()
     objectives_before = measure(world, route).as_dict()
@@ -192,6 +194,8 @@ class Dataset:
         (the command line that began it) is kept in ``meta.json``."""
         self.folder.mkdir(parents=True, exist_ok=True)
         old = self.meta()
+        if old is not None and isinstance(old.get("collect"), dict):  # a setting added later: begun with its default
+            old["collect"] = {**asdict(CollectConfig()), **old["collect"]}
         settings = {**settings, "schema": SCHEMA, "features": list(FEATURE_NAMES)}
         if old is not None and {k: old.get(k) for k in settings} != settings:
             diff = next(k for k in settings if old.get(k) != settings[k])

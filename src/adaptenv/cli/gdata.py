@@ -43,8 +43,11 @@ def collect(
     policy: str = typer.Option("pretrained", "--policy", help="The agent whose success and SPL each edit is measured "
                                "on: pretrained, pretrained-map, pretrained-scan, expert, a checkpoint (.pt), ..."),
     tasks: int = typer.Option(2, "--tasks", min=1, max=20, help="Episodes per house that F analyses and G edits for."),
-    candidates: int = typer.Option(24, "--candidates", min=2, max=256, help="Candidate edits per task (half the "
-                                   "built-in G's route moves, half random moves)."),
+    candidates: int = typer.Option(24, "--candidates", min=2, max=256, help="Candidate edits per task (the built-in "
+                                   "G's route moves and random moves, as --random-share splits them)."),
+    random_share: float = typer.Option(0.5, "--random-share", min=0.0, max=1.0, help="Share of the candidates drawn "
+                                       "as random moves (the rest the built-in G's route moves; the learned G "
+                                       "draws route moves only)."),
     episodes: int = typer.Option(3, "--episodes", min=0, max=16, help="Paired episodes (the task's start and target, "
                                  "headings spread evenly) each accepted edit is measured on, before and after (0: "
                                  "only the route objectives, for `gdata train --target objectives`)."),
@@ -74,7 +77,7 @@ def collect(
         n = len(hs.houses) if limit == 0 else min(limit, len(hs.houses))
         pairs += [(h, {"spec": spec, "name": w.name, "index": i, "sha256": house_sha256(h)})
                   for i, (h, w) in enumerate(zip(hs.houses[:n], hs.worlds[:n], strict=True))]
-    cfg = CollectConfig(tasks=tasks, candidates=candidates, episodes=episodes, seed=seed)
+    cfg = CollectConfig(tasks=tasks, candidates=candidates, episodes=episodes, seed=seed, random_share=random_share)
     console = Console()
     with folder, ProgressBar("collecting edits", len(pairs)) as bar:
         counts = collect(pairs, pol, cfg, out, progress=lambda key: bar.advance(), command=command_line())
