@@ -119,6 +119,25 @@ def test_collection_with_other_settings_is_refused(collected, tiny):
         collect(_pairs(tiny, 1), ExpertPolicy(), CollectConfig(tasks=1, candidates=7, episodes=1, seed=3), out)
 
 
+def test_collection_of_route_moves_only_and_a_folder_begun_before_the_setting(collected, tiny, tmp_path):
+    out, _ = collected
+    cfg = CollectConfig(tasks=1, candidates=6, episodes=0, seed=3, random_share=0.0)
+    collect(_pairs(tiny, 1), ExpertPolicy(), cfg, tmp_path / "route")
+    rows = load_rows(tmp_path / "route")
+    assert rows and {r["edit"]["generator"] for r in rows} == {"builtin"}
+    assert "random" in {r["edit"]["generator"] for r in load_rows(out)}  # the default draws half random moves
+    folder = tmp_path / "old"  # a folder whose meta.json predates random_share continues with its default
+    folder.mkdir()
+    for name in (ROWS, "houses.jsonl"):
+        (folder / name).write_bytes((out / name).read_bytes())
+    meta = json.loads((out / "meta.json").read_text())
+    del meta["collect"]["random_share"]
+    (folder / "meta.json").write_text(json.dumps(meta))
+    assert collect(_pairs(tiny, 2), ExpertPolicy(), CFG, folder)["houses"] == 2
+    with pytest.raises(ConfigError, match="random_share"):
+        collect(_pairs(tiny, 2), ExpertPolicy(), cfg, folder)
+
+
 def test_train_writes_a_scorer_and_its_card(collected, tmp_path):
     out, _ = collected
     ckpt = tmp_path / "g.pt"
