@@ -152,12 +152,19 @@ class _Walls:
     p1: np.ndarray
     lines: np.ndarray
     union: shapely.Geometry
+    units: np.ndarray
+    """(N, 2) unit direction of each segment."""
+    lo: np.ndarray
+    hi: np.ndarray
+    """(N, 2) corners of each segment's bounding box."""
 
     @classmethod
     def of(cls, geometry: SceneGeometry) -> _Walls:
-        seg = geometry.blocking_segments()
+        seg = geometry.blocking_segments().reshape(-1, 2, 2)
         lines = shapely.linestrings(seg) if len(seg) else np.array([], dtype=object)
-        return cls(seg[:, 0], seg[:, 1], lines, shapely.multilinestrings(list(lines)) if len(seg) else shapely.Point())
+        d = seg[:, 1] - seg[:, 0]
+        return cls(seg[:, 0], seg[:, 1], lines, shapely.multilinestrings(list(lines)) if len(seg) else shapely.Point(),
+                   d / np.maximum(np.linalg.norm(d, axis=1), 1e-12)[:, None], seg.min(axis=1), seg.max(axis=1))
 
     def against(self, fp: Footprint) -> bool:
         """The scene graph's ``against_wall``: the back edge along a wall, the front pointing into the room."""
@@ -185,16 +192,20 @@ class _Walls:
         le = np.array([float(np.linalg.norm(e)) for e in b - a])  # per edge, as a scalar norm rounds
         ok = le >= 1e-6
         a, b, le = a[ok], b[ok], le[ok]
-        ue = np.array([e / n for e, n in zip(b - a, le, strict=True)]).reshape(-1, 2)
-        d = self.p1 - self.p0
-        us = d / np.maximum(np.linalg.norm(d, axis=1), 1e-12)[:, None]
+        ue = ((b - a) / le[:, None]).reshape(-1, 2)
+        us = self.units
         max_sin = math.sin(math.radians(AGAINST_WALL_ANGLE))
         near = np.abs(us[None, :, 0] * ue[:, None, 1] - us[None, :, 1] * ue[:, None, 0]) <= max_sin
-        rows = np.flatnonzero(near.any(axis=1))
-        if not len(rows):
+        # a segment whose bounding box is farther than the distance from the edge's cannot lie within it
+        elo, ehi = np.minimum(a, b)[:, None, :], np.maximum(a, b)[:, None, :]
+        gap = np.maximum(np.maximum(self.lo[None] - ehi, elo - self.hi[None]), 0.0)
+        near &= np.hypot(gap[..., 0], gap[..., 1]) <= AGAINST_WALL_DISTANCE + 1e-9
+        ei, si = np.nonzero(near)
+        if not len(ei):
             return 0.0
-        edges = shapely.linestrings(np.stack([a[rows], b[rows]], axis=1))
-        near[rows] &= shapely.distance(edges[:, None], self.lines[None, :]) <= AGAINST_WALL_DISTANCE
+        edges = shapely.linestrings(np.stack([a[ei], b[ei]], axis=1))
+        near[ei, si] = shapely.distance(edges, self.lines[si]) <= AGAINST_WALL_DISTANCE
+        rows = np.flatnonzero(near.any(axis=1))
         worst = 0.0
         for e in rows:  # the part of each edge along a wall that no parallel wall segment covers
             k = np.flatnonzero(near[e])
