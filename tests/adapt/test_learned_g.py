@@ -376,6 +376,17 @@ def test_collect_refuses_held_out_houses(tmp_path):
     assert isinstance(result.exception, ConfigError) and "not training data" in str(result.exception)
 
 
+def test_collect_command_takes_the_share_of_random_moves(tmp_path):
+    args = ["gdata", "collect", "--houses", "preset:tiny", "--limit", "1", "--tasks", "1", "--candidates", "4",
+            "--episodes", "0", "--policy", "expert", "-o", str(tmp_path / "route")]
+    result = runner.invoke(app, [*args, "--random-share", "0"])
+    assert result.exit_code == 0, result.output
+    assert json.loads((tmp_path / "route" / "meta.json").read_text())["collect"]["random_share"] == 0.0
+    assert {r["edit"]["generator"] for r in load_rows(tmp_path / "route")} == {"builtin"}
+    result = runner.invoke(app, [*args[:-1], str(tmp_path / "bad"), "--random-share", "1.5"])
+    assert result.exit_code == 2 and "--random-share" in result.output and not (tmp_path / "bad").exists()
+
+
 def test_chosen_drop_scores_the_edit_the_g_would_make():
     from adaptenv.adapt.gtrain import Arrays, chosen_drop
 
