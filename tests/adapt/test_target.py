@@ -28,13 +28,14 @@ def tiny():
 
 class ShyExpert(ExpertPolicy):
     """The expert, except that it gives up at once on episode k (k = seed % 1000) when k < the number of whole
-    ``per`` metres ``OBJECT`` stands from ``home``: its success falls as the object moves away."""
+    ``per`` metres ``OBJECT`` stands from ``home``: its success falls as the object moves away (with
+    ``measured_only``, on the measured draw alone: seeds below 1000)."""
 
     name = "shy-expert"
 
-    def __init__(self, home: tuple[float, float], per: float = 0.2):
+    def __init__(self, home: tuple[float, float], per: float = 0.2, measured_only: bool = False):
         super().__init__()
-        self.home, self.per = home, per
+        self.home, self.per, self.measured_only = home, per, measured_only
         self._quit = np.zeros(0, bool)
 
     def act(self, obs, state, done):
@@ -46,7 +47,8 @@ class ShyExpert(ExpertPolicy):
             world = ctx.worlds[int(ctx.env_idx[i])]
             x, z = next(t.center for t in world.instances if t.object_id == OBJECT)
             fails = math.floor(math.hypot(x - self.home[0], z - self.home[1]) / self.per + 1e-6)
-            self._quit[i] = int(ctx.seeds[i]) % 1000 < fails
+            seed = int(ctx.seeds[i])
+            self._quit[i] = seed % 1000 < fails and (seed < 1000 or not self.measured_only)
         actions = np.where(self._quit, END, actions)
         return actions, state
 
@@ -285,6 +287,26 @@ def test_several_draws_per_episode_measure_each_episode_with_its_own_seeds(tiny)
     assert two.draws == 2 and len(two.before.successes) == 20 and len(two.episodes) == 10
     assert two.success_trace == one.success_trace and two.to_dict()["draws"] == 2
     assert all(0 <= r.episode < 20 for r in two.rounds) and two.measure_steps > one.measure_steps
+
+
+def test_confirmed_edits_must_come_closer_on_other_draws_too(tiny):
+    from adaptenv.adapt.target import CONFIRM_SEED_STRIDE, FRESH_SEED_STRIDE
+
+    plain = run(tiny, 0.7, tolerance=0.1)
+    kw = dict(tolerance=0.1, episodes=10, max_edits=8, patience=3, seed=0, name="tiny")
+    same = adapt_to_success(tiny, ShyExpert(home_of(tiny)), Pusher(3.0), 0.7, confirm=True, **kw)
+    # where every draw agrees, confirming keeps the same edits, with more rollouts
+    assert same.success_trace == plain.success_trace and same.measure_steps > plain.measure_steps
+    assert same.to_dict()["confirm"] is True and plain.to_dict()["confirm"] is False
+    assert all("and on the confirming draws" in r.reason for r in same.rounds if r.kept)
+    # an edit whose gain shows on the measured draw alone is kept without confirming, dropped with it
+    noisy = adapt_to_success(tiny, ShyExpert(home_of(tiny), measured_only=True), Pusher(3.0), 0.7, **kw)
+    checked = adapt_to_success(tiny, ShyExpert(home_of(tiny), measured_only=True), Pusher(3.0), 0.7, confirm=True,
+                               **kw)
+    assert noisy.edits and noisy.success < 1.0
+    assert not checked.edits and checked.success == 1.0
+    assert any("not on the confirming draws" in r.reason for r in checked.rounds)
+    assert CONFIRM_SEED_STRIDE != FRESH_SEED_STRIDE and CONFIRM_SEED_STRIDE % 1000 == 0
 
 
 @pytest.mark.parametrize("draws", [0, 17, 1.5])

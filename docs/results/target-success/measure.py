@@ -5,7 +5,8 @@
 
 Options (before OUT.jsonl): ``--generators a,b`` (default ``builtin,random,failure-modes``; a name may end in
 ``+checksK``, the learned G with ``checks=K``, in ``+choicesK``, K edits proposed and measured per round, and in
-``+drawsD``, each measured episode run D times with its own sampling seeds),
+``+drawsD``, each measured episode run D times with its own sampling seeds, and in ``+confirm``, an edit that comes
+closer kept only when it also comes closer on confirming draws),
 ``--patience N`` (default 3), ``--first K`` (start at the K-th house), ``--rollout-episodes N`` (headings of G's
 own rollout check, default 3; rows then carry ``rollout_episodes``), ``--houses SET`` (default
 ``preset:validation``), ``--targets P,Q`` (default ``0.25,0.5,0.75``).
@@ -36,7 +37,7 @@ HOUSES = "preset:validation"
 
 
 def make(g: str):
-    """The generator ``g`` names, the choices per round and the draws per episode (``learned+checks8+choices4+draws3``:
+    """The generator ``g`` names, the choices per round, the draws per episode and whether edits are confirmed (``learned+checks8+choices4+draws3``:
     the learned G with ``checks=8``, 4 edits measured per round, each episode measured 3 times)."""
     from adaptenv.adapt.generators import make_generator
 
@@ -44,7 +45,8 @@ def make(g: str):
     checks = [int(m.removeprefix("checks")) for m in mods if m.startswith("checks")]
     choices = [int(m.removeprefix("choices")) for m in mods if m.startswith("choices")]
     draws = [int(m.removeprefix("draws")) for m in mods if m.startswith("draws")]
-    return make_generator(name, **({"checks": checks[0]} if checks else {})), (choices or [1])[0], (draws or [1])[0]
+    return (make_generator(name, **({"checks": checks[0]} if checks else {})), (choices or [1])[0], (draws or [1])[0],
+            "confirm" in mods)
 
 
 def run(out: Path, houses: int, steps: int) -> None:
@@ -64,10 +66,11 @@ def run(out: Path, houses: int, steps: int) -> None:
                 if (g, p, name) in done:
                     continue
                 t0 = time.perf_counter()
-                generator, choices, draws = make(g)
+                generator, choices, draws, confirm = make(g)
                 res = adapt_to_success(house, policy, generator, p, tolerance=TOLERANCE, episodes=EPISODES,
                                        max_edits=steps, patience=PATIENCE, seed=SEED, name=name,
-                                       rollout_episodes=ROLLOUT_EPISODES, choices=choices, draws=draws)
+                                       rollout_episodes=ROLLOUT_EPISODES, choices=choices, draws=draws,
+                                       confirm=confirm)
                 row = {"generator": g, "target": p, "house": name, "steps": steps, "patience": PATIENCE,
                        "rollout_episodes": ROLLOUT_EPISODES, "choices": choices, "houses": HOUSES, "seconds": time.perf_counter() - t0,
                        **{k: v for k, v in res.to_dict().items() if k not in ("trace", "generator")},

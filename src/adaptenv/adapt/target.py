@@ -17,7 +17,9 @@ edit, and a run that keeps only the edits that come closer selects on that noise
 measuring the original and the returned house again on ``fresh_draws`` fresh action draws per episode
 (the same starts and targets, new sampling seeds), which nothing was selected on. With ``draws=D``
 each measured episode is run D times with its own sampling seeds, and success is the mean over all
-N x D runs, which one edit's noise moves less::
+N x D runs, which one edit's noise moves less. With ``confirm=True`` an edit that comes closer is measured
+again on a second set of action draws (the same episodes, other sampling seeds) and kept only when it comes
+closer there too, so an edit whose gain was one draw's noise is dropped::
 
     result = adapt_to_success(house, policy, make_generator("builtin"), 0.5, episodes=20, max_edits=10)
     result.success_trace   # [1.0, 0.95, 0.85, ...]: success before and after each kept edit
@@ -66,9 +68,9 @@ SPL_TOL = 1e-3
 FRESH_DRAWS = 3
 #: Fresh action draws of the one episode an adaptation step works on (``adaptenv adapt``, ``adaptenv bench adapt``).
 EPISODE_FRESH_DRAWS = 8
-#: Seed offsets per measured and per fresh draw (multiples of 1000, so ``seed % 1000`` still names the episode;
-#: the two primes keep the measured and the fresh seeds apart).
-DRAW_SEED_STRIDE, FRESH_SEED_STRIDE = 1000 * 1009, 1000 * 7919
+#: Seed offsets per measured, per fresh and per confirming draw (multiples of 1000, so ``seed % 1000`` still names
+#: the episode; the three primes keep the measured, the fresh and the confirming seeds apart).
+DRAW_SEED_STRIDE, FRESH_SEED_STRIDE, CONFIRM_SEED_STRIDE = 1000 * 1009, 1000 * 7919, 1000 * 3011
 #: Most action draws per measured episode.
 MAX_DRAWS = 16
 
@@ -153,6 +155,8 @@ class TargetResult:
     """The original house on fresh action draws (:func:`fresh_measurement`; None when ``fresh_draws`` is 0)."""
     fresh_after: Measurement | None = None
     """The returned house on the same fresh draws."""
+    confirm: bool = False
+    """Whether each edit that came closer was kept only when it also came closer on the confirming draws."""
 
     @property
     def fresh_draws(self) -> int:
@@ -195,7 +199,8 @@ class TargetResult:
     def to_dict(self) -> dict[str, Any]:
         """Plain figures for JSON: target, reached success, gap, edits, rounds and the trace."""
         return {"target": self.target, "tolerance": self.tolerance, "generator": self.generator,
-                "episodes": len(self.episodes), "draws": self.draws, "success_before": self.before.success,
+                "episodes": len(self.episodes), "draws": self.draws, "confirm": self.confirm,
+                "success_before": self.before.success,
                 "spl_before": self.before.spl, "success": self.after.success, "spl": self.after.spl,
                 "gap": self.gap, "reached": self.reached, "edits": len(self.edits), "rounds": self.round_count,
                 "proposed": len(self.rounds),
@@ -295,7 +300,7 @@ def adapt_to_success(house: House, policy: Policy, generator: Generator, target:
                      patience: int = PATIENCE, analyzer: Analyzer | None = None, seed: int | Sequence[int] = 0,
                      target_type: str | None = None, name: str = "house",
                      rollout_episodes: int = 3, choices: int = 1, draws: int = 1,
-                     fresh_draws: int = FRESH_DRAWS) -> TargetResult:
+                     fresh_draws: int = FRESH_DRAWS, confirm: bool = False) -> TargetResult:
     """Edit ``house`` with ``generator`` until the policy's success on fixed episodes is within ``tolerance`` of
     ``target`` (see the module docstring).
 
@@ -318,6 +323,8 @@ def adapt_to_success(house: House, policy: Policy, generator: Generator, target:
             of them, which an edit's noise moves less (1 to ``MAX_DRAWS``).
         fresh_draws: fresh action draws per episode on which the original and the returned house are measured
             once the run ends (``fresh_before``, ``fresh_after``); 0 skips it.
+        confirm: measure an edit that comes closer again on ``draws`` confirming draws per episode (other sampling
+            seeds, apart from the fresh ones) and keep it only when it comes closer there too.
     """
     check_target(target, tolerance, what="target", tol_what="tolerance")
     if max_edits < 0 or patience < 1 or not isinstance(choices, (int, np.integer)) or choices < 1:
@@ -336,8 +343,10 @@ def adapt_to_success(house: House, policy: Policy, generator: Generator, target:
     first, trajs = measure(world, runs, policy)
     result = TargetResult(house, house, getattr(generator, "name", type(generator).__name__), float(target),
                           float(tolerance), eps, first, first, trajectories_before=trajs, trajectories_after=trajs,
-                          draws=int(draws))
+                          draws=int(draws), confirm=bool(confirm))
     result.measure_steps = first.steps
+    confirming = drawn(eps, int(draws), CONFIRM_SEED_STRIDE, first=1) if confirm else []
+    cur_c: Measurement | None = None
     current, cur, turn, misses, g_steps = house, first, 0, 0, 1
     while True:
         if abs(cur.success - target) <= tolerance + 1e-9:
@@ -370,14 +379,24 @@ def adapt_to_success(house: House, policy: Policy, generator: Generator, target:
             m, ctrajs = measure(cworld, runs, policy)
             result.measure_steps += m.steps
             keep, why = closer(target, cur, m)
+            mc = None
+            if keep and confirm:
+                if cur_c is None:
+                    cur_c = measure(world, confirming, policy)[0]
+                    result.measure_steps += cur_c.steps
+                mc = measure(cworld, confirming, policy)[0]
+                result.measure_steps += mc.steps
+                keep, also = closer(target, cur_c, mc)
+                why = f"{why}; {'and' if keep else 'not'} on the confirming draws ({also})"
             result.rounds.append(TargetRound(n, k, edit, False, why, m.success, m.spl))
             key = rank(target, cur, m)
             if keep and (best is None or key < best[0]):
-                best = (key, len(result.rounds) - 1, candidate, cworld, m, ctrajs)
+                best = (key, len(result.rounds) - 1, candidate, cworld, m, ctrajs, mc)
         if best is None:
             misses += 1
             continue
-        _, i, current, world, cur, trajs = best
+        _, i, current, world, cur, trajs, mc = best
+        cur_c = mc if confirm else cur_c
         result.rounds[i] = replace(result.rounds[i], kept=True)
         misses, turn = 0, 0
     result.house, result.after, result.trajectories_after = current, cur, trajs

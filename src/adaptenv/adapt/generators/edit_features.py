@@ -80,8 +80,8 @@ def enumerate_candidates(v: EditValidator, world: NavWorld, route: RouteSpec, rn
     if not 0.0 <= random_share <= 1.0:
         raise ConfigError(f"random_share {random_share}: must be from 0 to 1")
     routed = max(1, int(n * (1.0 - random_share))) if random_share < 1.0 else 0
-    out = (BuiltinGenerator(max_candidates=routed, fit_to_rules=fit)._candidates(v, world, route, set(scene.target_ids), rng, limit=routed)
-           if routed else [])
+    builtin = BuiltinGenerator(max_candidates=routed, fit_to_rules=fit)
+    out = builtin._candidates(v, world, route, set(scene.target_ids), rng, limit=routed) if routed else []
     ids = [oid for oid, m in zip(v.ctx.ids, v.ctx.movable, strict=True) if m and oid not in scene.target_ids]
     seen = {(c.object_id, c.dx_units, c.dy_units, c.rotation) for c in out}
     for _ in range(3 * n):
