@@ -395,8 +395,7 @@ def adapt_to_success(house: House, policy: Policy, generator: Generator, target:
         if best is None:
             misses += 1
             continue
-        _, i, current, world, cur, trajs, mc = best
-        cur_c = mc if confirm else cur_c
+        _, i, current, world, cur, trajs, cur_c = best
         result.rounds[i] = replace(result.rounds[i], kept=True)
         misses, turn = 0, 0
     result.house, result.after, result.trajectories_after = current, cur, trajs
