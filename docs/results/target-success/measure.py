@@ -5,8 +5,9 @@
 
 Options (before OUT.jsonl): ``--generators a,b`` (default ``builtin,random,failure-modes``; a name may end in
 ``+checksK``, the learned G with ``checks=K``, in ``+choicesK``, K edits proposed and measured per round, and in
-``+drawsD``, each measured episode run D times with its own sampling seeds, and in ``+confirm``, an edit that comes
-closer kept only when it also comes closer on confirming draws),
+``+drawsD``, each measured episode run D times with its own sampling seeds, in ``+confirm``, an edit that comes
+closer kept only when it also comes closer on confirming draws, and in ``+relocate`` and ``+doors``, the failure-mode
+G's ``relocate_targets`` and ``door_edits``),
 ``--patience N`` (default 3), ``--first K`` (start at the K-th house), ``--rollout-episodes N`` (headings of G's
 own rollout check, default 3; rows then carry ``rollout_episodes``), ``--houses SET`` (default
 ``preset:validation``), ``--targets P,Q`` (default ``0.25,0.5,0.75``).
@@ -45,8 +46,10 @@ def make(g: str):
     checks = [int(m.removeprefix("checks")) for m in mods if m.startswith("checks")]
     choices = [int(m.removeprefix("choices")) for m in mods if m.startswith("choices")]
     draws = [int(m.removeprefix("draws")) for m in mods if m.startswith("draws")]
-    return (make_generator(name, **({"checks": checks[0]} if checks else {})), (choices or [1])[0], (draws or [1])[0],
-            "confirm" in mods)
+    kw = {"checks": checks[0]} if checks else {}
+    kw |= {"relocate_targets": True} if "relocate" in mods else {}
+    kw |= {"door_edits": True} if "doors" in mods else {}
+    return make_generator(name, **kw), (choices or [1])[0], (draws or [1])[0], "confirm" in mods
 
 
 def run(out: Path, houses: int, steps: int) -> None:
