@@ -452,6 +452,8 @@ EXPORT_CASES = [Case(f"export dataset {did}", ("houses", "export", arg, "-o", "{
 CHOICES = [
     case("adapt analyzer unknown", "adapt " + H + " --analyzer oracle -o {out}/a", "--analyzer", "oracle"),
     case("adapt door-edits builtin", "adapt " + H + " --door-edits -o {out}/a", "--door-edits"),
+    case("adapt relocate-targets learned", "adapt " + H + " --generator learned --relocate-targets -o {out}/a",
+         "--relocate-targets"),
     case("adapt trajectory with a dataset", "adapt {in}/d.jsonl --trajectory {in}/t.json -o {out}/a", "d.jsonl",
          "pick one line"),
     case("adapt target not in trajectory", "adapt " + H + " --trajectory {in}/t.json --target Unicorn -o {out}/a",

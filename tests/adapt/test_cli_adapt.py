@@ -260,3 +260,26 @@ def test_adapt_with_door_edits_opens_a_shut_door(tmp_path):
     after = load_house(tmp_path / "out" / "house.json")
     assert set(closed_interior_doors(after)) == set(closed_interior_doors(shut)) - {e["object_id"] for e in doors}
     assert json.loads((tmp_path / "out" / "summary.json").read_text())["valid"]
+
+
+def test_adapt_relocate_targets_reaches_the_failure_mode_g(tmp_path, monkeypatch):
+    import adaptenv.adapt.generators.failure_modes as fm
+    from adaptenv.scene.house import save_house
+    from adaptenv.scene.procedural import GenerationConfig, generate_house
+
+    made = []
+    real = fm.FailureModeGenerator.__init__
+
+    def spy(self, **kw):
+        real(self, **kw)
+        made.append(self.relocate_targets)
+
+    monkeypatch.setattr(fm.FailureModeGenerator, "__init__", spy)
+    path = save_house(generate_house(0, GenerationConfig(n_rooms=4)), tmp_path / "h.json")
+    args = ["adapt", str(path), "--policy", "expert", "--steps", "1", "--seed", "1", "--relocate-targets"]
+    wrong = runner.invoke(app, [*args, "-o", str(tmp_path / "x")])
+    assert isinstance(wrong.exception, ConfigError) and "add --generator failure-modes" in str(wrong.exception)
+    assert not (tmp_path / "x").exists() and made == []
+    result = runner.invoke(app, [*args, "--generator", "failure-modes", "-o", str(tmp_path / "out")])
+    assert result.exit_code == 0, result.output
+    assert made == [True]

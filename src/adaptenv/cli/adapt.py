@@ -164,6 +164,9 @@ def adapt(
                                   "F's failure families), learned (offline, a trained scorer ranks edits), llm, or random."),
     door_edits: bool = typer.Option(False, "--door-edits", help="With --generator failure-modes or llm: G may also "
                                     "open or shut interior doors."),
+    relocate_targets: bool = typer.Option(False, "--relocate-targets", help="With --generator failure-modes: G may "
+                                          "also move a target inside its room or to a far room where its type "
+                                          "plausibly stands; otherwise no built-in edit moves a target."),
     learned_checks: int = typer.Option(0, "--learned-checks", min=0, max=64, help="With --generator learned: roll "
                                        "--policy out on this many of the best-scored edits each step and make the "
                                        "hardest for it (0: no rollout, the best-scored edit is made)."),
@@ -226,6 +229,9 @@ def adapt(
     if door_edits and generator not in ("failure-modes", "llm"):
         raise ConfigError(f"--door-edits: only the failure-modes and llm generators edit doors; add --generator "
                           f"failure-modes or drop --door-edits (got --generator {generator})")
+    if relocate_targets and generator != "failure-modes":
+        raise ConfigError(f"--relocate-targets: only the failure-modes generator relocates targets; add --generator "
+                          f"failure-modes or drop --relocate-targets (got --generator {generator})")
     if learned_checks and generator != "learned":
         raise ConfigError(f"--learned-checks: only the learned generator checks its edits this way; add --generator "
                           f"learned or drop --learned-checks (got --generator {generator})")
@@ -265,6 +271,7 @@ def adapt(
             console.print(f"LLM: {d['model']} at {d['base_url']} ({d['api']} API, prompts {d['prompts']})",
                           highlight=False)
     options = {"door_edits": True} if door_edits else {"checks": learned_checks} if learned_checks else {}
+    options |= {"relocate_targets": True} if relocate_targets else {}
     gen = (make_generator(generator, backend=backend, **options) if generator == "llm"
            else make_generator(generator, **options))
     if generator == "llm" and not as_json:
