@@ -2,6 +2,7 @@
 
     NUMBA_NUM_THREADS=1 nice -n 10 python docs/results/target-success/measure.py OUT.jsonl [HOUSES [STEPS]]
     python docs/results/target-success/measure.py OUT.jsonl table    # the table of the rows already there
+    python docs/results/target-success/measure.py summary A.jsonl B.jsonl ...   # every run judged on fresh draws, one line per file and G
 
 Options (before OUT.jsonl): ``--generators a,b`` (default ``builtin,random,failure-modes``; a name may end in
 ``+checksK``, the learned G with ``checks=K``, in ``+choicesK``, K edits proposed and measured per round, and in
@@ -123,7 +124,31 @@ def fresh(sel: list[dict], p: float) -> str:
             f"{np.mean([r['fresh_success'] for r in sel]):.3f}")
 
 
+def summary(files: list[Path]) -> None:
+    """One line per (rows file, G) with a fresh check: houses, runs within 0.10 of P on fresh draws per P, and the mean
+    fresh success before and reached (the rows' own settings: see each run's section of the README)."""
+    print("| rows | G | houses | budget, patience | within 0.10 on fresh draws (P = 0.25 / 0.5 / 0.75) | "
+          "mean fresh success before, reached | fresh drop (points) |")
+    print("|---|---|---|---|---|---|---|")
+    for f in files:
+        rs = [r for r in rows(f) if r.get("fresh_success") is not None]
+        for g in dict.fromkeys(r["generator"] for r in rs):
+            sel = [r for r in rs if r["generator"] == g]
+            names = sorted({r["house"] for r in sel})
+            per_p = " / ".join(
+                f"{sum(abs(r['fresh_success'] - p) <= 0.10 + 1e-9 for r in ps)}/{len(ps)}" if ps else "-"
+                for p in (0.25, 0.5, 0.75) for ps in [[r for r in sel if r["target"] == p]])
+            before, after = np.mean([r["fresh_success_before"] for r in sel]), np.mean([r["fresh_success"] for r in sel])
+            print(f"| {f.name} | {g} | {names[0]} to {names[-1]} ({len(names)}) | "
+                  f"{'/'.join(str(v) for v in sorted({r['steps'] for r in sel}))}, "
+                  f"{'/'.join(str(v) for v in sorted({r['patience'] for r in sel}))} | {per_p} | "
+                  f"{before:.3f}, {after:.3f} | {100 * (before - after):.1f} |")
+
+
 if __name__ == "__main__":
+    if sys.argv[1:2] == ["summary"]:
+        summary([Path(a) for a in sys.argv[2:]])
+        sys.exit(0)
     while sys.argv[1].startswith("--"):  # --generators a,b / --patience N / --first K
         flag, value = sys.argv.pop(1), sys.argv.pop(1)
         if flag == "--generators":
