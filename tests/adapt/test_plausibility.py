@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 from typer.testing import CliRunner
@@ -145,3 +147,28 @@ def test_adapt_verdict_line_says_what_decided():
         "(success rose)"
     assert _verdict_text("harder", {"success": True}, {"success": True}).endswith("(SPL at equal success fell)")
     assert _verdict_text("unchanged", {"success": True}, {"success": True}).startswith("unchanged")
+
+
+def test_open_floor_and_wall_distance_agree_with_plain_distances(real_house):
+    """The open-floor rule's cached wall distances and within-distance test give what plain distances give."""
+    import shapely
+
+    from adaptenv.adapt.plausibility import OPEN_FLOOR, PlausibilityReference, _on_open_floor
+    from adaptenv.scene.geometry import SceneGeometry
+
+    geometry = SceneGeometry.from_house(real_house)
+    ref = PlausibilityReference.of(real_house, geometry=geometry)
+    floor = geometry.floor_objects
+    rng = np.random.default_rng(0)
+    outcomes = set()
+    for _ in range(3):  # a second and third pass read the wall distances from the cache
+        for f in floor:
+            for dx, dz in rng.uniform(-1.5, 1.5, (8, 2)):
+                fp = replace(f, center=(f.center[0] + dx, f.center[1] + dz))
+                wall = float(shapely.distance(fp.polygon, ref.walls.union))
+                assert ref.walls.distance(fp) == wall
+                others = [o.polygon for o in floor if o.object_id != fp.object_id]
+                plain = wall > OPEN_FLOOR and float(np.min(shapely.distance(fp.polygon, others))) > OPEN_FLOOR
+                assert _on_open_floor(fp, ref.walls, floor) == plain
+                outcomes.add(plain)
+    assert outcomes == {True, False}, "both answers are exercised"

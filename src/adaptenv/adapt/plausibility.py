@@ -157,6 +157,9 @@ class _Walls:
     lo: np.ndarray
     hi: np.ndarray
     """(N, 2) corners of each segment's bounding box."""
+    _distances: dict[bytes, float] = field(default_factory=dict, compare=False, repr=False)
+    """:meth:`distance` per outline already measured (its vertices' bytes): the objects that did not move are
+    measured again on every check."""
 
     @classmethod
     def of(cls, geometry: SceneGeometry) -> _Walls:
@@ -176,7 +179,14 @@ class _Walls:
         return any(backs_onto(fp, self.p0[k], self.p1[k], min_cos) for k in near)
 
     def distance(self, fp: Footprint) -> float:
-        return float(shapely.distance(fp.polygon, self.union)) if len(self.lines) else math.inf
+        """The distance (m) from the footprint's outline to the nearest blocking segment (inf when there is none)."""
+        if not len(self.lines):
+            return math.inf
+        key = np.ascontiguousarray(fp.outline, dtype=np.float64).tobytes()
+        d = self._distances.get(key)
+        if d is None:
+            d = self._distances[key] = float(shapely.distance(fp.polygon, self.union))
+        return d
 
     def overhang(self, fp: Footprint) -> float:
         """How far (m) an edge of the footprint that runs along a wall runs past that wall's end (0 when none does).
@@ -280,7 +290,7 @@ def _on_open_floor(fp: Footprint, walls: _Walls, others: list[Footprint]) -> boo
     if walls.distance(fp) <= OPEN_FLOOR:
         return False
     polys = [o.polygon for o in others if o.object_id != fp.object_id]
-    return not polys or float(np.min(shapely.distance(fp.polygon, polys))) > OPEN_FLOOR
+    return not polys or not bool(shapely.dwithin(fp.polygon, polys, OPEN_FLOOR).any())
 
 
 def _faces(a: Footprint, b: Footprint) -> float:
