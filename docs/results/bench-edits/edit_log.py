@@ -6,6 +6,7 @@ versions of placement and validation:
 
 import json
 import sys
+from pathlib import Path
 
 import numpy as np
 
@@ -20,5 +21,5 @@ for seed in (0, 1, 2, 3):
     for oid, dx, dy, yaw in adapt_edits.proposals(ids, 2000, np.random.default_rng(seed)):
         v.try_edit(oid, dx, dy, yaw, source="random")
     out += [e.model_dump(mode="json") for e in v.log]
-json.dump(out, open(sys.argv[1], "w", encoding="utf-8"))
+Path(sys.argv[1]).write_text(json.dumps(out), encoding="utf-8")
 print(len(out), sum(e["accepted"] for e in out))
