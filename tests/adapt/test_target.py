@@ -219,8 +219,10 @@ def test_cli_reports_target_reached_success_gap_and_edits(tiny, tmp_path):
                                     "0.5", "--target-episodes", "4", "--steps", "1", "-o", str(out), "--force"])
     assert text.exit_code == 0, text.output
     assert f"target success 0.50 +/- 0.10: reached {doc['success']:.2f}" in text.output
-    assert f"on 3 fresh action draws per episode (not selected on): success {doc['fresh_success_before']:.2f}" \
-        in text.output
+    fresh_gap = abs(doc["fresh_success"] - 0.5)
+    assert (f"on 3 fresh action draws per episode (not selected on): success {doc['fresh_success_before']:.2f} -> "
+            f"{doc['fresh_success']:.2f}, gap {fresh_gap:.2f}: {'within' if fresh_gap <= 0.10 + 1e-9 else 'not within'} "
+            "the tolerance") in text.output
     bad = CliRunner().invoke(app, ["adapt", _tiny_file(tiny, tmp_path), "--target-success", "0.5",
                                    "--target-choices", "0", "-o", str(tmp_path / "none")])
     assert bad.exit_code == 2 and "--target-choices" in bad.output and not (tmp_path / "none").exists()
