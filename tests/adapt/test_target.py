@@ -220,6 +220,7 @@ def test_cli_reports_target_reached_success_gap_and_edits(tiny, tmp_path):
     assert text.exit_code == 0, text.output
     assert f"target success 0.50 +/- 0.10: reached {doc['success']:.2f}" in text.output
     fresh_gap = abs(doc["fresh_success"] - 0.5)
+    assert doc["fresh_gap"] == pytest.approx(fresh_gap) and doc["fresh_reached"] == (fresh_gap <= 0.10 + 1e-9)
     assert (f"on 3 fresh action draws per episode (not selected on): success {doc['fresh_success_before']:.2f} -> "
             f"{doc['fresh_success']:.2f}, gap {fresh_gap:.2f}: {'within' if fresh_gap <= 0.10 + 1e-9 else 'not within'} "
             "the tolerance") in text.output

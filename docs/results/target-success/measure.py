@@ -119,9 +119,13 @@ def fresh(sel: list[dict], p: float) -> str:
     for rows made before it existed."""
     if not all(r.get("fresh_success") is not None for r in sel):
         return "- | -"
-    within = sum(abs(r["fresh_success"] - p) <= 0.10 + 1e-9 for r in sel)
-    return (f"{within}/{len(sel)} | {np.mean([r['fresh_success_before'] for r in sel]):.3f}, "
+    return (f"{fresh_within(sel, p)}/{len(sel)} | {np.mean([r['fresh_success_before'] for r in sel]):.3f}, "
             f"{np.mean([r['fresh_success'] for r in sel]):.3f}")
+
+
+def fresh_within(sel: list[dict], p: float) -> int:
+    """How many of the runs ended within 0.10 of P on their fresh draws."""
+    return sum(abs(r["fresh_success"] - p) <= 0.10 + 1e-9 for r in sel)
 
 
 def summary(files: list[Path]) -> None:
@@ -136,7 +140,7 @@ def summary(files: list[Path]) -> None:
             sel = [r for r in rs if r["generator"] == g]
             names = sorted({r["house"] for r in sel})
             per_p = " / ".join(
-                f"{sum(abs(r['fresh_success'] - p) <= 0.10 + 1e-9 for r in ps)}/{len(ps)}" if ps else "-"
+                f"{fresh_within(ps, p)}/{len(ps)}" if ps else "-"
                 for p in (0.25, 0.5, 0.75) for ps in [[r for r in sel if r["target"] == p]])
             before, after = np.mean([r["fresh_success_before"] for r in sel]), np.mean([r["fresh_success"] for r in sel])
             print(f"| {f.name} | {g} | {names[0]} to {names[-1]} ({len(names)}) | "

@@ -182,6 +182,16 @@ class TargetResult:
         return self.gap <= self.tolerance + 1e-9
 
     @property
+    def fresh_gap(self) -> float | None:
+        """``|success - target|`` of the returned house on the fresh draws (None when none were made)."""
+        return abs(self.fresh_after.success - self.target) if self.fresh_after else None
+
+    @property
+    def fresh_reached(self) -> bool | None:
+        """Whether the returned house is within the tolerance of the target on the fresh draws (None without them)."""
+        return None if self.fresh_gap is None else self.fresh_gap <= self.tolerance + 1e-9
+
+    @property
     def success_trace(self) -> list[float]:
         """Measured success before the first edit and after each kept edit."""
         return [self.before.success] + [r.success for r in self.rounds if r.kept and r.success is not None]
@@ -208,6 +218,7 @@ class TargetResult:
                 "fresh_draws": self.fresh_draws,
                 "fresh_success_before": self.fresh_before.success if self.fresh_before else None,
                 "fresh_success": self.fresh_after.success if self.fresh_after else None,
+                "fresh_gap": self.fresh_gap, "fresh_reached": self.fresh_reached,
                 "trace": [r.to_dict() for r in self.rounds]}
 
     def generation_log(self) -> dict[str, Any]:
