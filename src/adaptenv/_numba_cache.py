@@ -26,7 +26,7 @@ import tempfile
 from pathlib import Path
 
 PACKAGE = Path(__file__).resolve().parent
-KERNEL_PACKAGES = ("sim", "agents")
+KERNEL_PACKAGES = ("sim", "agents", "adapt")
 """The sub-packages whose modules define cached kernels: numba caches each in its ``__pycache__``."""
 
 

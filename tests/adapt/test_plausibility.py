@@ -172,3 +172,68 @@ def test_open_floor_and_wall_distance_agree_with_plain_distances(real_house):
                 assert _on_open_floor(fp, ref.walls, floor) == plain
                 outcomes.add(plain)
     assert outcomes == {True, False}, "both answers are exercised"
+
+
+def _plain_overhang(walls, fp) -> float:
+    """The wall overhang from its definition, with shapely distances and plain loops (the kernel's reference)."""
+    import math
+
+    import shapely
+
+    from adaptenv.scene.graph import AGAINST_WALL_ANGLE, AGAINST_WALL_DISTANCE, MIN_WALL_OVERLAP
+
+    worst, a = 0.0, fp.outline
+    for e in range(len(a)):
+        p, q = a[e], a[(e + 1) % len(a)]
+        le = float(np.hypot(*(q - p)))
+        if le < 1e-6:
+            continue
+        u = (q - p) / le
+        edge = shapely.LineString([p, q])
+        spans = []
+        for k in range(len(walls.p0)):
+            w = walls.units[k]
+            if abs(w[0] * u[1] - w[1] * u[0]) > math.sin(math.radians(AGAINST_WALL_ANGLE)):
+                continue
+            if shapely.distance(edge, walls.lines[k]) > AGAINST_WALL_DISTANCE:
+                continue
+            t0, t1 = float((walls.p0[k] - p) @ u), float((walls.p1[k] - p) @ u)
+            spans.append((min(max(min(t0, t1), 0.0), le), min(max(max(t0, t1), 0.0), le)))
+        covered, end = 0.0, 0.0
+        for lo, hi in sorted(spans):
+            if hi > end:
+                covered, end = covered + hi - max(lo, end), hi
+        if spans and covered >= MIN_WALL_OVERLAP:
+            worst = max(worst, le - covered)
+    return worst
+
+
+def test_wall_overhang_kernel_matches_its_definition(real_house):
+    """The compiled overhang gives what shapely distances and plain loops give, for objects slid along, onto and off
+    their walls and turned (nonzero overhangs included)."""
+    from adaptenv.adapt.plausibility import PlausibilityReference
+    from adaptenv.scene.geometry import SceneGeometry
+
+    geometry = SceneGeometry.from_house(real_house)
+    walls = PlausibilityReference.of(real_house, geometry=geometry).walls
+    rng = np.random.default_rng(1)
+    values = []
+    for f in geometry.floor_objects:
+        for dx, dz, turn in zip(*rng.uniform(-1.0, 1.0, (2, 12)), rng.choice([0.0, 0.0, 90.0, 7.0], 12), strict=True):
+            fp = replace(f, center=(f.center[0] + dx, f.center[1] + dz), yaw=(f.yaw + turn) % 360.0)
+            values.append((walls.overhang(fp), _plain_overhang(walls, fp)))
+    got, want = np.array(values).T
+    np.testing.assert_allclose(got, want, rtol=0, atol=1e-9)
+    assert (want > 0.1).sum() >= 10 and (want == 0).sum() >= 10, "both outcomes are exercised"
+
+
+def test_wall_overhang_leaves_distances_at_the_limit_to_geos():
+    """An edge exactly AGAINST_WALL_DISTANCE from a wall is marked a tie for shapely to decide, not rounded."""
+    from adaptenv.adapt.plausibility import _TIE, _edges_along
+    from adaptenv.scene.graph import AGAINST_WALL_DISTANCE
+
+    square = np.array([[0.0, 0.25], [1.0, 0.25], [1.0, 1.0], [0.0, 1.0]])
+    p0, p1 = np.array([[-1.0, 0.25 - AGAINST_WALL_DISTANCE], [-1.0, 0.5]]), np.array([[2.0, 0.25 - AGAINST_WALL_DISTANCE], [-1.0, 3.0]])
+    units = (p1 - p0) / np.linalg.norm(p1 - p0, axis=1)[:, None]
+    near = _edges_along(square, units, np.minimum(p0, p1), np.maximum(p0, p1), p0, p1, 0.5, AGAINST_WALL_DISTANCE)
+    assert near[0, 0] == _TIE and near[0, 1] == 0 and near[1, 0] == 0  # the bottom edge; the wall x = -1 is too far

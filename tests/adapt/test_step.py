@@ -149,3 +149,28 @@ def test_loop_generate_job_and_adapt_cli_make_the_same_house_and_log(house, tmp_
     verified = [s["verified"] for s in cli_edits["steps"] if s["status"] == "applied"]
     assert verified and [s["verified"] for s in made.edit_log["steps"] if s["status"] == "applied"] == verified
     assert made.edits == sum(1 for s in cli_edits["steps"] if s["status"] == "applied")
+
+
+@pytest.mark.parametrize("generator", ["builtin", "learned"])
+def test_the_world_generation_hands_back_is_the_edited_house_compiled(house, generator):
+    """The step reuses the world G compiled for its last edit: the same arrays as compiling the edited house, the
+    step's name, and the same validation as without any world handed in."""
+    from adaptenv.adapt.validation import validate_scene, world_fits
+    from adaptenv.scene.geometry import SceneGeometry
+
+    world = compile_world(house, "h")
+    ep = draw_episode(world, np.random.default_rng([1, 1]))
+    gen = make_generator(generator, **({"max_candidates": 10} if generator == "builtin" else {}))
+    res = adapt_scene(house, ep, policy=ExpertPolicy(), analyzer=BuiltinAnalyzer(), generator=gen, steps=2,
+                      rng=np.random.default_rng(1), name="h")
+    assert res.edits_applied >= 1 and res.generation.world is not None
+    fresh = compile_world(res.house, "h")
+    assert res.world.name == "h" and world_fits(res.world, SceneGeometry.from_house(res.house))
+    for a, b in ((res.world.grid.clearance, fresh.grid.clearance), (res.world.grid.label, fresh.grid.label),
+                 (res.world.occluder, fresh.occluder), (res.world.semantic, fresh.semantic)):
+        assert np.array_equal(a, b)
+    assert not world_fits(world, SceneGeometry.from_house(res.house)), "the original's world fits the original only"
+    plain = validate_scene(res.house, episode_targets=[ep.target_type], start=ep.start[:2], original=house)
+    handed = validate_scene(res.house, episode_targets=[ep.target_type], start=ep.start[:2], original=house,
+                            world=world, original_world=res.world)  # both the wrong way round: neither is used
+    assert [str(p) for p in handed] == [str(p) for p in plain] == res.problems

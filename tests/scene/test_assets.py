@@ -92,3 +92,16 @@ def test_footprint_is_a_rectangle_of_the_right_size(cx, cz, sx, sz, yaw):
     assert math.dist(c[0], c[1]) == pytest.approx(sx, abs=1e-9)
     assert math.dist(c[1], c[2]) == pytest.approx(sz, abs=1e-9)
     np.testing.assert_allclose(c.mean(axis=0), (cx, cz), atol=1e-9)
+
+
+def test_footprint_corners_are_the_centre_plus_the_turned_half_extents():
+    """Bit for bit the corners c -/+ (sx / 2) x_axis -/+ (sz / 2) z_axis of the yaw's axes (any yaw, any size)."""
+    from adaptenv.scene.geometry import yaw_axes
+
+    rng = np.random.default_rng(0)
+    for cx, cz, sx, sz, yaw in zip(*rng.uniform(-20, 20, (2, 500)), *rng.uniform(0.05, 4.0, (2, 500)),
+                                   np.r_[rng.uniform(0, 360, 496), 0.0, 90.0, 180.0, 270.0], strict=True):
+        ux, uz = yaw_axes(yaw)
+        c, hx, hz = np.array([cx, cz]), sx / 2.0, sz / 2.0
+        plain = np.stack([c - hx * ux - hz * uz, c + hx * ux - hz * uz, c + hx * ux + hz * uz, c - hx * ux + hz * uz])
+        assert np.array_equal(footprint_corners(float(cx), float(cz), float(sx), float(sz), float(yaw)), plain)

@@ -150,3 +150,34 @@ def test_corridors_the_disc_fits_stay_passable_and_the_expert_gets_through(gap):
     ep = Episode("GarbageCan", (width / 2 - 1.5, 1.0, 0.0))
     assert is_solvable(w, ep)
     assert run_episode(w, ep, expert_policy(), max_steps=600).metrics.success
+
+
+def test_reuse_region_keeps_only_what_a_move_cannot_change(real_house):
+    """A move far from every target keeps the base world's success region (exactly what computing it gives); a move
+    near one, or of a target itself, is refused and the region is computed."""
+    from dataclasses import replace
+
+    from adaptenv.scene.geometry import SceneGeometry
+    from adaptenv.sim.geodesic import reuse_region
+
+    base = compile_world(real_house)
+    geometry = SceneGeometry.from_house(real_house)
+    target = "Bed"
+    success_region(base, target)
+    beds = [t.center for t in base.instances_of(target)]
+    kept, refused = 0, 0
+    for f in geometry.floor_objects:
+        for dx, dz in ((0.4, 0.0), (0.0, -0.4), (-0.3, 0.3)):
+            moved = replace(geometry, footprints=[replace(g, center=(g.center[0] + dx, g.center[1] + dz))
+                                                  if g is f else g for g in geometry.footprints])
+            world = compile_world(real_house, geometry=moved)
+            if reuse_region(world, base, target):
+                kept += 1
+                fresh = compile_world(real_house, geometry=moved)
+                assert np.array_equal(world.cache[("region", target)], success_region(fresh, target))
+            else:
+                refused += 1
+                assert ("region", target) not in world.cache
+                near = min(np.hypot(f.center[0] - x, f.center[1] - z) for x, z in beds)
+                assert f.object_type == target or near < 6.0, "refused only near a target"
+    assert kept >= 10 and refused >= 5, "both outcomes are exercised"

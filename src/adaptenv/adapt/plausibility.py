@@ -54,6 +54,7 @@ from dataclasses import dataclass, field
 from functools import cache
 from importlib import resources
 
+import numba
 import numpy as np
 import shapely
 
@@ -197,41 +198,106 @@ class _Walls:
         """
         if not len(self.lines):
             return 0.0
-        a = fp.outline
-        b = np.roll(a, -1, axis=0)
-        le = np.array([float(np.linalg.norm(e)) for e in b - a])  # per edge, as a scalar norm rounds
-        ok = le >= 1e-6
-        a, b, le = a[ok], b[ok], le[ok]
-        ue = ((b - a) / le[:, None]).reshape(-1, 2)
-        us = self.units
-        max_sin = math.sin(math.radians(AGAINST_WALL_ANGLE))
-        near = np.abs(us[None, :, 0] * ue[:, None, 1] - us[None, :, 1] * ue[:, None, 0]) <= max_sin
-        # a segment whose bounding box is farther than the distance from the edge's cannot lie within it
-        elo, ehi = np.minimum(a, b)[:, None, :], np.maximum(a, b)[:, None, :]
-        gap = np.maximum(np.maximum(self.lo[None] - ehi, elo - self.hi[None]), 0.0)
-        near &= np.hypot(gap[..., 0], gap[..., 1]) <= AGAINST_WALL_DISTANCE + 1e-9
-        ei, si = np.nonzero(near)
-        if not len(ei):
-            return 0.0
-        edges = shapely.linestrings(np.stack([a[ei], b[ei]], axis=1))
-        near[ei, si] = shapely.distance(edges, self.lines[si]) <= AGAINST_WALL_DISTANCE
-        rows = np.flatnonzero(near.any(axis=1))
-        worst = 0.0
-        for e in rows:  # the part of each edge along a wall that no parallel wall segment covers
-            k = np.flatnonzero(near[e])
-            if not len(k):
+        a = np.ascontiguousarray(fp.outline, dtype=np.float64)
+        near = _edges_along(a, self.units, self.lo, self.hi, self.p0, self.p1,
+                            math.sin(math.radians(AGAINST_WALL_ANGLE)), AGAINST_WALL_DISTANCE)
+        if (tie := np.argwhere(near == _TIE)).size:  # GEOS decides distances this close to the limit
+            e, k = tie.T
+            edges = shapely.linestrings(np.stack([a[e], np.roll(a, -1, axis=0)[e]], axis=1))
+            near[e, k] = shapely.distance(edges, self.lines[k]) <= AGAINST_WALL_DISTANCE
+        return float(_uncovered(a, near == 1, self.p0, self.p1, MIN_WALL_OVERLAP))
+
+
+_TIE = 2
+""":func:`_edges_along`'s mark of a segment whose distance to the edge is within 1e-9 m of the limit."""
+
+
+@numba.njit(cache=True)
+def _segment_distance(ax, az, bx, bz, cx, cz, dx, dz):
+    """Distance (m) between segments ab and cd: 0 when they cross, else the least of the four end-to-segment ones."""
+    o1 = (bx - ax) * (cz - az) - (bz - az) * (cx - ax)
+    o2 = (bx - ax) * (dz - az) - (bz - az) * (dx - ax)
+    o3 = (dx - cx) * (az - cz) - (dz - cz) * (ax - cx)
+    o4 = (dx - cx) * (bz - cz) - (dz - cz) * (bx - cx)
+    if o1 * o2 < 0.0 and o3 * o4 < 0.0:
+        return 0.0
+    return min(min(_point_segment(ax, az, cx, cz, dx, dz), _point_segment(bx, bz, cx, cz, dx, dz)),
+               min(_point_segment(cx, cz, ax, az, bx, bz), _point_segment(dx, dz, ax, az, bx, bz)))
+
+
+@numba.njit(cache=True)
+def _point_segment(px, pz, ax, az, bx, bz):
+    """Distance (m) from point p to segment ab."""
+    ux, uz = bx - ax, bz - az
+    len2 = ux * ux + uz * uz
+    t = 0.0 if len2 == 0.0 else min(1.0, max(0.0, ((px - ax) * ux + (pz - az) * uz) / len2))
+    return math.hypot(px - (ax + t * ux), pz - (az + t * uz))
+
+
+@numba.njit(cache=True)
+def _edges_along(a, units, lo, hi, p0, p1, max_sin, reach):
+    """int8 (edges, segments): 1 where a blocking segment runs along an outline edge (parallel within ``max_sin``
+    and within ``reach`` m), 0 where it does not, _TIE where its distance is within 1e-9 m of ``reach``.
+
+    Edge e runs from vertex e to the next; an edge shorter than 1e-6 m runs along nothing.
+    """
+    n, m = a.shape[0], p0.shape[0]
+    out = np.zeros((n, m), dtype=np.int8)
+    for e in range(n):
+        ax, az = a[e, 0], a[e, 1]
+        bx, bz = a[(e + 1) % n, 0], a[(e + 1) % n, 1]
+        le = math.sqrt((bx - ax) * (bx - ax) + (bz - az) * (bz - az))
+        if le < 1e-6:
+            continue
+        ux, uz = (bx - ax) / le, (bz - az) / le
+        for k in range(m):
+            if abs(units[k, 0] * uz - units[k, 1] * ux) > max_sin:
                 continue
-            t0, t1 = (self.p0[k] - a[e]) @ ue[e], (self.p1[k] - a[e]) @ ue[e]
-            spans = sorted(zip(np.clip(np.minimum(t0, t1), 0.0, le[e]), np.clip(np.maximum(t0, t1), 0.0, le[e]),
-                               strict=True))
-            covered, end = 0.0, 0.0
-            for lo, hi in spans:
-                if hi > end:
-                    covered += hi - max(lo, end)
-                    end = hi
-            if covered >= MIN_WALL_OVERLAP:
-                worst = max(worst, float(le[e]) - covered)
-        return worst
+            gx = max(max(lo[k, 0] - max(ax, bx), min(ax, bx) - hi[k, 0]), 0.0)
+            gz = max(max(lo[k, 1] - max(az, bz), min(az, bz) - hi[k, 1]), 0.0)
+            if math.hypot(gx, gz) > reach + 1e-9:  # its bounding box is already farther
+                continue
+            d = _segment_distance(ax, az, bx, bz, p0[k, 0], p0[k, 1], p1[k, 0], p1[k, 1])
+            out[e, k] = _TIE if abs(d - reach) <= 1e-9 else (1 if d <= reach else 0)
+    return out
+
+
+@numba.njit(cache=True)
+def _uncovered(a, near, p0, p1, min_overlap):
+    """The longest part (m) of an outline edge that the segments ``near`` it (bool (edges, segments)) leave
+    uncovered, projected onto the edge, over the edges they cover at least ``min_overlap`` of (0 when none does)."""
+    n, m = near.shape
+    worst = 0.0
+    spans = np.empty((m, 2))
+    for e in range(n):
+        ax, az = a[e, 0], a[e, 1]
+        bx, bz = a[(e + 1) % n, 0], a[(e + 1) % n, 1]
+        le = math.sqrt((bx - ax) * (bx - ax) + (bz - az) * (bz - az))
+        count = 0
+        for k in range(m):
+            if not near[e, k]:
+                continue
+            ux, uz = (bx - ax) / le, (bz - az) / le  # le >= 1e-6 where a segment is near
+            t0 = (p0[k, 0] - ax) * ux + (p0[k, 1] - az) * uz
+            t1 = (p1[k, 0] - ax) * ux + (p1[k, 1] - az) * uz
+            s0, s1 = min(max(min(t0, t1), 0.0), le), min(max(max(t0, t1), 0.0), le)
+            j = count  # insertion sort by start, then end
+            while j > 0 and (spans[j - 1, 0] > s0 or (spans[j - 1, 0] == s0 and spans[j - 1, 1] > s1)):
+                spans[j] = spans[j - 1]
+                j -= 1
+            spans[j, 0], spans[j, 1] = s0, s1
+            count += 1
+        if count == 0:
+            continue
+        covered, end = 0.0, 0.0
+        for j in range(count):
+            s0, s1 = spans[j, 0], spans[j, 1]
+            if s1 > end:
+                covered += s1 - max(s0, end)
+                end = s1
+        if covered >= min_overlap:
+            worst = max(worst, le - covered)
+    return worst
 
 
 @dataclass(frozen=True)
@@ -371,6 +437,8 @@ class PlausibilityReference:
         if before is None:
             return True
         (x, z), yaw = before
+        if fp.yaw == yaw and fp.center == (x, z):  # most objects never moved
+            return False
         dyaw = abs((fp.yaw - yaw + 180.0) % 360.0 - 180.0)
         return math.hypot(fp.center[0] - x, fp.center[1] - z) > 1e-6 or dyaw > 1e-6
 

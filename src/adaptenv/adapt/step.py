@@ -18,7 +18,7 @@ from __future__ import annotations
 
 import json
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -37,11 +37,12 @@ from adaptenv.adapt.llm.accounting import scene_usage
 from adaptenv.adapt.llm.usage import Prices
 from adaptenv.adapt.objectives import RouteSpec, measure, realism_score
 from adaptenv.adapt.plausibility import audit
-from adaptenv.adapt.validation import validate_scene
+from adaptenv.adapt.validation import validate_scene, world_fits
 from adaptenv.agents.policy import ExpertPolicy, Policy, as_policy
 from adaptenv.agents.rollout import rollout
 from adaptenv.render.compare import render_before_after
 from adaptenv.render.topdown import save_render
+from adaptenv.scene.geometry import SceneGeometry
 from adaptenv.scene.house import House, save_house
 from adaptenv.scene.validate import validate_house
 from adaptenv.sim.geodesic import is_solvable
@@ -122,13 +123,15 @@ def adapt_scene(house: House, episode: Episode, *, policy: Policy, analyzer: Ana
         analysis = analyzer.analyze(before, world)
     context = GenerationContext(episode=episode, trajectory=before, policy=policy,
                                 rollout_episodes=rollout_episodes, render=render, out_dir=render_dir,
-                                diagnosis=diagnosed.diagnosis if diagnosed else None)
+                                diagnosis=diagnosed.diagnosis if diagnosed else None, world=world)
     generation = generator.generate(house, analysis, steps=steps, context=context, rng=rng)
     new = generation.house
+    new_world = generation.world  # trusted only when it is the world of the house generation returned
+    new_world = (replace(new_world, name=name) if world_fits(new_world, SceneGeometry.from_house(new))
+                 and new_world.start == new.agent_pose() else compile_world(new, name))
     problems = [str(p) for p in validate_scene(new, episode_targets=[episode.target_type], start=episode.start[:2],
-                                               original=house)]
+                                               original=house, world=new_world, original_world=world)]
     problems += [p.message for p in validate_house(new)]
-    new_world = compile_world(new, name)
     if diagnosed is None:
         after = rollout(new_world, episode, policy)
         return AdaptResult(new, house, episode, analysis, generation, before, after, problems,

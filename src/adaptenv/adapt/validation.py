@@ -367,10 +367,22 @@ def _world_reaches(world: NavWorld, target_type: str, start: tuple[float, float]
 
 
 def _geodesic_targets(house: House, geometry: SceneGeometry, start: tuple[float, float],
-                      types: list[str]) -> set[str]:
-    """Target types whose success region is reachable from the start (finite geodesic distance)."""
-    world = compile_world(house, geometry=geometry)
+                      types: list[str], world: NavWorld | None = None) -> set[str]:
+    """Target types whose success region is reachable from the start (finite geodesic distance); ``world``: the
+    house's compiled world, used when it fits ``geometry`` (:func:`world_fits`)."""
+    world = world if world_fits(world, geometry) else compile_world(house, geometry=geometry)
     return {t for t in types if _world_reaches(world, t, start)}
+
+
+def world_fits(world: NavWorld | None, geometry: SceneGeometry) -> bool:
+    """Whether ``world`` is a compiled world of ``geometry`` at the default resolution: the same footprints, walls,
+    doors and windows (a world handed in to save compiling the house again, checked before it is trusted)."""
+    if world is None or world.grid.resolution != DEFAULT_RESOLUTION:
+        return False
+    g = world.geometry
+    return g is geometry or (g.footprints == geometry.footprints and g.walls == geometry.walls
+                             and g.doors == geometry.doors and g.windows == geometry.windows
+                             and g.rooms == geometry.rooms)
 
 
 def _default_targets(geometry: SceneGeometry) -> list[str]:
@@ -379,15 +391,17 @@ def _default_targets(geometry: SceneGeometry) -> list[str]:
 
 
 def scene_reachability(house: House, *, start: Start | None = None, targets: list[str] | None = None,
-                       geometry: SceneGeometry | None = None) -> Reachability:
-    """Rooms, doorways and target types reachable from the start of a house (the validation baseline)."""
+                       geometry: SceneGeometry | None = None, world: NavWorld | None = None) -> Reachability:
+    """Rooms, doorways and target types reachable from the start of a house (the validation baseline);
+    ``world``: the house's compiled world, used instead of rasterizing it again when it fits."""
     geometry = geometry or SceneGeometry.from_house(house)
-    occ = rasterize(geometry)
+    occ = world.grid if world_fits(world, geometry) else rasterize(geometry)
     s = _start_of(house, start)
     reach, _ = _reachable(occ.navigable(AGENT_RADIUS), None if s is None else _cell(occ, s), occ.room,
                           occ.room_ids, door_threshold_cells(geometry, occ))
     if reach.start_free and s is not None:
-        reach.targets = _geodesic_targets(house, geometry, s, _default_targets(geometry) if targets is None else targets)
+        reach.targets = _geodesic_targets(house, geometry, s, _default_targets(geometry) if targets is None else targets,
+                                          world)
     return reach
 
 
@@ -462,7 +476,8 @@ def _approach_problems(geometry: SceneGeometry, orig_geometry: SceneGeometry) ->
 
 
 def validate_scene(house: House, *, episode_targets: list[str] | None = None, start: Start | None = None,
-                   original: House | None = None, catalog: AssetCatalog | None = None) -> list[ValidationProblem]:
+                   original: House | None = None, catalog: AssetCatalog | None = None, world: NavWorld | None = None,
+                   original_world: NavWorld | None = None) -> list[ValidationProblem]:
     """Every physical-plausibility and task-feasibility problem of a (possibly edited) house.
 
     Args:
@@ -471,6 +486,8 @@ def validate_scene(house: House, *, episode_targets: list[str] | None = None, st
             reachable in ``original`` (or present, without ``original``).
         start: the agent's start (x, z[, yaw]); default: the house's metadata pose.
         original: the scene before editing; only problems new relative to it count.
+        world, original_world: the compiled worlds of ``house`` and ``original`` when the caller has them
+            (each is used only when it fits its house, :func:`world_fits`; the answer is the same).
 
     Returns:
         The problems, empty when the scene is valid.
@@ -507,7 +524,7 @@ def validate_scene(house: House, *, episode_targets: list[str] | None = None, st
         problems.append(ValidationProblem("no_start", "the house has no start pose; set one with "
                                           "House.set_agent_pose or pass start="))
         return problems
-    occ = rasterize(geometry)
+    occ = world.grid if world_fits(world, geometry) else rasterize(geometry)
     doors = door_threshold_cells(geometry, occ)
     now, _ = _reachable(occ.navigable(AGENT_RADIUS), _cell(occ, s), occ.room, occ.room_ids, doors)
     if not now.start_free:
@@ -518,7 +535,7 @@ def validate_scene(house: House, *, episode_targets: list[str] | None = None, st
         # Doors opened or shut on purpose are part of the baseline; what the original reached must stay reached.
         base = _doors_as_in(original, house)
         before = scene_reachability(original, start=start or _start_of(original, None), targets=episode_targets,
-                                    geometry=orig_geometry)
+                                    geometry=orig_geometry, world=original_world)
         need = before if base is original else scene_reachability(base, start=start or _start_of(original, None),
                                                                   targets=[])
         need_targets = before.targets if episode_targets is None else set(episode_targets) & before.targets
@@ -532,7 +549,7 @@ def validate_scene(house: House, *, episode_targets: list[str] | None = None, st
     for d in sorted(need.doors - now.doors):
         problems.append(ValidationProblem("doorway_blocked", f"the doorway {d} is no longer passable from the "
                                           "start; move the furniture out of it", (d,)))
-    reached = _geodesic_targets(house, geometry, s, sorted(need_targets))
+    reached = _geodesic_targets(house, geometry, s, sorted(need_targets), world)
     for t in sorted(need_targets - reached):
         problems.append(ValidationProblem("target_unreachable", f"no {t} can be reached and seen from the start; "
                                           "clear a path to one", (t,)))
@@ -597,10 +614,12 @@ class EditValidator:
 
     def __init__(self, house: House, *, episode_targets: list[str] | None = None, start: Start | None = None,
                  original: House | None = None, step: float = DEFAULT_STEP, catalog: AssetCatalog | None = None,
-                 copy: bool = True, plausibility: bool = True, move_targets: bool = False):
+                 copy: bool = True, plausibility: bool = True, move_targets: bool = False,
+                 world: NavWorld | None = None):
         """``plausibility``: check the moved object against :mod:`adaptenv.adapt.plausibility` (off only for the
         random baselines); ``move_targets``: let objects of ``episode_targets``' types move (edits that relocate
-        the target opt in)."""
+        the target opt in); ``world``: the compiled world of ``house``, used instead of compiling it again when it
+        fits (:func:`world_fits`)."""
         self._settings = dict(episode_targets=episode_targets, step=step, catalog=catalog, plausibility=plausibility,
                               move_targets=move_targets)
         self.catalog = catalog or load_catalog()
@@ -609,7 +628,8 @@ class EditValidator:
         self.geometry = SceneGeometry.from_house(self.house, self.catalog)
         self.ctx = PlacementContext.from_house(self.house, original=original, catalog=self.catalog,
                                                geometry=self.geometry)
-        self.raster = NavRaster(self.geometry)
+        world = world if world_fits(world, self.geometry) else None
+        self.raster = NavRaster(self.geometry, occupancy=world.grid if world is not None else None)
         occ = self.raster.occupancy
         self.labels = LabelRaster(occ, self.geometry.floor_objects)
         self._slot = {f.object_id: k for k, f in enumerate(self.geometry.footprints)}
@@ -620,7 +640,8 @@ class EditValidator:
         self.start = _start_of(self.house, start) if original is None else _start_of(original, start)
         self.start_cell = None if self.start is None else _cell(occ, self.start)
         base_house, base_geometry = (original, None) if original is not None else (self.house, self.geometry)
-        need = scene_reachability(base_house, start=self.start, targets=episode_targets, geometry=base_geometry)
+        need = scene_reachability(base_house, start=self.start, targets=episode_targets, geometry=base_geometry,
+                                  world=world if original is None else None)
         if original is not None and (doored := _doors_as_in(original, self.house)) is not original:
             # doors opened or shut since the original: rooms and doorways are judged with them as they are now
             now = scene_reachability(doored, start=self.start, targets=[])
@@ -642,7 +663,7 @@ class EditValidator:
             self.of_type.setdefault(ty, []).append(k)
         self.regions: dict[str, np.ndarray | None] = {}
         if self.start_cell is not None:
-            self._refresh_regions(compile_world(self.house, geometry=self.geometry))
+            self._refresh_regions(world or compile_world(self.house, geometry=self.geometry))
         self.objects = {obj.id: obj for obj in self.house.objects}
         self.log = EditLog()
         self._witness: dict[str, int] = {}

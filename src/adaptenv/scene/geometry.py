@@ -50,10 +50,12 @@ def footprint_corners(cx: float, cz: float, size_x: float, size_z: float, yaw_de
     Order: local (-x,-z), (+x,-z), (+x,+z), (-x,+z), i.e. back-left, back-right, front-right,
     front-left seen from behind the object.
     """
-    ux, uz = yaw_axes(yaw_deg)
+    t = math.radians(yaw_deg)
+    c, s = math.cos(t), math.sin(t)
     hx, hz = size_x / 2.0, size_z / 2.0
-    c = np.array([cx, cz])
-    return np.stack([c - hx * ux - hz * uz, c + hx * ux - hz * uz, c + hx * ux + hz * uz, c - hx * ux + hz * uz])
+    ax, az, bx, bz = hx * c, hx * -s, hz * s, hz * c  # half extents along the local x and z axes (yaw_axes)
+    return np.array([[cx - ax - bx, cz - az - bz], [cx + ax - bx, cz + az - bz], [cx + ax + bx, cz + az + bz],
+                     [cx - ax + bx, cz - az + bz]], dtype=float)
 
 
 def pose_outline(local: np.ndarray, cx: float, cz: float, yaw_deg: float) -> np.ndarray:

@@ -210,6 +210,50 @@ def success_region(world: NavWorld, target_type: str) -> np.ndarray:
     return world.cache[key]
 
 
+def reuse_region(world: NavWorld, base: NavWorld, target_type: str) -> bool:
+    """Give ``world`` (a few objects moved from ``base``) the success region of ``target_type`` that ``base`` has
+    cached, when it is provably the same; True when it did.
+
+    It is the same when both have the same grid and target instances, the same occluder and label cells within
+    reach of every sample point (all that :func:`_scan_region` reads) and the same navigable cells two cells further
+    (all that the 3 x 3 opening of :func:`enterable` reads there). Nothing is computed in ``base``.
+    """
+    key = ("region", target_type)
+    if key in world.cache or ("distance", target_type) in world.cache:
+        return False
+    if key not in base.cache and ("distance", target_type) not in base.cache:
+        return False
+    g, b = world.grid, base.grid
+    if (g.shape != b.shape or (g.x0, g.z0, g.resolution) != (b.x0, b.z0, b.resolution)
+            or not _same_instances(world.instances_of(target_type), base.instances_of(target_type))):
+        return False
+    tp = target_points(base, target_type)
+    if len(tp.points):
+        cells = np.unique(np.stack(g.to_cell(tp.points[:, 0], tp.points[:, 1]), axis=1), axis=0)
+        reach = int(math.ceil(SUCCESS_DISTANCE / g.resolution)) + 1
+        if (_near_cells((world.occluder != base.occluder) | (g.label != b.label), cells, reach)
+                or _near_cells((g.clearance >= AGENT_RADIUS) != (b.clearance >= AGENT_RADIUS), cells, reach + 2)):
+            return False
+    world.cache[key] = success_region(base, target_type).copy()
+    return True
+
+
+def _near_cells(mask: np.ndarray, cells: np.ndarray, reach: int) -> bool:
+    """Whether a True cell of ``mask`` lies within ``reach`` rows and columns of one of ``cells`` ((N, 2) rows, cols)."""
+    rows, cols = np.nonzero(mask)
+    lo, hi = cells.min(axis=0) - reach, cells.max(axis=0) + reach
+    box = (rows >= lo[0]) & (rows <= hi[0]) & (cols >= lo[1]) & (cols <= hi[1])
+    rows, cols = rows[box], cols[box]
+    return bool(len(rows)) and bool(((np.abs(rows[:, None] - cells[None, :, 0]) <= reach)
+                                     & (np.abs(cols[:, None] - cells[None, :, 1]) <= reach)).any())
+
+
+def _same_instances(a: list, b: list) -> bool:
+    """Whether two lists of target instances are the same objects at the same place."""
+    return len(a) == len(b) and all(x.object_id == y.object_id and x.label == y.label
+                                    and np.array_equal(x.corners, y.corners) for x, y in zip(a, b, strict=True))
+
+
 def _compute_region(world: NavWorld, target_type: str) -> np.ndarray:
     g = world.grid
     out = np.zeros(g.shape, dtype=np.bool_)

@@ -28,6 +28,7 @@ if TYPE_CHECKING:
     from adaptenv.scene.house import House
     from adaptenv.sim.task import Episode
     from adaptenv.sim.trajectory import Trajectory
+    from adaptenv.sim.world import NavWorld
 
 StepStatus = Literal["applied", "rejected", "skipped", "no-op"]
 """``applied``: the step's edit is in the house. ``rejected``: validation refused it. ``skipped``: no
@@ -96,6 +97,9 @@ class GenerationContext:
     """When set, renders are written here as ``step-XX.png``."""
     diagnosis: SceneDiagnosis | None = None
     """F's multi-episode diagnosis of the scene, when there is one (the ``failure-modes`` G aims at its families)."""
+    world: NavWorld | None = None
+    """The compiled world of the house being edited, when the caller has it (``compile_world(house)``): generators
+    start from it instead of compiling the house again."""
 
 
 @dataclass
@@ -118,6 +122,8 @@ class GenerationResult:
     """Why generation ended before ``steps`` steps (LLM unavailable, budget used up), else empty."""
     objective_trace: list[dict[str, float | None]] = field(default_factory=list)
     """Objective values before the first step and after every step."""
+    world: NavWorld | None = None
+    """The compiled world of ``house`` as generation left it, when the generator has it (None: compile it)."""
 
     @property
     def applied(self) -> list[Edit]:

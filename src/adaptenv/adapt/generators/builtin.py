@@ -62,11 +62,12 @@ from adaptenv.adapt.objectives import (
 )
 from adaptenv.adapt.plausibility import OVERHANG, check_move
 from adaptenv.adapt.realism import RealismReference
-from adaptenv.adapt.validation import EditValidator, Proposal
+from adaptenv.adapt.validation import EditValidator, Proposal, world_fits
 from adaptenv.adapt.verification import Check, check_objective, revise_until_verified
 from adaptenv.agents.rollout import checking_episodes, mean_spl, run_in_worlds, total_steps
 from adaptenv.scene.geometry import Footprint, SceneGeometry, heading
 from adaptenv.scene.house import House
+from adaptenv.sim.geodesic import reuse_region
 from adaptenv.sim.rollout import expert_policy, run_episode
 from adaptenv.sim.task import Episode
 from adaptenv.sim.world import NavWorld, compile_world
@@ -238,7 +239,7 @@ class BuiltinGenerator:
                                                reason="the analysis has no suggestion with an objective"))
                 continue
             cands = self._candidates(v, world, route, targets, rng, limit=POOL * self.max_candidates)
-            tried = self._try(v, cands, route, original, ep)
+            tried = self._try(v, cands, route, original, ep, base=world)
             rollouts: dict[int, tuple[int, float]] = {}
             record = StepRecord(step=step, status="skipped", suggestion_id=order[0].id,
                                 suggestion_kind=order[0].kind, candidates=len(cands), passed=len(tried),
@@ -269,7 +270,7 @@ class BuiltinGenerator:
                 continue
             record.gain = gain(sug.kind, values, chosen.values)
             world, values, realism = self._applied(v, chosen, edit, record, result, context, step)
-        result.house = v.house
+        result.house, result.world = v.house, world
         return result
 
     def _begin(self, house: House, context: GenerationContext, reference: RealismReference
@@ -279,8 +280,9 @@ class BuiltinGenerator:
         with the first objective trace entry."""
         ep = context.episode
         route = RouteSpec.from_episode(ep.target_type, ep.start, context.trajectory)
-        v = EditValidator(house, episode_targets=[ep.target_type], start=ep.start[:2], move_targets=self.move_targets)
-        world = compile_world(v.house, "candidate")
+        v = EditValidator(house, episode_targets=[ep.target_type], start=ep.start[:2], move_targets=self.move_targets,
+                          world=context.world)
+        world = context.world if world_fits(context.world, v.geometry) else compile_world(v.house, "candidate")
         values = measure(world, route)
         result = GenerationResult(house=v.house, steps=[], edit_log=v.log, generator=self.name,
                                   objective_trace=[values.as_dict()])
@@ -296,18 +298,20 @@ class BuiltinGenerator:
             record.render = keep_render(result, render_scene(v.house, context, highlight={edit.object_id: "gold"}),
                                         context, step)
         result.steps.append(record)
-        return compile_world(v.house, "candidate"), chosen.values, chosen.realism
+        world = chosen.world if world_fits(chosen.world, v.geometry) else compile_world(v.house, "candidate")
+        return world, chosen.values, chosen.realism
 
     # ----------------------------------------------------------------------------- candidates
     def _try(self, v: EditValidator, cands: list[Candidate], route: RouteSpec, original: RealismReference,
-             episode: Episode) -> list[Candidate]:
-        """Dry-run candidates in order until ``max_candidates`` pass (placement, validation, plausibility, expert)."""
+             episode: Episode, *, base: NavWorld | None = None) -> list[Candidate]:
+        """Dry-run candidates in order until ``max_candidates`` pass (placement, validation, plausibility, expert);
+        ``base``: the compiled world of ``v.house``, whose success region a candidate far from the target keeps."""
         geometry = SceneGeometry.from_house(v.house)
         tried: list[Candidate] = []
         for c in cands:
             if len(tried) >= self.max_candidates:
                 break
-            if self._evaluate(v, geometry, c, route, original, episode) is not None:
+            if self._evaluate(v, geometry, c, route, original, episode, base=base) is not None:
                 tried.append(c)
         return tried
 
@@ -383,7 +387,7 @@ class BuiltinGenerator:
         return out
 
     def _evaluate(self, v: EditValidator, geometry: SceneGeometry, cand: Candidate, route: RouteSpec,
-                  original: RealismReference, episode: Episode) -> Candidate | None:
+                  original: RealismReference, episode: Episode, *, base: NavWorld | None = None) -> Candidate | None:
         """Dry-run one proposal; None when placement or validation rejects it, it changes nothing, or
         (with ``require_expert``) the shortest-path expert no longer solves the episode."""
         proposal = v.propose(cand.object_id, cand.dx_units, cand.dy_units, cand.rotation, relocate=cand.relocate)
@@ -393,9 +397,10 @@ class BuiltinGenerator:
         if not res.rotation_applied and math.hypot(*res.achieved) < MIN_MOVE:
             return None
         cand.proposal = proposal
-        moved = moved_geometry(geometry, res)
-        return self._measure(cand, compile_world(v.house, "candidate", geometry=moved), route, original, episode,
-                             lambda: edited_copy(v.house, res, share=True))
+        world = compile_world(v.house, "candidate", geometry=moved_geometry(geometry, res))
+        if base is not None:
+            reuse_region(world, base, episode.target_type)
+        return self._measure(cand, world, route, original, episode, lambda: edited_copy(v.house, res, share=True))
 
     def _measure(self, cand: Candidate, world: NavWorld, route: RouteSpec, original: RealismReference,
                  episode: Episode, edited: Callable[[], House]) -> Candidate | None:

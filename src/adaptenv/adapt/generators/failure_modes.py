@@ -247,7 +247,7 @@ class FailureModeGenerator(BuiltinGenerator):
             cands += [c for c in self._candidates(v, world, route, targets, rng, limit=POOL * self.max_candidates // 2)
                       if not any(c.object_id == o.object_id and (c.dx_units, c.dy_units, c.rotation) ==
                                  (o.dx_units, o.dy_units, o.rotation) for o in cands)]
-            tried = self._try(v, cands, route, reference, ep)
+            tried = self._try(v, cands, route, reference, ep, base=world)
             record = StepRecord(step=step, status="skipped", suggestion_kind=family, failure_mode=family,
                                 candidates=len(cands), passed=len(tried), objective_before=values.as_dict())
             if not tried:
@@ -284,7 +284,7 @@ class FailureModeGenerator(BuiltinGenerator):
             record.gain = chosen.mode_value - before
             record.policy_score_after = chosen.policy_score
             world, values, realism = self._applied(v, chosen, edit, record, result, context, step)
-        result.house = v.house
+        result.house, result.world = v.house, world
         return result
 
     # ----------------------------------------------------------------------------- verification with pi_t
@@ -319,11 +319,11 @@ class FailureModeGenerator(BuiltinGenerator):
         return out
 
     def _evaluate(self, v: EditValidator, geometry: SceneGeometry, cand: Candidate, route: RouteSpec,
-                  original: RealismReference, episode: Episode) -> Candidate | None:
+                  original: RealismReference, episode: Episode, *, base: NavWorld | None = None) -> Candidate | None:
         """A move as the built-in G dry-runs it; a door edit through the validator's door check, then the same
         objective, expert and realism measures on the edited house."""
         if cand.openness is None:
-            return super()._evaluate(v, geometry, cand, route, original, episode)
+            return super()._evaluate(v, geometry, cand, route, original, episode, base=base)
         house, problems = v.propose_door(cand.object_id, cand.openness)
         if house is None or problems:
             return None

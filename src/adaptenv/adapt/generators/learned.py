@@ -68,10 +68,11 @@ from adaptenv.adapt.objectives import (
     suggestion_weights,
     weighted_gain,
 )
-from adaptenv.adapt.validation import EditValidator, Proposal
+from adaptenv.adapt.validation import EditValidator, Proposal, world_fits
 from adaptenv.agents.rollout import checking_episodes, mean_spl, run_in_worlds, total_steps
 from adaptenv.errors import ConfigError
 from adaptenv.scene.house import House
+from adaptenv.sim.geodesic import reuse_region
 from adaptenv.sim.rollout import expert_policy, run_episode
 from adaptenv.sim.task import Episode
 from adaptenv.sim.world import NavWorld, compile_world
@@ -279,13 +280,15 @@ class LearnedGenerator:
                  rng: np.random.Generator) -> GenerationResult:
         ep = context.episode
         route = RouteSpec.from_episode(ep.target_type, ep.start, context.trajectory)
-        v = EditValidator(house, episode_targets=[ep.target_type], start=ep.start[:2])
+        v = EditValidator(house, episode_targets=[ep.target_type], start=ep.start[:2], world=context.world)
         result = GenerationResult(house=v.house, steps=[], edit_log=v.log, generator=self.name)
         want = self.checks if self.checks and context.policy is not None else max(1, self.objectives)
         suggestions = sorted(analysis.suggestions, key=lambda s: -s.priority)
         edited: set[str] = set()
+        world = context.world if world_fits(context.world, v.geometry) else None  # of v.house; None: compile it
         for step in range(steps):
-            world = compile_world(v.house, "candidate")
+            if world is None:
+                world = compile_world(v.house, "candidate")
             scene = Scene.of(v, world, route)
             values = measure(world, route) if self.objectives else None
             cands = [c for c in enumerate_candidates(v, world, route, rng, self.candidates, scene=scene,
@@ -303,7 +306,7 @@ class LearnedGenerator:
                     continue
                 if self.checks and any(cands[j].object_id == c.object_id for _, j, _, _ in passed):
                     continue
-                if (found := self._passes(v, c, ep, want > 1)) is not None:
+                if (found := self._passes(v, c, ep, want > 1, world)) is not None:
                     passed.append((tried, int(k), *found))
                     if len(passed) >= want:
                         break
@@ -312,16 +315,18 @@ class LearnedGenerator:
                                  "check" if cands else "no movable object left to edit")
                 result.steps.append(record)
                 continue
-            if len(passed) == 1:
-                tried, k, p, _ = passed[0]
+            if len(passed) == 1:  # world: the chosen edit's world (None when none was compiled), the next step's
+                tried, k, p, world = passed[0]
             elif self.checks:
-                tried, k, p, _ = self._check(passed, context, record)
+                tried, k, p, world = self._check(passed, context, record)
             else:
-                tried, k, p, _ = self._by_objectives(passed, route, values, weights)
+                tried, k, p, world = self._by_objectives(passed, route, values, weights)
             c = cands[k]
             edit = v.commit(p, source=self.name,
                             intent=f"learned: {c.kind} move, expected {self._expects} {scores[k]:+.3f} (rank {tried})")
             edited.add(c.object_id)
+            if not world_fits(world, v.geometry):  # the chosen edit's world is the next step's when it is exact
+                world = None
             record.status, record.edit, record.attempts = "applied", edit, tried
             record.reason = (f"the best-scored of {len(cands)} candidates that passed every check (tried {tried})"
                              if len(passed) == 1 else
@@ -333,12 +338,14 @@ class LearnedGenerator:
                 record.render = keep_render(result, render_scene(v.house, context, highlight={edit.object_id: "gold"}),
                                             context, step)
             result.steps.append(record)
-        result.house = v.house
+        result.house, result.world = v.house, world
         return result
 
-    def _passes(self, v: EditValidator, c: Candidate, ep: Episode, keep_world: bool) -> tuple[Proposal, NavWorld | None] | None:
+    def _passes(self, v: EditValidator, c: Candidate, ep: Episode, keep_world: bool,
+                base: NavWorld) -> tuple[Proposal, NavWorld | None] | None:
         """The proposal of ``c`` (and, with ``keep_world``, its edited world) when it passes placement, validation,
-        the plausibility rules and (``require_expert``) the expert; None otherwise."""
+        the plausibility rules and (``require_expert``) the expert; None otherwise. ``base``: the world of ``v.house``,
+        whose success region an edit far from the target keeps."""
         p = v.propose(c.object_id, c.dx_units, c.dy_units, c.rotation, relocate=c.relocate)
         res = p.result
         if not p.valid or not res.changed or (not res.rotation_applied and math.hypot(*res.achieved) < MIN_MOVE):
@@ -346,6 +353,7 @@ class LearnedGenerator:
         cw = None
         if self.require_expert or keep_world:
             cw = compile_world(v.house, "candidate", geometry=moved_geometry(v.geometry, res))
+            reuse_region(cw, base, ep.target_type)
             if self.require_expert and not run_episode(cw, ep, self._expert, record=False).metrics.success:
                 return None
         return p, cw
