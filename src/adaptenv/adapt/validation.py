@@ -376,7 +376,7 @@ def _geodesic_targets(house: House, geometry: SceneGeometry, start: tuple[float,
 
 def world_fits(world: NavWorld | None, geometry: SceneGeometry) -> bool:
     """Whether ``world`` is a compiled world of ``geometry`` at the default resolution: the same footprints, walls,
-    doors and windows (a world handed in to save compiling the house again, checked before it is trusted)."""
+    doors, windows and rooms (a world handed in to save compiling the house again, checked before it is trusted)."""
     if world is None or world.grid.resolution != DEFAULT_RESOLUTION:
         return False
     g = world.geometry
