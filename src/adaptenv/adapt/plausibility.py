@@ -273,11 +273,13 @@ def _uncovered(a, near, p0, p1, min_overlap):
         ax, az = a[e, 0], a[e, 1]
         bx, bz = a[(e + 1) % n, 0], a[(e + 1) % n, 1]
         le = math.sqrt((bx - ax) * (bx - ax) + (bz - az) * (bz - az))
+        if le < 1e-6:  # runs along nothing (as in _edges_along)
+            continue
+        ux, uz = (bx - ax) / le, (bz - az) / le
         count = 0
         for k in range(m):
             if not near[e, k]:
                 continue
-            ux, uz = (bx - ax) / le, (bz - az) / le  # le >= 1e-6 where a segment is near
             t0 = (p0[k, 0] - ax) * ux + (p0[k, 1] - az) * uz
             t1 = (p1[k, 0] - ax) * ux + (p1[k, 1] - az) * uz
             s0, s1 = min(max(min(t0, t1), 0.0), le), min(max(max(t0, t1), 0.0), le)
