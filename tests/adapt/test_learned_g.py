@@ -371,6 +371,35 @@ def test_adapt_learned_checks_rolls_the_policy_out_on_k_edits(tiny, tmp_path, mo
     assert result.exit_code != 0 and "--learned-checks" in str(result.exception) and not (tmp_path / "b").exists()
 
 
+def test_adapt_and_the_loop_rank_edits_with_a_scorer_file_given(tiny, tmp_path):
+    import shutil
+
+    from adaptenv.curriculum.jobs import make_fg
+    from adaptenv.curriculum.methods import LoopConfig
+    from adaptenv.scene.house import save_house
+
+    path = save_house(tiny.houses[1], tmp_path / "h.json")
+    mine, bad = tmp_path / "mine.pt", tmp_path / "bad.pt"
+    shutil.copyfile(shipped_path(), mine)
+    bad.write_bytes(b"not a checkpoint")
+    args = ["adapt", str(path), "--policy", "expert", "--steps", "1", "--seed", "1"]
+    result = runner.invoke(app, [*args, "--generator", "learned", "--learned-scorer", str(mine), "-o", str(tmp_path / "a")])
+    assert result.exit_code == 0, result.output
+    assert json.loads((tmp_path / "a" / "summary.json").read_text())["learned_scorer"] == str(mine)
+    result = runner.invoke(app, [*args, "--generator", "learned", "--learned-scorer", str(bad), "-o", str(tmp_path / "b")])
+    assert isinstance(result.exception, ConfigError) and "\n" not in str(result.exception)
+    assert str(bad) in str(result.exception) and not (tmp_path / "b").exists()
+    result = runner.invoke(app, [*args, "--learned-scorer", str(mine), "-o", str(tmp_path / "c")])
+    assert isinstance(result.exception, ConfigError) and "--learned-scorer" in str(result.exception)
+    _, g = make_fg("learned", {}, learned_scorer=str(mine))
+    assert g.scorer.path == mine and make_fg("learned", {})[1].scorer.path == shipped_path()
+    LoopConfig(method="ours-learned", learned_scorer=str(mine)).check()
+    with pytest.raises(ConfigError, match="not a readable torch checkpoint"):
+        LoopConfig(method="ours-learned", learned_scorer=str(bad)).check()
+    with pytest.raises(ConfigError, match="learned_scorer applies to ours-learned"):
+        LoopConfig(method="ours", learned_scorer=str(mine)).check()
+
+
 def test_collect_refuses_held_out_houses(tmp_path):
     result = runner.invoke(app, ["gdata", "collect", "--houses", "suite:large", "-o", str(tmp_path / "x")])
     assert isinstance(result.exception, ConfigError) and "not training data" in str(result.exception)

@@ -237,3 +237,23 @@ def test_wall_overhang_leaves_distances_at_the_limit_to_geos():
     units = (p1 - p0) / np.linalg.norm(p1 - p0, axis=1)[:, None]
     near = _edges_along(square, units, np.minimum(p0, p1), np.maximum(p0, p1), p0, p1, 0.5, AGAINST_WALL_DISTANCE)
     assert near[0, 0] == _TIE and near[0, 1] == 0 and near[1, 0] == 0  # the bottom edge; the wall x = -1 is too far
+
+
+def test_boxes_apart_only_where_the_shapes_are_further_apart_than_the_gap():
+    """The rules' bounding-box test skips shapely only where the footprints' distance exceeds the gap."""
+    import shapely
+
+    from adaptenv.adapt.plausibility import _apart
+    from adaptenv.scene.geometry import Footprint
+
+    rng = np.random.default_rng(0)
+    skipped = 0
+    for _ in range(2000):
+        a, b = (Footprint("o", "Chair", "a", tuple(rng.uniform(0, 3, 2)), tuple(rng.uniform(0.1, 1.5, 2)),
+                          float(rng.uniform(0, 360)), 1.0, "floor", True) for _ in range(2))
+        gap = float(rng.choice([0.0, 0.3]))
+        assert a.bounds == tuple(shapely.bounds(a.polygon))
+        if _apart(a.bounds, b.bounds, gap):
+            skipped += 1
+            assert shapely.distance(a.polygon, b.polygon) > gap
+    assert 200 < skipped < 1800, "both outcomes are exercised"

@@ -17,6 +17,7 @@ covers most of its width and is rejected, a chair beside the frame is not.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 import shapely
@@ -40,6 +41,11 @@ class ApproachZone:
     """Unit vector along the door, from p0."""
     width: float
     zone: Polygon
+
+    @cached_property
+    def bounds(self) -> tuple[float, float, float, float]:
+        """(min x, min z, max x, max z) of the zone, m."""
+        return tuple(float(b) for b in self.zone.bounds)
 
 
 def approach_zones(geometry: SceneGeometry, depth: float = APPROACH_DEPTH) -> list[ApproachZone]:

@@ -349,15 +349,22 @@ def _offset(anchor: tuple[tuple[float, float], float], member: tuple[float, floa
 
 def _window_cover(w: WindowZone, fp: Footprint) -> float:
     """Width (m) of the window a tall footprint covers within the window's zone (0 for a low one)."""
-    if fp.height <= w.tall_from or not w.zone.zone.intersects(fp.polygon):
+    if fp.height <= w.tall_from or _apart(fp.bounds, w.zone.bounds) or not w.zone.zone.intersects(fp.polygon):
         return 0.0
     return covered_width(w.zone, [fp.polygon])
+
+
+def _apart(a: tuple[float, ...], b: tuple[float, ...], gap: float = 0.0) -> bool:
+    """Whether two (min x, min z, max x, max z) boxes lie more than ``gap`` m apart along x or z (then nothing
+    inside one comes within ``gap`` of anything inside the other)."""
+    return a[0] - b[2] > gap or b[0] - a[2] > gap or a[1] - b[3] > gap or b[1] - a[3] > gap
 
 
 def _on_open_floor(fp: Footprint, walls: _Walls, others: list[Footprint]) -> bool:
     if walls.distance(fp) <= OPEN_FLOOR:
         return False
-    polys = [o.polygon for o in others if o.object_id != fp.object_id]
+    box, gap = fp.bounds, OPEN_FLOOR + 1e-9
+    polys = [o.polygon for o in others if o.object_id != fp.object_id and not _apart(box, o.bounds, gap)]
     return not polys or not bool(shapely.dwithin(fp.polygon, polys, OPEN_FLOOR).any())
 
 
@@ -470,9 +477,12 @@ def check_move(ref: PlausibilityReference, fp: Footprint, current: Mapping[str, 
             out.append(Violation("facing_broken", oid, f"{a} no longer faces {b}",
                                  (b if oid == a else a,)))
     out += _person_rules(ref, fp, now)
-    floor = [f for f in now.values() if f.role == "floor"]
+    floor = None
     for k in sorted({oid} | {s for s in ref.small if s in now and s != oid and ref.moved(now[s])}):
-        if k in ref.small and _on_open_floor(now[k], ref.walls, floor):
+        if k not in ref.small:
+            continue
+        floor = floor or [f for f in now.values() if f.role == "floor"]
+        if _on_open_floor(now[k], ref.walls, floor):
             out.append(Violation("open_floor", k, f"{k} ({now[k].object_type}) stands alone on open floor; its "
                                  "type stands by a wall or by furniture, never in the middle of a room"))
     return out
@@ -482,7 +492,7 @@ def _zone_growth(zones, before: Mapping[tuple[str, str], float], fp: Footprint) 
     """(door id, m^2) for each zone ``fp`` now covers more of than the object did in the reference house."""
     out = []
     for z in zones:
-        if z.zone.intersects(fp.polygon):
+        if not _apart(fp.bounds, z.bounds) and z.zone.intersects(fp.polygon):
             grew = z.zone.intersection(fp.polygon).area - before.get((z.door_id, fp.object_id), 0.0)
             if grew > ZONE_EPS:
                 out.append((z.door_id, grew))

@@ -170,6 +170,9 @@ def adapt(
     learned_checks: int = typer.Option(0, "--learned-checks", min=0, max=64, help="With --generator learned: roll "
                                        "--policy out on this many of the best-scored edits each step and make the "
                                        "hardest for it (0: no rollout, the best-scored edit is made)."),
+    learned_scorer: Path | None = typer.Option(None, "--learned-scorer", metavar="FILE.pt", help="With --generator "
+                                               "learned: the scorer that ranks edits (adaptenv gdata train -o "
+                                               "FILE.pt); default: the shipped one."),
     analyzer: str = typer.Option("builtin", "--analyzer", help="builtin (offline) or llm."),
     model: str | None = MODEL_OPTION,
     base_url: str | None = BASE_URL_OPTION,
@@ -235,6 +238,14 @@ def adapt(
     if learned_checks and generator != "learned":
         raise ConfigError(f"--learned-checks: only the learned generator checks its edits this way; add --generator "
                           f"learned or drop --learned-checks (got --generator {generator})")
+    if learned_scorer is not None and generator != "learned":
+        raise ConfigError(f"--learned-scorer: only the learned generator reads a scorer; add --generator learned or "
+                          f"drop --learned-scorer (got --generator {generator})")
+    scorer = None
+    if learned_scorer is not None:
+        from adaptenv.adapt.generators.learned import load_scorer
+
+        scorer = load_scorer(learned_scorer)  # a missing or foreign file is refused before any work
     if analyzer not in ("builtin", "llm"):
         raise ConfigError(f"--analyzer {analyzer!r}: unknown analyzer; use builtin or llm")
     check_llm_config(llm_config_file)
@@ -245,7 +256,7 @@ def adapt(
         if trajectory is not None or diagnose:
             raise ConfigError("--target-success: drop --trajectory and --diagnose (the success is measured on "
                               "--target-episodes episodes of the policy itself)")
-    folder = output_folder(out, "-o", "adapt", force=force, inputs=[house, trajectory, policy])
+    folder = output_folder(out, "-o", "adapt", force=force, inputs=[house, trajectory, policy, learned_scorer])
     many = _is_house_set(house, one=trajectory is not None)
     if trajectory is not None and (many or diagnose):
         raise ConfigError("--trajectory: give one house (a file or a one-line dataset slice FILE.jsonl.gz:2:3) and "
@@ -272,6 +283,7 @@ def adapt(
                           highlight=False)
     options = {"door_edits": True} if door_edits else {"checks": learned_checks} if learned_checks else {}
     options |= {"relocate_targets": True} if relocate_targets else {}
+    options |= {"scorer": scorer} if scorer is not None else {}
     gen = (make_generator(generator, backend=backend, **options) if generator == "llm"
            else make_generator(generator, **options))
     if generator == "llm" and not as_json:
@@ -340,8 +352,15 @@ def _adapt_one(h, name: str, out: Path, policy, analyzer, generator, *, steps: i
                       "success_after": fresh[1].success}
     if before is not None:
         s["trajectory"] = {"policy": before.policy, "after_policy": result.after.policy}
+    s |= _scorer_field(generator)
     write_outputs(result, s, out)
     return s
+
+
+def _scorer_field(generator) -> dict:
+    """``learned_scorer``, the scorer file that ranked the learned G's edits (nothing for other G)."""
+    scorer = getattr(generator, "scorer", None)
+    return {"learned_scorer": str(scorer.path)} if scorer is not None and scorer.path is not None else {}
 
 
 def _target_one(h, name: str, out: Path, policy, analyzer, generator, *, steps: int, seed: int, target: str | None,
@@ -373,7 +392,8 @@ def _target_one(h, name: str, out: Path, policy, analyzer, generator, *, steps: 
                "episodes": [{"target_type": e.target_type, "start": list(e.start), "seed": e.seed} for e in res.episodes],
                "edits_applied": len(res.edits), "edit_counts": counts,
                "plausibility": audit(h, res.house).counts(), "realism_before": realism_score(h, h),
-               "realism_after": realism_score(res.house, h), "env_steps": res.env_steps, "valid": True, "problems": []}
+               "realism_after": realism_score(res.house, h), "env_steps": res.env_steps, "valid": True, "problems": [],
+               **_scorer_field(generator)}
     out.mkdir(parents=True, exist_ok=True)
     save_house(res.house, out / "house.json")
     pair = render_before_after(h, res.house, res.trajectories_before[0], res.trajectories_after[0],

@@ -154,6 +154,9 @@ def loop(
                                           "failures); otherwise no edit moves a target."),
     door_edits: bool = typer.Option(False, "--door-edits", help="G may also open or shut interior doors (the "
                                     "failure-mode G for search, looping and timeout failures; the LLM G by a tool)."),
+    learned_scorer: Path | None = typer.Option(None, "--learned-scorer", metavar="FILE.pt", help="ours-learned: "
+                                               "the learned G's scorer (adaptenv gdata train -o FILE.pt); default: "
+                                               "the shipped one."),
     target_success: float | None = typer.Option(None, "--target-success", metavar="P",
                                                   callback=numbers.finite, help="Difficulty on request "
                                                 "(adapting methods): edit each adapted scene until pi_t's success on "
@@ -196,7 +199,7 @@ def loop(
     from adaptenv.curriculum.loop import LoopConfig, run_loop
     from adaptenv.curriculum.records import RUN_INFO, STATE
 
-    folder = output_folder(out, "-o", "loop", inputs=[houses, policy, match_run or None], keep=True, force_flag=None,
+    folder = output_folder(out, "-o", "loop", inputs=[houses, policy, match_run or None, learned_scorer], keep=True, force_flag=None,
                            legacy=lambda p: (p / STATE).is_file() or (p / RUN_INFO).is_file())
     if resume:
         check_resumable(out)
@@ -218,6 +221,7 @@ def loop(
                      finetune_min_start=finetune_min_start, finetune_precision=finetune_precision,
                      finetune_beta=finetune_beta, finetune_max_steps=finetune_max_steps,
                      relocate_targets=relocate_targets, door_edits=door_edits, focus_training=focus_training,
+                     learned_scorer=str(learned_scorer) if learned_scorer else None,
                      heldout_episodes=heldout_episodes, llm=llm, target_success=target_success,
                      target_tolerance=target_tolerance, target_episodes=target_episodes,
                      target_choices=target_choices, target_draws=target_draws, **({"heldout": h} if (h := _heldout(heldout)) else {}))

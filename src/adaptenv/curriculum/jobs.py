@@ -226,6 +226,8 @@ class GenerateJob:
     """``failure-modes``: G may relocate a target instance to a far room (``LoopConfig.relocate_targets``)."""
     door_edits: bool = False
     """``failure-modes`` and ``llm``: G may open or shut interior doors (``LoopConfig.door_edits``)."""
+    learned_scorer: str | None = None
+    """``learned``: the scorer file (``LoopConfig.learned_scorer``); None: the shipped one."""
     target_success: float | None = None
     """When set: edit toward pi_t's success rate P on ``target_episodes`` fixed episodes
     (:func:`~adaptenv.adapt.target.adapt_to_success`, ``edit_steps`` the budget) instead of the most difficulty."""
@@ -282,7 +284,7 @@ def run_generate(job: GenerateJob) -> Generated:
         return _run_diagnosed(job, rng)
     if job.rollout is None or job.weights is None:
         raise ValueError(f"GenerateJob {job.name}: kind {job.kind!r} needs the policy weights and its rollout")
-    analyzer, generator = make_fg(job.kind, job.llm, door_edits=job.door_edits)
+    analyzer, generator = make_fg(job.kind, job.llm, door_edits=job.door_edits, learned_scorer=job.learned_scorer)
     res = adapt_scene(job.house, job.rollout.episode, policy=job.weights.policy(), analyzer=analyzer,
                       generator=generator, steps=job.edit_steps, rng=rng, before=job.rollout.trajectory,
                       name=job.name)
@@ -301,7 +303,7 @@ def _run_diagnosed(job: GenerateJob, rng: np.random.Generator) -> Generated:
         raise ValueError(f"GenerateJob {job.name}: kind {job.kind!r} needs the policy weights")
     episodes = hard_episodes(compile_world(job.house, job.name), rng, job.diagnose_episodes)
     analyzer, generator = make_fg(job.kind, job.llm, relocate_targets=job.relocate_targets,
-                                  door_edits=job.door_edits)
+                                  door_edits=job.door_edits, learned_scorer=job.learned_scorer)
     res = adapt_scene(job.house, episodes[0], policy=job.weights.policy(), analyzer=analyzer, generator=generator,
                       steps=job.edit_steps, rng=rng, name=job.name, episodes=episodes)
     log = res.generation.to_json_dict()
@@ -326,7 +328,8 @@ def _run_targeted(job: GenerateJob) -> Generated:
     same episodes (pi_t's success, and its regret against the expert)."""
     if job.weights is None:
         raise ValueError(f"GenerateJob {job.name}: kind {job.kind!r} needs the policy weights")
-    analyzer, generator = make_fg(job.kind, job.llm, relocate_targets=job.relocate_targets, door_edits=job.door_edits)
+    analyzer, generator = make_fg(job.kind, job.llm, relocate_targets=job.relocate_targets, door_edits=job.door_edits,
+                                  learned_scorer=job.learned_scorer)
     res = adapt_to_success(job.house, job.weights.policy(), generator, job.target_success,
                            tolerance=job.target_tolerance, episodes=job.target_episodes, max_edits=job.edit_steps,
                            analyzer=analyzer, seed=job.seed, name=job.name, choices=job.target_choices,
@@ -348,8 +351,9 @@ def check_steps(generation: GenerationResult) -> int:
 
 
 def make_fg(kind: GeneratorKind, llm: dict[str, Any], *, relocate_targets: bool = False,
-            door_edits: bool = False) -> tuple[Analyzer, Generator]:
-    """Analyzer F and generator G: built-in, or LLM-backed (one backend shared by F and G)."""
+            door_edits: bool = False, learned_scorer: str | None = None) -> tuple[Analyzer, Generator]:
+    """Analyzer F and generator G: built-in, learned (``learned_scorer``: its scorer file, None the shipped one), or
+    LLM-backed (one backend shared by F and G)."""
     if kind == "llm":
         backend = make_backend(LLMConfig(**llm))
         return LLMAnalyzer(backend), make_generator("llm", backend=backend, door_edits=door_edits)
@@ -359,5 +363,5 @@ def make_fg(kind: GeneratorKind, llm: dict[str, Any], *, relocate_targets: bool 
     if kind == "regret-only":
         return NoAnalyzer(), make_generator("builtin")
     if kind == "learned":
-        return BuiltinAnalyzer(), make_generator("learned")
+        return BuiltinAnalyzer(), make_generator("learned", checkpoint=learned_scorer)
     return BuiltinAnalyzer(), make_generator("builtin")

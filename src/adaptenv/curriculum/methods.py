@@ -27,6 +27,7 @@ from typing import Any, ClassVar
 
 import numpy as np
 
+from adaptenv.adapt.generators.learned import load_scorer
 from adaptenv.adapt.llm.accounting import check_llm_section
 from adaptenv.adapt.target import MAX_DRAWS, check_target
 from adaptenv.agents.config import FinetuneConfig
@@ -145,6 +146,8 @@ class LoopConfig:
     door_edits: bool = False
     """G may also open or shut interior doors: the failure-mode G for search, looping and timeout failures, the LLM
     G (ours-llm) through its set_door_openness tool."""
+    learned_scorer: str | None = None
+    """ours-learned: the learned G's scorer file (``adaptenv gdata train -o FILE.pt``); null: the shipped one."""
     target_success: float | None = None
     """Difficulty on request: each adapted scene is edited until pi_t's success on target_episodes fixed episodes is
     within target_tolerance of this rate P (0 < P < 1; edit_steps is the edit budget,
@@ -204,6 +207,11 @@ class LoopConfig:
             raise ConfigError(f"{source}: method ours-llm needs an llm section (provider, model, base_url); "
                               "see docs/llm.md")
         check_llm_section(self.llm, source)
+        if self.learned_scorer is not None:
+            if self.method != "ours-learned":
+                raise ConfigError(f"{source}: learned_scorer applies to ours-learned, not {self.method}; pick "
+                                  "ours-learned or drop learned_scorer")
+            load_scorer(self.learned_scorer)  # a missing or foreign file is refused here, before any work
         if self.target_success is not None:
             check_target(self.target_success, self.target_tolerance, what=f"{source}: target_success",
                          tol_what=f"{source}: target_tolerance")
@@ -570,6 +578,7 @@ class Ours(Method):
                             (it.cfg.seed, it.t, Stream.GENERATE + k), weights=it.weights,
                             diagnose_episodes=it.cfg.diagnose_episodes, llm=it.cfg.llm,
                             relocate_targets=it.cfg.relocate_targets, door_edits=it.cfg.door_edits,
+                            learned_scorer=it.cfg.learned_scorer,
                             **target_fields(it.cfg))
                 for k, p in enumerate(parents)]
         children = []

@@ -128,6 +128,12 @@ class Footprint:
         return convex_pieces(self.local_outline)
 
     @cached_property
+    def bounds(self) -> tuple[float, float, float, float]:
+        """(min x, min z, max x, max z) of :attr:`outline`, m."""
+        o = self.outline
+        return float(o[:, 0].min()), float(o[:, 1].min()), float(o[:, 0].max()), float(o[:, 1].max())
+
+    @cached_property
     def polygon(self) -> Polygon:
         """The true floor outline as a polygon (the bounding rectangle for boxes)."""
         return Polygon(self.outline)
