@@ -327,3 +327,18 @@ def test_an_episode_without_a_seed_draws_from_seed_zero():
     ep = Episode("Bed", (1.0, 2.0, 0.0), None)
     assert [e.seed for e in drawn([ep], 2, FRESH_SEED_STRIDE, first=1)] == [FRESH_SEED_STRIDE, 2 * FRESH_SEED_STRIDE]
     assert drawn([with_(ep, seed=5)], 2)[0].seed == 5
+
+
+def test_a_stop_gap_below_the_tolerance_edits_on_past_the_tolerance_edge(tiny):
+    """With stop_gap the run goes on where the tolerance alone stopped it, the same edits first, until the
+    gap is at most stop_gap; `reached` is still judged by the tolerance."""
+    edge = run(tiny, 0.7, tolerance=0.2)
+    deeper = adapt_to_success(tiny, ShyExpert(home_of(tiny)), Pusher(3.0), 0.7, tolerance=0.2, episodes=10,
+                              max_edits=8, patience=3, seed=0, name="tiny", stop_gap=0.0)
+    assert edge.stopped == "within tolerance" and edge.gap > 0.0
+    assert deeper.stopped == "within the stop gap 0.00" and deeper.gap == pytest.approx(0.0) and deeper.reached
+    assert deeper.edits[:len(edge.edits)] == edge.edits and len(deeper.edits) > len(edge.edits)
+    assert deeper.to_dict()["stop_gap"] == 0.0 and edge.to_dict()["stop_gap"] == 0.2
+    for bad in (0.3, -0.1, math.nan):
+        with pytest.raises(ConfigError, match="stop gap must lie in"):
+            adapt_to_success(tiny, ShyExpert(home_of(tiny)), Pusher(3.0), 0.7, tolerance=0.2, stop_gap=bad)

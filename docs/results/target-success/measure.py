@@ -8,7 +8,10 @@ Options (before OUT.jsonl): ``--generators a,b`` (default ``builtin,random,failu
 ``+checksK``, the learned G with ``checks=K``, in ``+choicesK``, K edits proposed and measured per round, and in
 ``+drawsD``, each measured episode run D times with its own sampling seeds, in ``+confirm``, an edit that comes
 closer kept only when it also comes closer on confirming draws, and in ``+relocate`` and ``+doors``, the failure-mode
-G's ``relocate_targets`` and ``door_edits``),
+G's ``relocate_targets`` and ``door_edits``, and in ``+stopK``, editing stopped once the measured gap is at most K
+hundredths, the tolerance's own point then also measured: rows carry ``tolerance_stop``, the edits kept and the success
+on the measured and on the fresh draws when the gap first came within the tolerance, which is where the run would
+have stopped without ``+stopK``),
 ``--patience N`` (default 3), ``--first K`` (start at the K-th house), ``--rollout-episodes N`` (headings of G's
 own rollout check, default 3; rows then carry ``rollout_episodes``), ``--houses SET`` (default
 ``preset:validation``), ``--targets P,Q`` (default ``0.25,0.5,0.75``).
@@ -39,18 +42,20 @@ HOUSES = "preset:validation"
 
 
 def make(g: str):
-    """The generator ``g`` names, the choices per round, the draws per episode and whether edits are confirmed (``learned+checks8+choices4+draws3``:
-    the learned G with ``checks=8``, 4 edits measured per round, each episode measured 3 times)."""
+    """The generator ``g`` names, the choices per round, the draws per episode, whether edits are confirmed and the
+    stop gap (``learned+checks8+choices4+draws3+stop5``: the learned G with ``checks=8``, 4 edits measured per round,
+    each episode measured 3 times, editing stopped within 0.05 of P)."""
     from adaptenv.adapt.generators import make_generator
 
     name, *mods = g.split("+")
     checks = [int(m.removeprefix("checks")) for m in mods if m.startswith("checks")]
     choices = [int(m.removeprefix("choices")) for m in mods if m.startswith("choices")]
     draws = [int(m.removeprefix("draws")) for m in mods if m.startswith("draws")]
+    stop = [int(m.removeprefix("stop")) / 100 for m in mods if m.startswith("stop")]
     kw = {"checks": checks[0]} if checks else {}
     kw |= {"relocate_targets": True} if "relocate" in mods else {}
     kw |= {"door_edits": True} if "doors" in mods else {}
-    return make_generator(name, **kw), (choices or [1])[0], (draws or [1])[0], "confirm" in mods
+    return make_generator(name, **kw), (choices or [1])[0], (draws or [1])[0], "confirm" in mods, (stop or [None])[0]
 
 
 def run(out: Path, houses: int, steps: int) -> None:
@@ -70,18 +75,40 @@ def run(out: Path, houses: int, steps: int) -> None:
                 if (g, p, name) in done:
                     continue
                 t0 = time.perf_counter()
-                generator, choices, draws, confirm = make(g)
+                generator, choices, draws, confirm, stop_gap = make(g)
                 res = adapt_to_success(house, policy, generator, p, tolerance=TOLERANCE, episodes=EPISODES,
                                        max_edits=steps, patience=PATIENCE, seed=SEED, name=name,
                                        rollout_episodes=ROLLOUT_EPISODES, choices=choices, draws=draws,
-                                       confirm=confirm)
+                                       confirm=confirm, stop_gap=stop_gap)
                 row = {"generator": g, "target": p, "house": name, "steps": steps, "patience": PATIENCE,
                        "rollout_episodes": ROLLOUT_EPISODES, "choices": choices, "houses": HOUSES, "seconds": time.perf_counter() - t0,
                        **{k: v for k, v in res.to_dict().items() if k not in ("trace", "generator")},
                        "kept_edits": [e.model_dump(mode="json") for e in res.edits]}
+                if stop_gap is not None:
+                    row["tolerance_stop"] = tolerance_stop(res, policy, name)
                 with out.open("a", encoding="utf-8") as f:
                     f.write(json.dumps(row) + "\n")
                 print(f"{g:13s} P={p:.2f} {name}: {res.line()} ({row['seconds']:.0f} s)", flush=True)
+
+
+def tolerance_stop(res, policy, name: str) -> dict:
+    """Where the run would have stopped with the tolerance as its stop gap: the edits kept when the measured gap
+    first came within the tolerance (every kept edit when it never did: both runs are the same), and the success
+    there on the measured and on the run's fresh draws. Until that point the two runs are the same."""
+    from adaptenv.adapt.edits import replay
+    from adaptenv.adapt.target import fresh_measurement
+    from adaptenv.sim.world import compile_world
+
+    trace = res.success_trace
+    k = next((i for i, s in enumerate(trace) if abs(s - res.target) <= res.tolerance + 1e-9), len(trace) - 1)
+    if k == len(res.edits):
+        fresh = res.fresh_after.success
+    elif k == 0:
+        fresh = res.fresh_before.success
+    else:
+        world = compile_world(replay(res.original, res.edits[:k]), name)
+        fresh = fresh_measurement(world, res.episodes, policy, res.fresh_draws).success
+    return {"edits": k, "success": trace[k], "fresh_success": fresh}
 
 
 def rows(out: Path) -> list[dict]:

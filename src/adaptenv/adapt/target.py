@@ -85,6 +85,15 @@ def check_target(target: float, tolerance: float = TOLERANCE, *, what: str = "--
         raise ConfigError(f"{tol_what} {tolerance}: the tolerance must lie in [0, 1), e.g. 0.1")
 
 
+def check_stop_gap(stop_gap: float | None, tolerance: float = TOLERANCE, *,
+                   what: str = "--target-stop-gap") -> None:
+    """Raise one ConfigError line unless ``stop_gap`` is None or lies in [0, tolerance]."""
+    if stop_gap is not None and not (isinstance(stop_gap, (int, float)) and np.isfinite(stop_gap)
+                                     and 0.0 <= float(stop_gap) <= float(tolerance) + 1e-12):
+        raise ConfigError(f"{what} {stop_gap}: editing must stop within the tolerance, so the stop gap must lie "
+                          f"in [0, {tolerance:g}], e.g. {tolerance / 2:g}")
+
+
 @dataclass(frozen=True)
 class Measurement:
     """The agent on the measured episodes of one house: per-episode success and SPL."""
@@ -140,7 +149,7 @@ class TargetResult:
     after: Measurement
     rounds: list[TargetRound] = field(default_factory=list)
     stopped: str = ""
-    """``within tolerance``, ``edit budget used`` or ``no kept edit in N rounds``."""
+    """``within tolerance`` (or ``within the stop gap G``), ``edit budget used`` or ``no kept edit in N rounds``."""
     trajectories_before: list[Trajectory] = field(default_factory=list)
     trajectories_after: list[Trajectory] = field(default_factory=list)
     check_steps: int = 0
@@ -157,6 +166,8 @@ class TargetResult:
     """The returned house on the same fresh draws."""
     confirm: bool = False
     """Whether each edit that came closer was kept only when it also came closer on the confirming draws."""
+    stop_gap: float | None = None
+    """Editing stopped once the measured gap was at most this (None: the tolerance)."""
 
     @property
     def fresh_draws(self) -> int:
@@ -210,6 +221,7 @@ class TargetResult:
         """Plain figures for JSON: target, reached success, gap, edits, rounds and the trace."""
         return {"target": self.target, "tolerance": self.tolerance, "generator": self.generator,
                 "episodes": len(self.episodes), "draws": self.draws, "confirm": self.confirm,
+                "stop_gap": self.tolerance if self.stop_gap is None else self.stop_gap,
                 "success_before": self.before.success,
                 "spl_before": self.before.spl, "success": self.after.success, "spl": self.after.spl,
                 "gap": self.gap, "reached": self.reached, "edits": len(self.edits), "rounds": self.round_count,
@@ -311,7 +323,8 @@ def adapt_to_success(house: House, policy: Policy, generator: Generator, target:
                      patience: int = PATIENCE, analyzer: Analyzer | None = None, seed: int | Sequence[int] = 0,
                      target_type: str | None = None, name: str = "house",
                      rollout_episodes: int = 3, choices: int = 1, draws: int = 1,
-                     fresh_draws: int = FRESH_DRAWS, confirm: bool = False) -> TargetResult:
+                     fresh_draws: int = FRESH_DRAWS, confirm: bool = False,
+                     stop_gap: float | None = None) -> TargetResult:
     """Edit ``house`` with ``generator`` until the policy's success on fixed episodes is within ``tolerance`` of
     ``target`` (see the module docstring).
 
@@ -336,6 +349,8 @@ def adapt_to_success(house: House, policy: Policy, generator: Generator, target:
             once the run ends (``fresh_before``, ``fresh_after``); 0 skips it.
         confirm: measure an edit that comes closer again on ``draws`` confirming draws per episode (other sampling
             seeds, apart from the fresh ones) and keep it only when it comes closer there too.
+        stop_gap: stop editing once ``|success - target|`` is at most this (0 to ``tolerance``; None: the
+            tolerance). Whether P was reached is still judged by ``tolerance``.
     """
     check_target(target, tolerance, what="target", tol_what="tolerance")
     if max_edits < 0 or patience < 1 or not isinstance(choices, (int, np.integer)) or choices < 1:
@@ -344,6 +359,8 @@ def adapt_to_success(house: House, policy: Policy, generator: Generator, target:
         raise ConfigError(f"draws {draws}: must be a whole number from 1 to {MAX_DRAWS}")
     if not isinstance(fresh_draws, (int, np.integer)) or fresh_draws < 0:
         raise ConfigError(f"fresh_draws {fresh_draws}: must be a whole number >= 0 (0 skips the fresh check)")
+    check_stop_gap(stop_gap, tolerance)
+    stop = tolerance if stop_gap is None else float(stop_gap)
     policy = as_policy(policy)
     analyzer = analyzer or BuiltinAnalyzer()
     world = world0 = compile_world(house, name)
@@ -354,14 +371,14 @@ def adapt_to_success(house: House, policy: Policy, generator: Generator, target:
     first, trajs = measure(world, runs, policy)
     result = TargetResult(house, house, getattr(generator, "name", type(generator).__name__), float(target),
                           float(tolerance), eps, first, first, trajectories_before=trajs, trajectories_after=trajs,
-                          draws=int(draws), confirm=bool(confirm))
+                          draws=int(draws), confirm=bool(confirm), stop_gap=stop_gap)
     result.measure_steps = first.steps
     confirming = drawn(eps, int(draws), CONFIRM_SEED_STRIDE, first=1) if confirm else []
     cur_c: Measurement | None = None
     current, cur, turn, misses, g_steps = house, first, 0, 0, 1
     while True:
-        if abs(cur.success - target) <= tolerance + 1e-9:
-            result.stopped = "within tolerance"
+        if abs(cur.success - target) <= stop + 1e-9:
+            result.stopped = "within tolerance" if stop == tolerance else f"within the stop gap {stop:.2f}"
             break
         if len(result.edits) >= max_edits:
             result.stopped = "edit budget used"
