@@ -227,11 +227,16 @@ def test_cli_reports_target_reached_success_gap_and_edits(tiny, tmp_path):
     bad = CliRunner().invoke(app, ["adapt", _tiny_file(tiny, tmp_path), "--target-success", "0.5",
                                    "--target-choices", "0", "-o", str(tmp_path / "none")])
     assert bad.exit_code == 2 and "--target-choices" in bad.output and not (tmp_path / "none").exists()
+    gap = CliRunner().invoke(app, ["adapt", _tiny_file(tiny, tmp_path), "--target-success", "0.5",
+                                   "--target-stop-gap", "0.2", "-o", str(tmp_path / "none")])
+    assert isinstance(gap.exception, ConfigError) and "--target-stop-gap 0.2" in str(gap.exception)
+    assert not (tmp_path / "none").exists()
     drawn = CliRunner().invoke(app, ["adapt", _tiny_file(tiny, tmp_path), "--policy", "expert", "--target-success",
                                      "0.5", "--target-episodes", "4", "--target-draws", "2", "--steps", "1", "-o",
                                      str(tmp_path / "drawn"), "--json"])
     assert drawn.exit_code == 0, drawn.output
     assert json.loads(drawn.output)["target_success"]["draws"] == 2
+    assert json.loads(drawn.output)["target_success"]["stop_gap"] == 0.1
 
 
 class SeedLog(ExpertPolicy):

@@ -23,6 +23,7 @@ def test_adapting_methods_are_those_with_g():
     ({"target_success": 0.5, "target_episodes": 0}, "target_episodes must be at least 1"),
     ({"target_success": 0.5, "target_choices": 0}, "target_choices must be a whole number from 1 to 64"),
     ({"target_success": 0.5, "target_draws": 17}, "target_draws must be a whole number from 1 to 16"),
+    ({"target_success": 0.5, "target_stop_gap": 0.2}, "target_stop_gap 0.2: editing must stop within the tolerance"),
     ({"target_success": 0.5, "method": "dr"}, "target_success applies to the methods that adapt scenes"),
     ({"target_success": "half"}, "target_success"),
 ])
@@ -40,9 +41,10 @@ def test_loop_config_takes_a_target_and_off_is_the_default():
 def test_an_experiment_gives_the_target_to_its_adapting_methods_only():
     cfg = ExperimentConfig(methods=["none", "dr", "ours"], seeds=[0],
                            loop={"target_success": 0.5, "target_episodes": 8, "target_choices": 3,
-                                 "target_draws": 2}).check()
+                                 "target_draws": 2, "target_stop_gap": 0.05}).check()
     assert cfg.loop_config("ours", 0).target_success == 0.5 and cfg.loop_config("ours", 0).target_episodes == 8
     assert cfg.loop_config("ours", 0).target_choices == 3 and cfg.loop_config("ours", 0).target_draws == 2
+    assert cfg.loop_config("ours", 0).target_stop_gap == 0.05
     assert cfg.loop_config("dr", 0).target_success is None and cfg.loop_config("none", 0).target_episodes == 20
     with pytest.raises(ConfigError, match="target_success"):
         ExperimentConfig(methods=["ours"], seeds=[0], loop={"target_success": 2.0}).check("exp.json")

@@ -64,6 +64,9 @@ TARGET_CHOICES_OPTION = typer.Option(1, "--target-choices", min=1, max=64, metav
 TARGET_DRAWS_OPTION = typer.Option(1, "--target-draws", min=1, max=16, metavar="D", help="With --target-success: "
                                    "action draws per measured episode, each with its own sampling seed (less noise "
                                    "in each measurement, D times the rollouts).")
+TARGET_STOP_GAP_OPTION = typer.Option(None, "--target-stop-gap", callback=numbers.finite, metavar="G", help="With "
+                                      "--target-success: stop editing once |success - P| is at most G (0 to the "
+                                      "tolerance; default the tolerance); P counts as reached within the tolerance.")
 LLM_CONFIG_OPTION = typer.Option(None, "--llm-config", metavar="FILE", help="LLMConfig JSON file (docs/llm.md); "
                                  "the flags above override its fields.")
 
@@ -210,6 +213,7 @@ def adapt(
                                         "episodes the success is measured on (the same after every edit)."),
     target_choices: int = TARGET_CHOICES_OPTION,
     target_draws: int = TARGET_DRAWS_OPTION,
+    target_stop_gap: float | None = TARGET_STOP_GAP_OPTION,
     force: bool = FORCE_OPTION,
 ) -> None:
     """One closed-loop step: roll out the policy, analyze (F), edit the house (G), validate, write OUT.
@@ -250,9 +254,10 @@ def adapt(
         raise ConfigError(f"--analyzer {analyzer!r}: unknown analyzer; use builtin or llm")
     check_llm_config(llm_config_file)
     if target_success is not None:
-        from adaptenv.adapt.target import check_target
+        from adaptenv.adapt.target import check_stop_gap, check_target
 
         check_target(target_success, target_tolerance)
+        check_stop_gap(target_stop_gap, target_tolerance)
         if trajectory is not None or diagnose:
             raise ConfigError("--target-success: drop --trajectory and --diagnose (the success is measured on "
                               "--target-episodes episodes of the policy itself)")
@@ -298,7 +303,7 @@ def adapt(
                 if target_success is not None:
                     s = _target_one(h, name, where, pol, f, gen, steps=steps, seed=seed, target=target,
                                     success=target_success, tolerance=target_tolerance, episodes=target_episodes,
-                                    choices=target_choices, draws=target_draws)
+                                    choices=target_choices, draws=target_draws, stop_gap=target_stop_gap)
                 else:
                     s = _adapt_one(h, name, where, pol, f, gen, steps=steps, seed=seed, target=target,
                                    diagnose=diagnose, before=before)
@@ -364,7 +369,8 @@ def _scorer_field(generator) -> dict:
 
 
 def _target_one(h, name: str, out: Path, policy, analyzer, generator, *, steps: int, seed: int, target: str | None,
-                success: float, tolerance: float, episodes: int, choices: int = 1, draws: int = 1) -> dict:
+                success: float, tolerance: float, episodes: int, choices: int = 1, draws: int = 1,
+                stop_gap: float | None = None) -> dict:
     """Edit one house toward the policy's success rate ``success`` with
     :func:`~adaptenv.adapt.target.adapt_to_success`; write it into ``out`` and return its summary."""
     from adaptenv.adapt.edits import edit_counts
@@ -382,7 +388,7 @@ def _target_one(h, name: str, out: Path, policy, analyzer, generator, *, steps: 
                      "at most)"):
         res = adapt_to_success(h, policy, generator, success, tolerance=tolerance, episodes=episodes, max_edits=steps,
                                analyzer=analyzer, seed=seed, target_type=target, name=name, choices=choices,
-                               draws=draws)
+                               draws=draws, stop_gap=stop_gap)
     counts = edit_counts(res.edits, h, res.house)
     types = house_types(h)
     counts["objects"] = [{"type": types.get(o["id"]), **o} for o in counts["objects"]]

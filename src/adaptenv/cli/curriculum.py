@@ -27,6 +27,7 @@ from adaptenv.cli.adapt import (
     TARGET_CHOICES_OPTION,
     TARGET_DRAWS_OPTION,
     TARGET_MOVES_OPTION,
+    TARGET_STOP_GAP_OPTION,
 )
 from adaptenv.curriculum.executor import ADDRESS_OPTION, EXECUTOR_OPTION, WORKERS_OPTION
 from adaptenv.errors import ConfigError, RunsFailed
@@ -168,6 +169,7 @@ def loop(
                                         "episodes per scene the success is measured on."),
     target_choices: int = TARGET_CHOICES_OPTION,
     target_draws: int = TARGET_DRAWS_OPTION,
+    target_stop_gap: float | None = TARGET_STOP_GAP_OPTION,
     heldout_episodes: int = typer.Option(100, "--heldout-episodes", callback=numbers.episodes, help="Episodes per held-out set."),
     heldout: list[str] = typer.Option(None, "--heldout", help="Held-out set NAME=HOUSES (repeatable); default: "
                                       "rearranged=preset:pretrain-rearranged and unseen=preset:pretrain-unseen."),
@@ -224,7 +226,8 @@ def loop(
                      learned_scorer=str(learned_scorer) if learned_scorer else None,
                      heldout_episodes=heldout_episodes, llm=llm, target_success=target_success,
                      target_tolerance=target_tolerance, target_episodes=target_episodes,
-                     target_choices=target_choices, target_draws=target_draws, **({"heldout": h} if (h := _heldout(heldout)) else {}))
+                     target_choices=target_choices, target_draws=target_draws,
+                     target_stop_gap=target_stop_gap, **({"heldout": h} if (h := _heldout(heldout)) else {}))
     cfg.check("adaptenv loop")
     options = ExecutorOptions(executor, workers, address).check()
     check_house_sets([cfg.houses, *cfg.heldout.values()], strict, console.print)

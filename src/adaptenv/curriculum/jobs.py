@@ -235,6 +235,7 @@ class GenerateJob:
     target_episodes: int = 20
     target_choices: int = 1
     target_draws: int = 1
+    target_stop_gap: float | None = None
 
 
 @dataclass
@@ -333,7 +334,7 @@ def _run_targeted(job: GenerateJob) -> Generated:
     res = adapt_to_success(job.house, job.weights.policy(), generator, job.target_success,
                            tolerance=job.target_tolerance, episodes=job.target_episodes, max_edits=job.edit_steps,
                            analyzer=analyzer, seed=job.seed, name=job.name, choices=job.target_choices,
-                           draws=job.target_draws)
+                           draws=job.target_draws, stop_gap=job.target_stop_gap)
     expert_before, _ = measure(compile_world(job.house, job.name), res.episodes, ExpertPolicy())
     expert_after, _ = measure(compile_world(res.house, job.name), res.episodes, ExpertPolicy()) if res.edits \
         else (expert_before, None)

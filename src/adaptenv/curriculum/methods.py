@@ -29,7 +29,7 @@ import numpy as np
 
 from adaptenv.adapt.generators.learned import load_scorer
 from adaptenv.adapt.llm.accounting import check_llm_section
-from adaptenv.adapt.target import MAX_DRAWS, check_target
+from adaptenv.adapt.target import MAX_DRAWS, check_stop_gap, check_target
 from adaptenv.agents.config import FinetuneConfig
 from adaptenv.agents.teachers import TEACHERS
 from adaptenv.agents.train import check_precision
@@ -161,6 +161,9 @@ class LoopConfig:
     """With target_success: edits G proposes per round, each measured on those episodes; the closest to P is kept."""
     target_draws: int = 1
     """With target_success: action draws per measured episode, each with its own sampling seed."""
+    target_stop_gap: float | None = None
+    """With target_success: stop editing a scene once |success - P| is at most this (0 to target_tolerance; null:
+    target_tolerance)."""
 
     __pydantic_config__ = STRICT
 
@@ -223,6 +226,7 @@ class LoopConfig:
             if not 1 <= self.target_choices <= 64:
                 raise ConfigError(f"{source}: target_choices must be a whole number from 1 to 64, got "
                                   f"{self.target_choices}")
+            check_stop_gap(self.target_stop_gap, self.target_tolerance, what=f"{source}: target_stop_gap")
             if not 1 <= self.target_draws <= MAX_DRAWS:
                 raise ConfigError(f"{source}: target_draws must be a whole number from 1 to {MAX_DRAWS}, got "
                                   f"{self.target_draws}")
@@ -738,4 +742,4 @@ def target_fields(cfg: LoopConfig) -> dict[str, Any]:
         return {}
     return {"target_success": cfg.target_success, "target_tolerance": cfg.target_tolerance,
             "target_episodes": cfg.target_episodes, "target_choices": cfg.target_choices,
-            "target_draws": cfg.target_draws}
+            "target_draws": cfg.target_draws, "target_stop_gap": cfg.target_stop_gap}
