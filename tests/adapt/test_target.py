@@ -80,15 +80,15 @@ def home_of(house) -> tuple[float, float]:
     return o.position.x, o.position.z
 
 
-def run(tiny, target, *, stride=3.0, tolerance=0.1, max_edits=8, patience=3, per=0.2):
+def run(tiny, target, *, stride=3.0, tolerance=0.1, max_edits=8, patience=3, per=0.2, stop_gap=None):
     return adapt_to_success(tiny, ShyExpert(home_of(tiny), per), Pusher(stride), target, tolerance=tolerance,
-                            episodes=10, max_edits=max_edits, patience=patience, seed=0, name="tiny")
+                            episodes=10, max_edits=max_edits, patience=patience, seed=0, name="tiny", stop_gap=stop_gap)
 
 
 def test_success_is_brought_within_tolerance_and_each_kept_edit_comes_closer(tiny):
     res = run(tiny, 0.7, tolerance=0.1)
     assert res.before.success == 1.0
-    assert res.stopped == "within tolerance" and res.reached and res.gap <= 0.1 + 1e-9
+    assert res.stopped == "within the stop gap 0.05" and res.reached and res.gap <= 0.05 + 1e-9
     assert 1 <= len(res.edits) <= 8 and res.success_trace[0] == 1.0 and res.success_trace[-1] == res.success
     gaps = [abs(s - 0.7) for s in res.success_trace]
     assert all(b <= a + 1e-9 for a, b in zip(gaps, gaps[1:], strict=False))
@@ -118,7 +118,7 @@ def test_an_edit_that_overshoots_is_dropped(tiny):
 def test_already_within_tolerance_needs_no_edit(tiny):
     g = Pusher(3.0)
     res = adapt_to_success(tiny, ShyExpert(home_of(tiny)), g, 0.95, tolerance=0.1, episodes=10, name="tiny")
-    assert res.stopped == "within tolerance" and res.edits == [] and g.calls == 0 and res.house is tiny
+    assert res.stopped == "within the stop gap 0.05" and res.edits == [] and g.calls == 0 and res.house is tiny
 
 
 class StridePusher(Pusher):
@@ -236,7 +236,7 @@ def test_cli_reports_target_reached_success_gap_and_edits(tiny, tmp_path):
                                      str(tmp_path / "drawn"), "--json"])
     assert drawn.exit_code == 0, drawn.output
     assert json.loads(drawn.output)["target_success"]["draws"] == 2
-    assert json.loads(drawn.output)["target_success"]["stop_gap"] == 0.1
+    assert json.loads(drawn.output)["target_success"]["stop_gap"] == pytest.approx(0.05)
 
 
 class SeedLog(ExpertPolicy):
@@ -335,15 +335,17 @@ def test_an_episode_without_a_seed_draws_from_seed_zero():
 
 
 def test_a_stop_gap_below_the_tolerance_edits_on_past_the_tolerance_edge(tiny):
-    """With stop_gap the run goes on where the tolerance alone stopped it, the same edits first, until the
-    gap is at most stop_gap; `reached` is still judged by the tolerance."""
-    edge = run(tiny, 0.7, tolerance=0.2)
-    deeper = adapt_to_success(tiny, ShyExpert(home_of(tiny)), Pusher(3.0), 0.7, tolerance=0.2, episodes=10,
-                              max_edits=8, patience=3, seed=0, name="tiny", stop_gap=0.0)
-    assert edge.stopped == "within tolerance" and edge.gap > 0.0
-    assert deeper.stopped == "within the stop gap 0.00" and deeper.gap == pytest.approx(0.0) and deeper.reached
+    """With a stop gap under the tolerance (by default half of it) the run goes on where the tolerance alone
+    stopped it, the same edits first, until the gap is at most the stop gap; `reached` is still judged by the
+    tolerance."""
+    edge = run(tiny, 0.7, tolerance=0.2, stop_gap=0.2)
+    default, deeper = run(tiny, 0.7, tolerance=0.2), run(tiny, 0.7, tolerance=0.2, stop_gap=0.0)
+    assert edge.stopped == "within tolerance" and edge.gap > 0.1
+    assert default.stopped == "within the stop gap 0.1" and default.gap <= 0.1 + 1e-9
+    assert deeper.stopped == "within the stop gap 0" and deeper.gap == pytest.approx(0.0) and deeper.reached
     assert deeper.edits[:len(edge.edits)] == edge.edits and len(deeper.edits) > len(edge.edits)
     assert deeper.to_dict()["stop_gap"] == 0.0 and edge.to_dict()["stop_gap"] == 0.2
+    assert default.to_dict()["stop_gap"] == pytest.approx(0.1)
     for bad in (0.3, -0.1, math.nan):
         with pytest.raises(ConfigError, match="stop gap must lie in"):
             adapt_to_success(tiny, ShyExpert(home_of(tiny)), Pusher(3.0), 0.7, tolerance=0.2, stop_gap=bad)

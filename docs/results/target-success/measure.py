@@ -3,6 +3,7 @@
     NUMBA_NUM_THREADS=1 nice -n 10 python docs/results/target-success/measure.py OUT.jsonl [HOUSES [STEPS]]
     python docs/results/target-success/measure.py OUT.jsonl table    # the table of the rows already there
     python docs/results/target-success/measure.py summary A.jsonl B.jsonl ...   # every run judged on fresh draws, one line per file and G
+    python docs/results/target-success/measure.py stops A.jsonl ...   # +stopK rows: each run against its tolerance_stop
 
 Options (before OUT.jsonl): ``--generators a,b`` (default ``builtin,random,failure-modes``; a name may end in
 ``+checksK``, the learned G with ``checks=K``, in ``+choicesK``, K edits proposed and measured per round, and in
@@ -176,9 +177,32 @@ def summary(files: list[Path]) -> None:
                   f"{before:.3f}, {after:.3f} | {100 * (before - after):.1f} |")
 
 
+def stops(files: list[Path]) -> None:
+    """Per P, the ``+stopK`` runs within 0.10 of P on their own and on fresh draws, against the same runs where the
+    tolerance alone would have stopped them (``tolerance_stop``), with the mean edits kept and fresh success."""
+    rs = [r for f in files for r in rows(f) if "tolerance_stop" in r]
+    print("| P | runs | stop gap: within 0.10 (own draws / fresh draws) | tolerance stop: within 0.10 (own / fresh) | "
+          "mean edits kept (stop gap / tolerance stop) | mean fresh success reached (stop gap / tolerance stop) |")
+    print("|---|---|---|---|---|---|")
+    for p in sorted({r["target"] for r in rs}):
+        sel = [r for r in rs if r["target"] == p]
+        ts = [r["tolerance_stop"] for r in sel]
+        near = lambda v: abs(v - p) <= 0.10 + 1e-9  # noqa: E731
+        print(f"| {p:.2f} | {len(sel)} | {sum(near(r['success']) for r in sel)} / {sum(near(r['fresh_success']) for r in sel)} | "
+              f"{sum(near(t['success']) for t in ts)} / {sum(near(t['fresh_success']) for t in ts)} | "
+              f"{np.mean([r['edits'] for r in sel]):.1f} / {np.mean([t['edits'] for t in ts]):.1f} | "
+              f"{np.mean([r['fresh_success'] for r in sel]):.3f} / {np.mean([t['fresh_success'] for t in ts]):.3f} |")
+    both = sum(abs(r["fresh_success"] - r["target"]) <= 0.10 + 1e-9 for r in rs)
+    tol = sum(abs(r["tolerance_stop"]["fresh_success"] - r["target"]) <= 0.10 + 1e-9 for r in rs)
+    print(f"\nwithin 0.10 of P on fresh draws: {both} of {len(rs)} runs with the stop gap, {tol} at their tolerance stop")
+
+
 if __name__ == "__main__":
     if sys.argv[1:2] == ["summary"]:
         summary([Path(a) for a in sys.argv[2:]])
+        sys.exit(0)
+    if sys.argv[1:2] == ["stops"]:
+        stops([Path(a) for a in sys.argv[2:]])
         sys.exit(0)
     while sys.argv[1].startswith("--"):  # --generators a,b / --patience N / --first K
         flag, value = sys.argv.pop(1), sys.argv.pop(1)

@@ -66,7 +66,8 @@ TARGET_DRAWS_OPTION = typer.Option(1, "--target-draws", min=1, max=16, metavar="
                                    "in each measurement, D times the rollouts).")
 TARGET_STOP_GAP_OPTION = typer.Option(None, "--target-stop-gap", callback=numbers.finite, metavar="G", help="With "
                                       "--target-success: stop editing once |success - P| is at most G (0 to the "
-                                      "tolerance; default the tolerance); P counts as reached within the tolerance.")
+                                      "tolerance; default half the tolerance); P counts as reached within the "
+                                      "tolerance.")
 LLM_CONFIG_OPTION = typer.Option(None, "--llm-config", metavar="FILE", help="LLMConfig JSON file (docs/llm.md); "
                                  "the flags above override its fields.")
 

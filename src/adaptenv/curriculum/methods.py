@@ -163,7 +163,7 @@ class LoopConfig:
     """With target_success: action draws per measured episode, each with its own sampling seed."""
     target_stop_gap: float | None = None
     """With target_success: stop editing a scene once |success - P| is at most this (0 to target_tolerance; null:
-    target_tolerance)."""
+    half of target_tolerance)."""
 
     __pydantic_config__ = STRICT
 
