@@ -416,7 +416,8 @@ def _print_target_summary(console, s: dict, out: Path) -> None:
     t = s["target_success"]
     draws = f" x {t['draws']} action draws" if t.get("draws", 1) > 1 else ""
     console.print(f"policy {s['policy']}, analyzer {s['analyzer']}, generator {s['generator']}; success measured on "
-                  f"{t['episodes']} fixed episodes{draws}", highlight=False, soft_wrap=True)
+                  f"{t['episodes']} fixed episodes{draws}; editing stops within {t['stop_gap']:.3g} of the target",
+                  highlight=False, soft_wrap=True)
     console.print(f"target success {t['target']:.2f} +/- {t['tolerance']:.2f}: reached {t['success']:.2f} (from "
                   f"{t['success_before']:.2f}), gap {t['gap']:.2f}, {t['edits']} edit(s) kept of {t['proposed']} "
                   f"proposed; {t['stopped']}", highlight=False, soft_wrap=True)
