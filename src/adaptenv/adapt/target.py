@@ -381,7 +381,7 @@ def adapt_to_success(house: House, policy: Policy, generator: Generator, target:
     first, trajs = measure(world, runs, policy)
     result = TargetResult(house, house, getattr(generator, "name", type(generator).__name__), float(target),
                           float(tolerance), eps, first, first, trajectories_before=trajs, trajectories_after=trajs,
-                          draws=int(draws), confirm=bool(confirm), stop_gap=stop_gap)
+                          draws=int(draws), confirm=bool(confirm), stop_gap=stop)
     result.measure_steps = first.steps
     confirming = drawn(eps, int(draws), CONFIRM_SEED_STRIDE, first=1) if confirm else []
     cur_c: Measurement | None = None

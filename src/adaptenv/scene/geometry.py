@@ -130,8 +130,8 @@ class Footprint:
     @cached_property
     def bounds(self) -> tuple[float, float, float, float]:
         """(min x, min z, max x, max z) of :attr:`outline`, m."""
-        o = self.outline
-        return float(o[:, 0].min()), float(o[:, 1].min()), float(o[:, 0].max()), float(o[:, 1].max())
+        lo, hi = self.outline.min(axis=0), self.outline.max(axis=0)
+        return float(lo[0]), float(lo[1]), float(hi[0]), float(hi[1])
 
     @cached_property
     def polygon(self) -> Polygon:
