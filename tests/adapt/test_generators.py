@@ -239,3 +239,51 @@ def test_builtin_rollout_checks_score_each_scene_as_one_run_at_a_time():
     scores = [s.policy_score_before for s in res.steps] + [s.policy_score_after for s in res.steps]
     assert any(s.status == "applied" for s in res.steps)
     assert len({x for x in scores if x is not None}) > 1, "the check should see different SPLs"
+
+
+def _plain_to_wall(v, oid, aim):
+    """``to_wall`` as one wall at a time, the definition its array form keeps."""
+    from adaptenv.scene.geometry import heading
+
+    ref, ctx = v.plausible, v.ctx
+    i = ctx.index[oid]
+    c, yaw = ctx.centers[i], float(ctx.yaws[i])
+    h, half_w, half_d = heading(yaw), float(ctx.sizes[i, 0]) / 2.0, float(ctx.sizes[i, 1]) / 2.0
+    room = v.geometry.room_of_point(float(c[0]), float(c[1]))
+    best, best_d = None, np.inf
+    for p0, p1 in zip(ref.walls.p0, ref.walls.p1, strict=True):
+        length = float(np.hypot(*(p1 - p0)))
+        if length < 2.0 * half_w + 0.1:
+            continue
+        u = (p1 - p0) / length
+        n = np.array([-u[1], u[0]])
+        if np.dot(n, aim - p0) < 0:
+            n = -n
+        if abs(float(np.dot(n, h))) < 0.99:
+            continue
+        t = float(np.clip(np.dot(aim - p0, u), half_w + 0.05, length - half_w - 0.05))
+        center = p0 + t * u + n * (half_d + 0.03)
+        dist = float(np.hypot(*(center - aim)))
+        if dist < best_d and v.geometry.room_of_point(float(center[0]), float(center[1])) == room:
+            best, best_d = (center - c, math.degrees(math.atan2(n[0], n[1])) % 360.0), dist
+    return best
+
+
+def test_to_wall_gives_what_one_wall_at_a_time_gives(real_house):
+    """The array form of ``to_wall`` picks the same wall, displacement and yaw, bit for bit, as the per-wall loop,
+    for every wall-standing object of a real house aimed at random points."""
+    from adaptenv.adapt.generators.builtin import to_wall
+    from adaptenv.adapt.validation import EditValidator
+
+    v = EditValidator(real_house)
+    rng = np.random.default_rng(0)
+    found = 0
+    for oid in sorted(v.plausible.anchored):
+        c = v.ctx.centers[v.ctx.index[oid]]
+        for aim in c + rng.uniform(-3.0, 3.0, (10, 2)):
+            got, want = to_wall(v, oid, aim), _plain_to_wall(v, oid, aim)
+            assert (got is None) == (want is None)
+            if want is not None:
+                found += 1
+                assert np.array_equal(got[0], want[0]) and got[1] == want[1]
+    assert found >= 20, "walls were found"

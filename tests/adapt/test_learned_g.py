@@ -267,6 +267,29 @@ def test_candidate_pool_takes_the_requested_share_of_random_moves(tiny):
         LearnedGenerator(random_share=1.5)
 
 
+def test_each_candidates_features_are_its_own(tiny):
+    """Features computed for a whole pool give each candidate the row it gets alone (the pool's arrays line up)."""
+    from adaptenv.adapt.generators.edit_features import (
+        Scene,
+        candidate_features,
+        enumerate_candidates,
+    )
+    from adaptenv.adapt.objectives import RouteSpec
+    from adaptenv.sim.world import compile_world
+
+    house, ctx, _ = _context(tiny)
+    ep = ctx.episode
+    v = EditValidator(house, episode_targets=[ep.target_type], start=ep.start[:2])
+    world, route = compile_world(v.house, "c"), RouteSpec.from_episode(ep.target_type, ep.start, ctx.trajectory)
+    scene = Scene.of(v, world, route)
+    cands = enumerate_candidates(v, world, route, np.random.default_rng(1), 16, scene=scene)
+    pool = candidate_features(v, scene, cands, None)
+    assert pool.shape == (16, len(FEATURE_NAMES)) and len({c.kind for c in cands}) >= 2
+    for n, c in enumerate(cands):
+        assert np.array_equal(pool[n], candidate_features(v, scene, [c], None)[0])
+    assert candidate_features(v, scene, [], None).shape == (0, len(FEATURE_NAMES))
+
+
 def test_a_g_ranked_by_agent_drops_edits_each_object_at_most_once(tiny, collected, tmp_path):
     ckpt = tmp_path / "agent.pt"  # an agent-target scorer: a second move of an object could undo its first
     result = runner.invoke(app, ["gdata", "train", str(collected[0]), "-o", str(ckpt), "--epochs", "2", "--heldin", "2"])

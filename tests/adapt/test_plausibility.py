@@ -257,3 +257,76 @@ def test_boxes_apart_only_where_the_shapes_are_further_apart_than_the_gap():
             skipped += 1
             assert shapely.distance(a.polygon, b.polygon) > gap
     assert 200 < skipped < 1800, "both outcomes are exercised"
+
+
+def _plain_against(walls, fp) -> bool:
+    """The scene graph's ``against_wall`` from shapely distances and ``backs_onto``, as the rule defines it."""
+    import math
+
+    import shapely
+
+    from adaptenv.scene.graph import AGAINST_WALL_ANGLE, AGAINST_WALL_DISTANCE, backs_onto
+
+    near = shapely.distance(shapely.linestrings(fp.corners[:2]), walls.lines) <= AGAINST_WALL_DISTANCE
+    return any(backs_onto(fp, walls.p0[k], walls.p1[k], math.cos(math.radians(AGAINST_WALL_ANGLE)))
+               for k in np.flatnonzero(near))
+
+
+def test_against_wall_test_matches_its_definition(real_house):
+    """The compiled distances and float arithmetic of the edge_off_wall test give what shapely and ``backs_onto``
+    give, for objects slid along, onto and off their walls and turned."""
+    from adaptenv.adapt.plausibility import PlausibilityReference
+    from adaptenv.scene.geometry import SceneGeometry
+
+    geometry = SceneGeometry.from_house(real_house)
+    walls = PlausibilityReference.of(real_house, geometry=geometry).walls
+    rng = np.random.default_rng(2)
+    got, want = [], []
+    for f in geometry.floor_objects:
+        for dx, dz, turn in zip(*rng.uniform(-0.3, 0.3, (2, 12)), rng.choice([0.0, 0.0, 90.0, 180.0, 7.0], 12),
+                                strict=True):
+            fp = replace(f, center=(f.center[0] + dx, f.center[1] + dz), yaw=(f.yaw + turn) % 360.0)
+            got.append(walls.against(fp))
+            want.append(_plain_against(walls, fp))
+    assert got == want
+    assert 20 < sum(want) < len(want) - 20, "both outcomes are exercised"
+
+
+def test_the_first_broken_rule_decides_as_the_full_check_does(real_house):
+    """``breaks_rules`` (which stops at the first rule broken) is True exactly where ``check_move`` finds a
+    violation, over random moves and turns of every floor object."""
+    from adaptenv.adapt.plausibility import PlausibilityReference, breaks_rules, check_move
+    from adaptenv.scene.geometry import SceneGeometry
+
+    geometry = SceneGeometry.from_house(real_house)
+    ref = PlausibilityReference.of(real_house, geometry=geometry)
+    current = {f.object_id: f for f in geometry.floor_objects}
+    rng = np.random.default_rng(3)
+    found = []
+    for f in geometry.floor_objects:
+        for dx, dz, turn in zip(*rng.uniform(-1.5, 1.5, (2, 6)), rng.choice([0.0, 90.0, 33.0], 6), strict=True):
+            fp = replace(f, center=(f.center[0] + dx, f.center[1] + dz), yaw=(f.yaw + turn) % 360.0)
+            found.append(check_move(ref, fp, current))
+            assert breaks_rules(ref, fp, current) == bool(found[-1])
+    assert 20 < sum(map(bool, found)) < len(found) - 20, "both outcomes are exercised"
+    assert len({v.rule for vs in found for v in vs}) >= 4, "several rules are exercised"
+
+
+def test_facing_cosine_is_numpys_bit_for_bit():
+    """The facing rule's cosine in Python floats equals numpy's norm-and-dot form exactly, and backs_onto's float
+    form agrees with backs_onto, on random poses."""
+    import math
+
+    from adaptenv.adapt.plausibility import _backs_onto, _faces
+    from adaptenv.scene.geometry import Footprint, heading
+    from adaptenv.scene.graph import backs_onto
+
+    rng = np.random.default_rng(4)
+    for _ in range(3000):
+        a, b = (Footprint("o", "Sofa", "a", tuple(rng.uniform(0, 5, 2)), tuple(rng.uniform(0.2, 2.0, 2)),
+                          float(rng.choice([0.0, 90.0, rng.uniform(0, 360)])), 1.0, "floor", True) for _ in range(2))
+        v = np.array(b.center) - np.array(a.center)
+        assert _faces(a, b) == float(np.dot(heading(a.yaw), v / float(np.linalg.norm(v))))
+        p0, p1 = rng.uniform(0, 5, (2, 2))
+        cos = math.cos(math.radians(float(rng.choice([5.0, 30.0]))))
+        assert _backs_onto(a, p0, p1, cos) == backs_onto(a, p0, p1, cos)

@@ -49,7 +49,7 @@ from __future__ import annotations
 import json
 import math
 from collections import Counter
-from collections.abc import Mapping
+from collections.abc import Iterator, Mapping
 from dataclasses import dataclass, field
 from functools import cache
 from importlib import resources
@@ -62,7 +62,7 @@ from adaptenv.adapt.doorways import APPROACH_DEPTH, ApproachZone, approach_zones
 from adaptenv.adapt.realism import FREE_STANDING
 from adaptenv.errors import AdaptenvError
 from adaptenv.scene.assets import AssetCatalog, load_catalog
-from adaptenv.scene.geometry import Footprint, SceneGeometry, heading, yaw_axes
+from adaptenv.scene.geometry import Footprint, SceneGeometry, yaw_axes
 from adaptenv.scene.graph import (
     AGAINST_WALL_ANGLE,
     AGAINST_WALL_DISTANCE,
@@ -174,10 +174,13 @@ class _Walls:
         """The scene graph's ``against_wall``: the back edge along a wall, the front pointing into the room."""
         if not len(self.lines):
             return False
-        back = shapely.LineString(fp.corners[:2])
-        near = np.flatnonzero(shapely.distance(back, self.lines) <= AGAINST_WALL_DISTANCE)
+        (ax, az), (bx, bz) = fp.corners[:2].tolist()
+        near = _segments_near(ax, az, bx, bz, self.lo, self.hi, self.p0, self.p1, AGAINST_WALL_DISTANCE)
+        if (near == _TIE).any():  # GEOS decides distances this close to the limit
+            k = np.flatnonzero(near == _TIE)
+            near[k] = shapely.distance(shapely.linestrings(fp.corners[:2]), self.lines[k]) <= AGAINST_WALL_DISTANCE
         min_cos = math.cos(math.radians(AGAINST_WALL_ANGLE))
-        return any(backs_onto(fp, self.p0[k], self.p1[k], min_cos) for k in near)
+        return any(_backs_onto(fp, self.p0[k], self.p1[k], min_cos) for k in np.flatnonzero(near == 1))
 
     def distance(self, fp: Footprint) -> float:
         """The distance (m) from the footprint's outline to the nearest blocking segment (inf when there is none)."""
@@ -201,11 +204,31 @@ class _Walls:
         a = np.ascontiguousarray(fp.outline, dtype=np.float64)
         near = _edges_along(a, self.units, self.lo, self.hi, self.p0, self.p1,
                             math.sin(math.radians(AGAINST_WALL_ANGLE)), AGAINST_WALL_DISTANCE)
-        if (tie := np.argwhere(near == _TIE)).size:  # GEOS decides distances this close to the limit
-            e, k = tie.T
+        if (near == _TIE).any():  # GEOS decides distances this close to the limit
+            e, k = np.nonzero(near == _TIE)
             edges = shapely.linestrings(np.stack([a[e], np.roll(a, -1, axis=0)[e]], axis=1))
             near[e, k] = shapely.distance(edges, self.lines[k]) <= AGAINST_WALL_DISTANCE
         return float(_uncovered(a, near == 1, self.p0, self.p1, MIN_WALL_OVERLAP))
+
+
+
+def _backs_onto(fp: Footprint, p0: np.ndarray, p1: np.ndarray, min_cos: float) -> bool:
+    """:func:`~adaptenv.scene.graph.backs_onto` in Python floats (a tenth of its time); ``backs_onto`` itself
+    decides whenever a value lies within 1e-9 of its limit, where the two roundings could disagree."""
+    (x0, z0), (x1, z1) = p0.tolist(), p1.tolist()
+    length = max(math.sqrt((x1 - x0) * (x1 - x0) + (z1 - z0) * (z1 - z0)), 1e-12)  # np.linalg.norm's arithmetic
+    ux, uz = (x1 - x0) / length, (z1 - z0) / length
+    nx, nz = -uz, ux
+    side = nx * (fp.center[0] - x0) + nz * (fp.center[1] - z0)
+    if side < 0:
+        nx, nz = -nx, -nz
+    a, b = sorted((cx - x0) * ux + (cz - z0) * uz for cx, cz in fp.corners[:2].tolist())
+    yaw = math.radians(fp.yaw)  # heading(fp.yaw) is (sin, cos) of it
+    facing = math.sin(yaw) * nx + math.cos(yaw) * nz - min_cos
+    overlap = min(b, length) - max(a, 0.0) - MIN_WALL_OVERLAP
+    if min(abs(side), abs(facing), abs(overlap)) <= 1e-9:
+        return backs_onto(fp, p0, p1, min_cos)
+    return facing >= 0 and overlap >= 0
 
 
 _TIE = 2
@@ -232,6 +255,22 @@ def _point_segment(px, pz, ax, az, bx, bz):
     len2 = ux * ux + uz * uz
     t = 0.0 if len2 == 0.0 else min(1.0, max(0.0, ((px - ax) * ux + (pz - az) * uz) / len2))
     return math.hypot(px - (ax + t * ux), pz - (az + t * uz))
+
+
+@numba.njit(cache=True)
+def _segments_near(ax, az, bx, bz, lo, hi, p0, p1, reach):
+    """int8 (segments,): 1 where a blocking segment lies within ``reach`` m of the segment ab, 0 where it does not,
+    _TIE where its distance is within 1e-9 m of ``reach``."""
+    m = p0.shape[0]
+    out = np.zeros(m, dtype=np.int8)
+    for k in range(m):
+        gx = max(max(lo[k, 0] - max(ax, bx), min(ax, bx) - hi[k, 0]), 0.0)
+        gz = max(max(lo[k, 1] - max(az, bz), min(az, bz) - hi[k, 1]), 0.0)
+        if math.hypot(gx, gz) > reach + 1e-9:  # its bounding box is already farther
+            continue
+        d = _segment_distance(ax, az, bx, bz, p0[k, 0], p0[k, 1], p1[k, 0], p1[k, 1])
+        out[k] = _TIE if abs(d - reach) <= 1e-9 else (1 if d <= reach else 0)
+    return out
 
 
 @numba.njit(cache=True)
@@ -369,10 +408,14 @@ def _on_open_floor(fp: Footprint, walls: _Walls, others: list[Footprint]) -> boo
 
 
 def _faces(a: Footprint, b: Footprint) -> float:
-    """Cosine between a's heading and the direction from a's centre to b's."""
-    v = np.array(b.center) - np.array(a.center)
-    n = float(np.linalg.norm(v))
-    return float(np.dot(heading(a.yaw), v / n)) if n > 1e-9 else 1.0
+    """Cosine between a's heading and the direction from a's centre to b's (in Python floats, with the arithmetic
+    of numpy's norm and dot of two 2-vectors)."""
+    vx, vz = b.center[0] - a.center[0], b.center[1] - a.center[1]
+    n = math.sqrt(vx * vx + vz * vz)
+    if n <= 1e-9:
+        return 1.0
+    yaw = math.radians(a.yaw)  # heading(a.yaw) is (sin, cos) of it
+    return math.sin(yaw) * (vx / n) + math.cos(yaw) * (vz / n)
 
 
 @dataclass(frozen=True)
@@ -454,38 +497,45 @@ class PlausibilityReference:
 
 def check_move(ref: PlausibilityReference, fp: Footprint, current: Mapping[str, Footprint]) -> list[Violation]:
     """The rules ``fp`` (an object at its new pose) breaks, with every other object where ``current`` has it."""
+    return list(_violations(ref, fp, current))
+
+
+def breaks_rules(ref: PlausibilityReference, fp: Footprint, current: Mapping[str, Footprint]) -> bool:
+    """Whether ``fp`` breaks any rule :func:`check_move` checks (it stops at the first one)."""
+    return next(_violations(ref, fp, current), None) is not None
+
+
+def _violations(ref: PlausibilityReference, fp: Footprint, current: Mapping[str, Footprint]) -> Iterator[Violation]:
+    """:func:`check_move`'s violations one at a time, the cheap rules first."""
     oid = fp.object_id
-    out: list[Violation] = []
     now = dict(current)
     now[oid] = fp
     if oid in ref.anchored and not ref.walls.against(fp):
-        out.append(Violation("edge_off_wall", oid, f"{oid} ({fp.object_type}) no longer stands with its back to a "
-                             "wall facing the room; its type stands only along walls"))
+        yield Violation("edge_off_wall", oid, f"{oid} ({fp.object_type}) no longer stands with its back to a "
+                        "wall facing the room; its type stands only along walls")
     for door_id, grew in _zone_growth(ref.zones, ref.zone_area, fp):
-        out.append(Violation("door_approach", oid, f"{oid} moves {grew:.2f} m^2 further into the "
-                             f"{DOOR_CLEARANCE:g} m clearance in front of doorway {door_id}", (door_id,)))
+        yield Violation("door_approach", oid, f"{oid} moves {grew:.2f} m^2 further into the "
+                        f"{DOOR_CLEARANCE:g} m clearance in front of doorway {door_id}", (door_id,))
     for a, m, name, d0 in ref.groups:
         if oid not in (a, m) or a not in now or m not in now:
             continue
         d = float(shapely.distance(now[a].polygon, now[m].polygon))
         if d > max(GROUP_DISTANCE, d0 + 0.05):
             other = m if oid == a else a
-            out.append(Violation("group_split", oid, f"{oid} ends {d:.2f} m from {other}, its {name} group "
-                                 "partner; move the group together or keep them side by side", (other,)))
+            yield Violation("group_split", oid, f"{oid} ends {d:.2f} m from {other}, its {name} group "
+                            "partner; move the group together or keep them side by side", (other,))
     for a, b in ref.facing:
         if oid in (a, b) and a in now and b in now and _faces(now[a], now[b]) < FACING_AFTER:
-            out.append(Violation("facing_broken", oid, f"{a} no longer faces {b}",
-                                 (b if oid == a else a,)))
-    out += _person_rules(ref, fp, now)
+            yield Violation("facing_broken", oid, f"{a} no longer faces {b}", (b if oid == a else a,))
+    yield from _person_rules(ref, fp, now)
     floor = None
     for k in sorted({oid} | {s for s in ref.small if s in now and s != oid and ref.moved(now[s])}):
         if k not in ref.small:
             continue
         floor = floor or [f for f in now.values() if f.role == "floor"]
         if _on_open_floor(now[k], ref.walls, floor):
-            out.append(Violation("open_floor", k, f"{k} ({now[k].object_type}) stands alone on open floor; its "
-                                 "type stands by a wall or by furniture, never in the middle of a room"))
-    return out
+            yield Violation("open_floor", k, f"{k} ({now[k].object_type}) stands alone on open floor; its "
+                            "type stands by a wall or by furniture, never in the middle of a room")
 
 
 def _zone_growth(zones, before: Mapping[tuple[str, str], float], fp: Footprint) -> list[tuple[str, float]]:
@@ -499,19 +549,18 @@ def _zone_growth(zones, before: Mapping[tuple[str, str], float], fp: Footprint) 
     return out
 
 
-def _person_rules(ref: PlausibilityReference, fp: Footprint, now: Mapping[str, Footprint]) -> list[Violation]:
+def _person_rules(ref: PlausibilityReference, fp: Footprint, now: Mapping[str, Footprint]) -> Iterator[Violation]:
     """What a person sees at once: an overhang past a wall's end, furniture in an open connection, a group left
     behind by its anchor, a tall object in front of a window."""
     oid = fp.object_id
-    out: list[Violation] = []
     over = ref.walls.overhang(fp)
     if over > OVERHANG and over > ref.overhang.get(oid, 0.0) + 0.05:
-        out.append(Violation("wall_overhang", oid, f"{oid} ({fp.object_type}) runs {over:.2f} m past the end of the "
-                             "wall it stands along; keep it along the wall"))
+        yield Violation("wall_overhang", oid, f"{oid} ({fp.object_type}) runs {over:.2f} m past the end of the "
+                        "wall it stands along; keep it along the wall")
     for door_id, grew in _zone_growth(ref.openings, ref.opening_area, fp):
-        out.append(Violation("in_opening", oid, f"{oid} ({fp.object_type}) moves {grew:.2f} m^2 further into the "
-                             f"open connection {door_id} between two rooms ({OPENING_CLEARANCE:g} m each side)",
-                             (door_id,)))
+        yield Violation("in_opening", oid, f"{oid} ({fp.object_type}) moves {grew:.2f} m^2 further into the "
+                        f"open connection {door_id} between two rooms ({OPENING_CLEARANCE:g} m each side)",
+                        (door_id,))
     for a, m, name, _ in ref.groups:
         if oid not in (a, m) or a not in now or m not in now or not ref.moved(now[a]):
             continue
@@ -519,16 +568,15 @@ def _person_rules(ref: PlausibilityReference, fp: Footprint, now: Mapping[str, F
         turns = (0.0, 180.0) if now[a].shape is None else (0.0,)
         shift = min(float(np.linalg.norm(_offset((now[a].center, now[a].yaw), now[m].center, t) - was)) for t in turns)
         if shift > GROUP_SHIFT:
-            out.append(Violation("group_left_behind", oid, f"{m} ({ref.types.get(m, '?')}) stands {shift:.2f} m from "
-                                 f"where it stood beside {a} ({ref.types.get(a, '?')}), its {name} group anchor, which "
-                                 "moved; a group moves together", (m if oid == a else a,)))
+            yield Violation("group_left_behind", oid, f"{m} ({ref.types.get(m, '?')}) stands {shift:.2f} m from "
+                            f"where it stood beside {a} ({ref.types.get(a, '?')}), its {name} group anchor, which "
+                            "moved; a group moves together", (m if oid == a else a,))
     for w in ref.windows:
         cover = _window_cover(w, fp)
         if cover > ref.window_cover.get((w.zone.door_id, oid), 0.0) + WINDOW_EPS:
-            out.append(Violation("blocks_window", oid, f"{oid} ({fp.object_type}, {fp.height:.2f} m tall) stands in "
-                                 f"front of window {w.zone.door_id}, covering {cover:.2f} of its {w.zone.width:.2f} m",
-                                 (w.zone.door_id,)))
-    return out
+            yield Violation("blocks_window", oid, f"{oid} ({fp.object_type}, {fp.height:.2f} m tall) stands in "
+                            f"front of window {w.zone.door_id}, covering {cover:.2f} of its {w.zone.width:.2f} m",
+                            (w.zone.door_id,))
 
 
 @dataclass

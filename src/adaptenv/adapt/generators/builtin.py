@@ -60,7 +60,7 @@ from adaptenv.adapt.objectives import (
     suggestion_weights,
     weighted_gain,
 )
-from adaptenv.adapt.plausibility import OVERHANG, check_move
+from adaptenv.adapt.plausibility import OVERHANG, breaks_rules
 from adaptenv.adapt.realism import RealismReference
 from adaptenv.adapt.validation import EditValidator, Proposal, world_fits
 from adaptenv.adapt.verification import Check, check_objective, revise_until_verified
@@ -143,7 +143,7 @@ def fit_rules(v: EditValidator, current: dict[str, Footprint], oid: str, d: np.n
     i = v.ctx.index[oid]
     c, yaw = v.ctx.centers[i], float(v.ctx.yaws[i]) if rotation is None else float(rotation)
     for f in (1.0, 0.75, 0.5, 0.25) if shrink and np.any(d) else (1.0,):
-        if not check_move(v.plausible, v.footprint_at(i, c + d * f, yaw), current):
+        if not breaks_rules(v.plausible, v.footprint_at(i, c + d * f, yaw), current):
             return d * f
     return None
 
@@ -159,22 +159,21 @@ def to_wall(v: EditValidator, oid: str, aim: np.ndarray) -> tuple[np.ndarray, fl
     c, yaw = ctx.centers[i], float(ctx.yaws[i])
     h, half_w, half_d = heading(yaw), float(ctx.sizes[i, 0]) / 2.0, float(ctx.sizes[i, 1]) / 2.0
     room = v.geometry.room_of_point(float(c[0]), float(c[1]))
+    p0, d = ref.walls.p0, ref.walls.p1 - ref.walls.p0  # every wall at once, each as the one-wall arithmetic
+    length = np.hypot(d[:, 0], d[:, 1])
+    long_enough = length >= 2.0 * half_w + 0.1
+    u = d / np.where(long_enough, length, 1.0)[:, None]
+    rel = aim - p0
+    n = np.stack([-u[:, 1], u[:, 0]], axis=1)
+    n = np.where((n[:, 0] * rel[:, 0] + n[:, 1] * rel[:, 1] < 0)[:, None], -n, n)
+    parallel = np.abs(n[:, 0] * h[0] + n[:, 1] * h[1]) >= 0.99
+    t = np.clip(rel[:, 0] * u[:, 0] + rel[:, 1] * u[:, 1], half_w + 0.05, length - half_w - 0.05)
+    centers = p0 + t[:, None] * u + n * (half_d + 0.03)
+    dist = np.hypot(centers[:, 0] - aim[0], centers[:, 1] - aim[1])
     best, best_d = None, np.inf
-    for p0, p1 in zip(ref.walls.p0, ref.walls.p1, strict=True):
-        length = float(np.hypot(*(p1 - p0)))
-        if length < 2.0 * half_w + 0.1:
-            continue
-        u = (p1 - p0) / length
-        n = np.array([-u[1], u[0]])
-        if np.dot(n, aim - p0) < 0:
-            n = -n
-        if abs(float(np.dot(n, h))) < 0.99:
-            continue
-        t = float(np.clip(np.dot(aim - p0, u), half_w + 0.05, length - half_w - 0.05))
-        center = p0 + t * u + n * (half_d + 0.03)
-        dist = float(np.hypot(*(center - aim)))
-        if dist < best_d and v.geometry.room_of_point(float(center[0]), float(center[1])) == room:
-            best, best_d = (center - c, math.degrees(math.atan2(n[0], n[1])) % 360.0), dist
+    for k in np.flatnonzero(long_enough & parallel):
+        if dist[k] < best_d and v.geometry.room_of_point(float(centers[k, 0]), float(centers[k, 1])) == room:
+            best, best_d = (centers[k] - c, math.degrees(math.atan2(n[k, 0], n[k, 1])) % 360.0), float(dist[k])
     return best
 
 

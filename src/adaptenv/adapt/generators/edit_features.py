@@ -111,10 +111,12 @@ def analysis_features(analysis: Analysis | None) -> list[float]:
             *severity.values(), *priority.values()]
 
 
-def _dist(points: np.ndarray, p: np.ndarray) -> float:
+def _dists(points: np.ndarray, ps: np.ndarray) -> np.ndarray:
+    """Distance (over DIST_SCALE, at most 1) from each of ``ps`` (N, 2) to the nearest of ``points`` (1 when none)."""
     if len(points) == 0:
-        return 1.0
-    return min(1.0, float(np.min(np.hypot(points[:, 0] - p[0], points[:, 1] - p[1]))) / DIST_SCALE)
+        return np.ones(len(ps))
+    d = np.hypot(points[None, :, 0] - ps[:, None, 0], points[None, :, 1] - ps[:, None, 1])
+    return np.minimum(1.0, d.min(axis=1) / DIST_SCALE)
 
 
 def candidate_features(v: EditValidator, scene: Scene, cands: list[Candidate], analysis: Analysis | None
@@ -128,26 +130,31 @@ def candidate_features(v: EditValidator, scene: Scene, cands: list[Candidate], a
     route_m = float(np.sum(np.hypot(*np.diff(scene.route, axis=0).T))) if len(scene.route) > 1 else 0.0
     house = [len(v.geometry.rooms) / 10.0, float(np.sum(ctx.movable)) / 50.0, min(1.0, route_m / 40.0)]
     fa = analysis_features(analysis)
+    index = np.array([ctx.index[c.object_id] for c in cands], dtype=int)
+    centers = ctx.centers[index].reshape(-1, 2)
+    d = np.array([(c.dx_units, c.dy_units) for c in cands], dtype=float).reshape(-1, 2) / upm
+    new = centers + d
+    route = scene.route
+    to_route = route[np.hypot(route[None, :, 0] - centers[:, None, 0],
+                              route[None, :, 1] - centers[:, None, 1]).argmin(axis=1)] - centers
+    moved = np.hypot(d[:, 0], d[:, 1])
+    norm = moved * np.hypot(to_route[:, 0], to_route[:, 1])
+    dot = d[:, 0] * to_route[:, 0] + d[:, 1] * to_route[:, 1]
+    start = scene.start[None, :]
+    near = np.stack([_dists(route, centers), _dists(scene.targets, centers), _dists(start, centers),
+                     _dists(route, new), _dists(scene.targets, new), _dists(start, new)], axis=1)
     rows = []
-    for c in cands:
-        i = ctx.index[c.object_id]
-        center, yaw = ctx.centers[i], float(ctx.yaws[i])
-        d = np.array([c.dx_units, c.dy_units], dtype=float) / upm
-        new = center + d
+    for n, (c, i) in enumerate(zip(cands, index.tolist(), strict=True)):
+        yaw = float(ctx.yaws[i])
         turn = math.radians(((c.rotation - yaw) if c.rotation is not None else 0.0) % 360.0)
-        j = int(np.argmin(np.hypot(scene.route[:, 0] - center[0], scene.route[:, 1] - center[1])))
-        to_route = scene.route[j] - center
-        norm = float(np.hypot(*d)) * float(np.hypot(*to_route))
         fp = fps.get(c.object_id)
         w, dep = (float(fp.size[0]), float(fp.size[1])) if fp is not None else (float(ctx.sizes[i, 0]), float(ctx.sizes[i, 1]))
         rows.append([
-            c.dx_units / 100.0, c.dy_units / 100.0, min(1.0, float(np.hypot(*d)) / 5.0), float(c.rotation is not None),
+            c.dx_units / 100.0, c.dy_units / 100.0, min(1.0, float(moved[n]) / 5.0), float(c.rotation is not None),
             math.sin(turn), math.cos(turn), float(c.relocate), *(float(c.kind == k) for k in KINDS),
             w, dep, math.log(max(w * dep, 1e-3)), float(fp.height) if fp is not None else 0.0,
-            float(fp.occludes) if fp is not None else 0.0, float(c.object_id in anchored),
-            _dist(scene.route, center), _dist(scene.targets, center), _dist(scene.start[None, :], center),
-            _dist(scene.route, new), _dist(scene.targets, new), _dist(scene.start[None, :], new),
-            float(np.dot(d, to_route)) / norm if norm > 1e-9 else 0.0,
+            float(fp.occludes) if fp is not None else 0.0, float(c.object_id in anchored), *near[n].tolist(),
+            float(dot[n]) / float(norm[n]) if norm[n] > 1e-9 else 0.0,
             float(int(ctx.room_of[i]) in target_rooms), float(ctx.room_ids[int(ctx.room_of[i])] == start_room)
             if 0 <= int(ctx.room_of[i]) < len(ctx.room_ids) else 0.0,
             *house, *fa,
