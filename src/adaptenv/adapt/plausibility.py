@@ -211,10 +211,9 @@ class _Walls:
         return float(_uncovered(a, near == 1, self.p0, self.p1, MIN_WALL_OVERLAP))
 
 
-
 def _backs_onto(fp: Footprint, p0: np.ndarray, p1: np.ndarray, min_cos: float) -> bool:
-    """:func:`~adaptenv.scene.graph.backs_onto` in Python floats (a tenth of its time); ``backs_onto`` itself
-    decides whenever a value lies within 1e-9 of its limit, where the two roundings could disagree."""
+    """:func:`~adaptenv.scene.graph.backs_onto` in Python floats, without its small numpy arrays; ``backs_onto``
+    itself decides whenever a value lies within 1e-9 of its limit, where the two roundings could disagree."""
     (x0, z0), (x1, z1) = p0.tolist(), p1.tolist()
     length = max(math.sqrt((x1 - x0) * (x1 - x0) + (z1 - z0) * (z1 - z0)), 1e-12)  # np.linalg.norm's arithmetic
     ux, uz = (x1 - x0) / length, (z1 - z0) / length
@@ -506,7 +505,7 @@ def breaks_rules(ref: PlausibilityReference, fp: Footprint, current: Mapping[str
 
 
 def _violations(ref: PlausibilityReference, fp: Footprint, current: Mapping[str, Footprint]) -> Iterator[Violation]:
-    """:func:`check_move`'s violations one at a time, the cheap rules first."""
+    """:func:`check_move`'s violations one at a time, in its order."""
     oid = fp.object_id
     now = dict(current)
     now[oid] = fp
