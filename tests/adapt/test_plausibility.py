@@ -260,15 +260,16 @@ def test_boxes_apart_only_where_the_shapes_are_further_apart_than_the_gap():
 
 
 def _plain_against(walls, fp) -> bool:
-    """The scene graph's ``against_wall`` from shapely distances and ``backs_onto``, as the rule defines it."""
+    """The scene graph's ``against_wall`` from shapely distances and ``backs_onto``'s array form, as the rule defines
+    it."""
     import math
 
     import shapely
 
-    from adaptenv.scene.graph import AGAINST_WALL_ANGLE, AGAINST_WALL_DISTANCE, backs_onto
+    from adaptenv.scene.graph import AGAINST_WALL_ANGLE, AGAINST_WALL_DISTANCE, _backs_onto_arrays
 
     near = shapely.distance(shapely.linestrings(fp.corners[:2]), walls.lines) <= AGAINST_WALL_DISTANCE
-    return any(backs_onto(fp, walls.p0[k], walls.p1[k], math.cos(math.radians(AGAINST_WALL_ANGLE)))
+    return any(_backs_onto_arrays(fp, walls.p0[k], walls.p1[k], math.cos(math.radians(AGAINST_WALL_ANGLE)))
                for k in np.flatnonzero(near))
 
 
@@ -314,12 +315,12 @@ def test_the_first_broken_rule_decides_as_the_full_check_does(real_house):
 
 def test_facing_cosine_is_numpys_bit_for_bit():
     """The facing rule's cosine in Python floats equals numpy's norm-and-dot form exactly, and backs_onto's float
-    form agrees with backs_onto, on random poses."""
+    form agrees with its array form, on random poses."""
     import math
 
-    from adaptenv.adapt.plausibility import _backs_onto, _faces
+    from adaptenv.adapt.plausibility import _faces
     from adaptenv.scene.geometry import Footprint, heading
-    from adaptenv.scene.graph import backs_onto
+    from adaptenv.scene.graph import _backs_onto_arrays, backs_onto
 
     rng = np.random.default_rng(4)
     for _ in range(3000):
@@ -329,4 +330,4 @@ def test_facing_cosine_is_numpys_bit_for_bit():
         assert _faces(a, b) == float(np.dot(heading(a.yaw), v / float(np.linalg.norm(v))))
         p0, p1 = rng.uniform(0, 5, (2, 2))
         cos = math.cos(math.radians(float(rng.choice([5.0, 30.0]))))
-        assert _backs_onto(a, p0, p1, cos) == backs_onto(a, p0, p1, cos)
+        assert backs_onto(a, p0, p1, cos) == _backs_onto_arrays(a, p0, p1, cos)

@@ -180,7 +180,7 @@ class _Walls:
             k = np.flatnonzero(near == _TIE)
             near[k] = shapely.distance(shapely.linestrings(fp.corners[:2]), self.lines[k]) <= AGAINST_WALL_DISTANCE
         min_cos = math.cos(math.radians(AGAINST_WALL_ANGLE))
-        return any(_backs_onto(fp, self.p0[k], self.p1[k], min_cos) for k in np.flatnonzero(near == 1))
+        return any(backs_onto(fp, self.p0[k], self.p1[k], min_cos) for k in np.flatnonzero(near == 1))
 
     def distance(self, fp: Footprint) -> float:
         """The distance (m) from the footprint's outline to the nearest blocking segment (inf when there is none)."""
@@ -209,25 +209,6 @@ class _Walls:
             edges = shapely.linestrings(np.stack([a[e], np.roll(a, -1, axis=0)[e]], axis=1))
             near[e, k] = shapely.distance(edges, self.lines[k]) <= AGAINST_WALL_DISTANCE
         return float(_uncovered(a, near == 1, self.p0, self.p1, MIN_WALL_OVERLAP))
-
-
-def _backs_onto(fp: Footprint, p0: np.ndarray, p1: np.ndarray, min_cos: float) -> bool:
-    """:func:`~adaptenv.scene.graph.backs_onto` in Python floats, without its small numpy arrays; ``backs_onto``
-    itself decides whenever a value lies within 1e-9 of its limit, where the two roundings could disagree."""
-    (x0, z0), (x1, z1) = p0.tolist(), p1.tolist()
-    length = max(math.sqrt((x1 - x0) * (x1 - x0) + (z1 - z0) * (z1 - z0)), 1e-12)  # np.linalg.norm's arithmetic
-    ux, uz = (x1 - x0) / length, (z1 - z0) / length
-    nx, nz = -uz, ux
-    side = nx * (fp.center[0] - x0) + nz * (fp.center[1] - z0)
-    if side < 0:
-        nx, nz = -nx, -nz
-    a, b = sorted((cx - x0) * ux + (cz - z0) * uz for cx, cz in fp.corners[:2].tolist())
-    yaw = math.radians(fp.yaw)  # heading(fp.yaw) is (sin, cos) of it
-    facing = math.sin(yaw) * nx + math.cos(yaw) * nz - min_cos
-    overlap = min(b, length) - max(a, 0.0) - MIN_WALL_OVERLAP
-    if min(abs(side), abs(facing), abs(overlap)) <= 1e-9:
-        return backs_onto(fp, p0, p1, min_cos)
-    return facing >= 0 and overlap >= 0
 
 
 _TIE = 2

@@ -221,7 +221,29 @@ def _wall_id(wall: WallSegment, room: str | None) -> str:
 
 def backs_onto(fp: Footprint, p0: np.ndarray, p1: np.ndarray, min_cos: float) -> bool:
     """Whether the footprint's front faces away from the wall p0-p1 (within ``acos(min_cos)``) and its back edge
-    overlaps the wall by MIN_WALL_OVERLAP or more (distance is the caller's test)."""
+    overlaps the wall by MIN_WALL_OVERLAP or more (distance is the caller's test).
+
+    Computed in Python floats; :func:`_backs_onto_arrays`, its definition, decides whenever a value lies within
+    1e-9 of its limit, where the two roundings could disagree.
+    """
+    x0, z0, x1, z1 = float(p0[0]), float(p0[1]), float(p1[0]), float(p1[1])
+    length = max(math.sqrt((x1 - x0) * (x1 - x0) + (z1 - z0) * (z1 - z0)), 1e-12)  # np.linalg.norm's arithmetic
+    ux, uz = (x1 - x0) / length, (z1 - z0) / length
+    nx, nz = -uz, ux
+    side = nx * (fp.center[0] - x0) + nz * (fp.center[1] - z0)
+    if side < 0:
+        nx, nz = -nx, -nz
+    a, b = sorted((cx - x0) * ux + (cz - z0) * uz for cx, cz in fp.corners[:2].tolist())
+    yaw = math.radians(fp.yaw)  # heading(fp.yaw) is (sin, cos) of it
+    facing = math.sin(yaw) * nx + math.cos(yaw) * nz - min_cos
+    overlap = min(b, length) - max(a, 0.0) - MIN_WALL_OVERLAP
+    if min(abs(side), abs(facing), abs(overlap)) <= 1e-9:
+        return _backs_onto_arrays(fp, p0, p1, min_cos)
+    return facing >= 0 and overlap >= 0
+
+
+def _backs_onto_arrays(fp: Footprint, p0: np.ndarray, p1: np.ndarray, min_cos: float) -> bool:
+    """:func:`backs_onto` as numpy arrays (its definition)."""
     length = max(float(np.linalg.norm(p1 - p0)), 1e-12)
     u = (p1 - p0) / length
     normal = np.array([-u[1], u[0]])
