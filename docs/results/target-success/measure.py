@@ -15,11 +15,12 @@ on the measured and on the fresh draws when the gap first came within the tolera
 have stopped without ``+stopK``),
 ``--patience N`` (default 3), ``--first K`` (start at the K-th house), ``--rollout-episodes N`` (headings of G's
 own rollout check, default 3; rows then carry ``rollout_episodes``), ``--houses SET`` (default
-``preset:validation``), ``--targets P,Q`` (default ``0.25,0.5,0.75``).
+``preset:validation``), ``--targets P,Q`` (default ``0.25,0.5,0.75``), ``--agent SPEC`` (default ``pretrained``; rows
+then carry ``agent``).
 
 For every G of ``GENERATORS``, every P of ``TARGETS`` and the first ``N`` houses (the second argument) of ``HOUSES``
-(default ``preset:validation``, held out from training), :func:`adaptenv.adapt.target.adapt_to_success` edits the house for the ``pretrained``
-agent, measured on ``EPISODES`` seeded episodes, until its success is within ``TOLERANCE`` of P or ``STEPS``
+(default ``preset:validation``, held out from training), :func:`adaptenv.adapt.target.adapt_to_success` edits the house for the agent
+(``pretrained`` unless ``--agent`` names another), measured on ``EPISODES`` seeded episodes, until its success is within ``TOLERANCE`` of P or ``STEPS``
 edits are kept or ``PATIENCE`` rounds in a row keep none. One JSON row per run is appended to OUT.jsonl (a rerun skips the runs already there); the
 table per (G, P) is printed at the end: houses within 10 points of P, mean edits kept, mean final gap, and the same
 on the run's closing check with fresh action draws (rows made before that check show "-").
@@ -82,7 +83,7 @@ def run(out: Path, houses: int, steps: int) -> None:
                                        rollout_episodes=ROLLOUT_EPISODES, choices=choices, draws=draws,
                                        confirm=confirm, stop_gap=stop_gap)
                 row = {"generator": g, "target": p, "house": name, "steps": steps, "patience": PATIENCE,
-                       "rollout_episodes": ROLLOUT_EPISODES, "choices": choices, "houses": HOUSES, "seconds": time.perf_counter() - t0,
+                       "rollout_episodes": ROLLOUT_EPISODES, "choices": choices, "houses": HOUSES, "agent": POLICY, "seconds": time.perf_counter() - t0,
                        **{k: v for k, v in res.to_dict().items() if k not in ("trace", "generator")},
                        "kept_edits": [e.model_dump(mode="json") for e in res.edits]}
                 if stop_gap is not None:
@@ -218,6 +219,8 @@ if __name__ == "__main__":
             HOUSES = value
         elif flag == "--targets":
             TARGETS = tuple(float(t) for t in value.split(","))
+        elif flag == "--agent":
+            POLICY = value
         else:
             sys.exit(f"unknown option {flag}")
     target = Path(sys.argv[1])
