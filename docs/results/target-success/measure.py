@@ -4,6 +4,7 @@
     python docs/results/target-success/measure.py OUT.jsonl table    # the table of the rows already there
     python docs/results/target-success/measure.py summary A.jsonl B.jsonl ...   # every run judged on fresh draws, one line per file and G
     python docs/results/target-success/measure.py stops A.jsonl ...   # +stopK rows: each run against its tolerance_stop
+    python docs/results/target-success/measure.py starts A.jsonl ...   # runs within 0.10 on fresh draws, and before any edit
 
 Options (before OUT.jsonl): ``--generators a,b`` (default ``builtin,random,failure-modes``; a name may end in
 ``+checksK``, the learned G with ``checks=K``, in ``+choicesK``, K edits proposed and measured per round, and in
@@ -152,9 +153,14 @@ def fresh(sel: list[dict], p: float) -> str:
             f"{np.mean([r['fresh_success'] for r in sel]):.3f}")
 
 
+def near(v: float, p: float) -> bool:
+    """Whether a success rate lies within 0.10 of P."""
+    return abs(v - p) <= 0.10 + 1e-9
+
+
 def fresh_within(sel: list[dict], p: float) -> int:
     """How many of the runs ended within 0.10 of P on their fresh draws."""
-    return sum(abs(r["fresh_success"] - p) <= 0.10 + 1e-9 for r in sel)
+    return sum(near(r["fresh_success"], p) for r in sel)
 
 
 def summary(files: list[Path]) -> None:
@@ -178,6 +184,21 @@ def summary(files: list[Path]) -> None:
                   f"{before:.3f}, {after:.3f} | {100 * (before - after):.1f} |")
 
 
+def starts(files: list[Path]) -> None:
+    """Per (G, P): runs within 0.10 of P on fresh draws at the end, how many of those already were before any edit,
+    and how many runs started within it on fresh draws at all."""
+    rs = [r for f in files for r in rows(f) if r.get("fresh_success") is not None]
+    print("| G | P | runs | within 0.10 on fresh draws at the end | of them within before any edit | "
+          "within 0.10 on fresh draws before any edit |")
+    print("|---|---|---|---|---|---|")
+    for g in dict.fromkeys(r["generator"] for r in rs):
+        for p in sorted({r["target"] for r in rs if r["generator"] == g}):
+            sel = [r for r in rs if r["generator"] == g and r["target"] == p]
+            end = [r for r in sel if near(r["fresh_success"], p)]
+            print(f"| {g} | {p:.2f} | {len(sel)} | {len(end)} | {sum(near(r['fresh_success_before'], p) for r in end)} | "
+                  f"{sum(near(r['fresh_success_before'], p) for r in sel)} |")
+
+
 def stops(files: list[Path]) -> None:
     """Per P, the ``+stopK`` runs within 0.10 of P on their own and on fresh draws, against the same runs where the
     tolerance alone would have stopped them (``tolerance_stop``), with the mean edits kept and fresh success."""
@@ -188,9 +209,9 @@ def stops(files: list[Path]) -> None:
     for p in sorted({r["target"] for r in rs}):
         sel = [r for r in rs if r["target"] == p]
         ts = [r["tolerance_stop"] for r in sel]
-        near = lambda v: abs(v - p) <= 0.10 + 1e-9  # noqa: E731
-        print(f"| {p:.2f} | {len(sel)} | {sum(near(r['success']) for r in sel)} / {sum(near(r['fresh_success']) for r in sel)} | "
-              f"{sum(near(t['success']) for t in ts)} / {sum(near(t['fresh_success']) for t in ts)} | "
+        print(f"| {p:.2f} | {len(sel)} | {sum(near(r['success'], p) for r in sel)} / "
+              f"{sum(near(r['fresh_success'], p) for r in sel)} | "
+              f"{sum(near(t['success'], p) for t in ts)} / {sum(near(t['fresh_success'], p) for t in ts)} | "
               f"{np.mean([r['edits'] for r in sel]):.1f} / {np.mean([t['edits'] for t in ts]):.1f} | "
               f"{np.mean([r['fresh_success'] for r in sel]):.3f} / {np.mean([t['fresh_success'] for t in ts]):.3f} |")
     both = sum(abs(r["fresh_success"] - r["target"]) <= 0.10 + 1e-9 for r in rs)
@@ -204,6 +225,9 @@ if __name__ == "__main__":
         sys.exit(0)
     if sys.argv[1:2] == ["stops"]:
         stops([Path(a) for a in sys.argv[2:]])
+        sys.exit(0)
+    if sys.argv[1:2] == ["starts"]:
+        starts([Path(a) for a in sys.argv[2:]])
         sys.exit(0)
     while sys.argv[1].startswith("--"):  # --generators a,b / --patience N / --first K
         flag, value = sys.argv.pop(1), sys.argv.pop(1)
