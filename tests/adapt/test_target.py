@@ -349,3 +349,19 @@ def test_a_stop_gap_below_the_tolerance_edits_on_past_the_tolerance_edge(tiny):
     for bad in (0.3, -0.1, math.nan):
         with pytest.raises(ConfigError, match="stop gap must lie in"):
             adapt_to_success(tiny, ShyExpert(home_of(tiny)), Pusher(3.0), 0.7, tolerance=0.2, stop_gap=bad)
+
+
+@pytest.mark.parametrize(("t", "expect"), [
+    ({"reached": True, "fresh_draws": 3, "fresh_reached": True, "stopped": "within the stop gap 0.05"}, None),
+    ({"reached": True, "fresh_draws": 0, "stopped": "within the stop gap 0.05"}, None),
+    ({"reached": False, "fresh_draws": 3, "fresh_reached": False, "stopped": "edit budget used"}, "--steps"),
+    ({"reached": False, "fresh_draws": 0, "stopped": "no kept edit in 6 rounds in a row"}, "out of reach"),
+    ({"reached": True, "fresh_draws": 3, "fresh_reached": False, "stopped": "within the stop gap 0.05"},
+     "--target-episodes"),
+    ({"reached": False, "fresh_draws": 3, "fresh_reached": True, "stopped": "no kept edit in 6 rounds in a row"}, None),
+])
+def test_a_missed_target_names_what_to_try(t, expect):
+    from adaptenv.cli.adapt import target_hint
+
+    hint = target_hint(t)
+    assert (hint is None) if expect is None else (expect in hint and "\n" not in hint)

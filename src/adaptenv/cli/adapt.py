@@ -428,12 +428,31 @@ def _print_target_summary(console, s: dict, out: Path) -> None:
                       f"{t['fresh_success_before']:.2f} -> {t['fresh_success']:.2f}, gap {t['fresh_gap']:.2f}: "
                       f"{'within' if t['fresh_reached'] else 'not within'} the tolerance",
                       highlight=False, soft_wrap=True)
+    if (hint := target_hint(t)) is not None:
+        console.print(hint, highlight=False, soft_wrap=True)
     console.print(edit_counts_text(s["edit_counts"]), highlight=False, soft_wrap=True)
     bad = {k: v for k, v in s["plausibility"].items() if v}
     console.print("plausibility audit of the moved objects: " + (", ".join(f"{k} {v}" for k, v in bad.items())
                                                                  if bad else "no violation") +
                   f"; realism {_fmt(s['realism_before'])} -> {_fmt(s['realism_after'])}", highlight=False, soft_wrap=True)
     console.print(f"wrote {out}/ (house.json, before_after.png, edits.json, summary.json)", soft_wrap=True)
+
+
+def target_hint(t: dict) -> str | None:
+    """What to try when a run toward a success rate missed it (judged on the fresh draws when it made them), or None."""
+    reached = t["fresh_reached"] if t.get("fresh_draws") else t["reached"]
+    if reached:
+        return None
+    if t["stopped"] == "edit budget used":
+        return "P not reached: the edit budget (--steps) was used up; a larger --steps may come closer"
+    if t["stopped"].startswith("no kept edit"):
+        return ("P not reached: no edit G proposed came closer in the last rounds; each single-object edit moves a "
+                "strong agent's success by a few points at most, so a distant P may lie out of reach of edits to this "
+                "house (docs/results/target-success in the adaptenv repository measures how far each G gets)")
+    if t["reached"]:
+        return ("P reached on the run's own draws but not on fresh ones: the measured success moves by an episode or "
+                "two between draws of the agent's actions; more --target-episodes measure it more closely")
+    return None
 
 
 def _is_house_set(house: Path, one: bool = False) -> bool:
