@@ -358,6 +358,7 @@ def test_a_stop_gap_below_the_tolerance_edits_on_past_the_tolerance_edge(tiny):
     ({"reached": False, "fresh_draws": 0, "stopped": "no kept edit in 6 rounds in a row"}, "out of reach"),
     ({"reached": True, "fresh_draws": 3, "fresh_reached": False, "stopped": "within the stop gap 0.05"},
      "--target-episodes"),
+    ({"reached": True, "fresh_draws": 3, "fresh_reached": False, "stopped": "edit budget used"}, "--target-episodes"),
     ({"reached": False, "fresh_draws": 3, "fresh_reached": True, "stopped": "no kept edit in 6 rounds in a row"}, None),
 ])
 def test_a_missed_target_names_what_to_try(t, expect):

@@ -214,8 +214,8 @@ def stops(files: list[Path]) -> None:
               f"{sum(near(t['success'], p) for t in ts)} / {sum(near(t['fresh_success'], p) for t in ts)} | "
               f"{np.mean([r['edits'] for r in sel]):.1f} / {np.mean([t['edits'] for t in ts]):.1f} | "
               f"{np.mean([r['fresh_success'] for r in sel]):.3f} / {np.mean([t['fresh_success'] for t in ts]):.3f} |")
-    both = sum(abs(r["fresh_success"] - r["target"]) <= 0.10 + 1e-9 for r in rs)
-    tol = sum(abs(r["tolerance_stop"]["fresh_success"] - r["target"]) <= 0.10 + 1e-9 for r in rs)
+    both = sum(near(r["fresh_success"], r["target"]) for r in rs)
+    tol = sum(near(r["tolerance_stop"]["fresh_success"], r["target"]) for r in rs)
     print(f"\nwithin 0.10 of P on fresh draws: {both} of {len(rs)} runs with the stop gap, {tol} at their tolerance stop")
 
 

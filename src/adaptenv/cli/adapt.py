@@ -440,18 +440,17 @@ def _print_target_summary(console, s: dict, out: Path) -> None:
 
 def target_hint(t: dict) -> str | None:
     """What to try when a run toward a success rate missed it (judged on the fresh draws when it made them), or None."""
-    reached = t["fresh_reached"] if t.get("fresh_draws") else t["reached"]
-    if reached:
+    if (t["fresh_reached"] if t.get("fresh_draws") else t["reached"]):
         return None
-    if t["stopped"] == "edit budget used":
-        return "P not reached: the edit budget (--steps) was used up; a larger --steps may come closer"
-    if t["stopped"].startswith("no kept edit"):
-        return ("P not reached: no edit G proposed came closer in the last rounds; each single-object edit moves a "
-                "strong agent's success by a few points at most, so a distant P may lie out of reach of edits to this "
-                "house (docs/results/target-success in the adaptenv repository measures how far each G gets)")
     if t["reached"]:
         return ("P reached on the run's own draws but not on fresh ones: the measured success moves by an episode or "
                 "two between draws of the agent's actions; more --target-episodes measure it more closely")
+    if t["stopped"] == "edit budget used":
+        return "P not reached: the edit budget (--steps) was used up; a larger --steps may come closer"
+    if t["stopped"].startswith("no kept edit"):
+        return ("P not reached: no edit G proposed came closer in the last rounds; a single-object edit moves a strong "
+                "agent's success by a few points on average, so a distant P may lie out of reach of edits to this house "
+                "(docs/results/target-success in the adaptenv repository measures how far each G gets)")
     return None
 
 
