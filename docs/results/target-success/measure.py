@@ -5,6 +5,7 @@
     python docs/results/target-success/measure.py summary A.jsonl B.jsonl ...   # every run judged on fresh draws, one line per file and G
     python docs/results/target-success/measure.py stops A.jsonl ...   # +stopK rows: each run against its tolerance_stop
     python docs/results/target-success/measure.py starts A.jsonl ...   # runs within 0.10 on fresh draws, and before any edit
+    python docs/results/target-success/measure.py outcomes A.jsonl ...   # how the proposed edits ended, per G
 
 Options (before OUT.jsonl): ``--generators a,b`` (default ``builtin,random,failure-modes``; a name may end in
 ``+checksK``, the learned G with ``checks=K``, in ``+choicesK``, K edits proposed and measured per round, and in
@@ -32,6 +33,7 @@ from __future__ import annotations
 import json
 import sys
 import time
+from collections import Counter
 from pathlib import Path
 
 import numpy as np
@@ -86,12 +88,26 @@ def run(out: Path, houses: int, steps: int) -> None:
                 row = {"generator": g, "target": p, "house": name, "steps": steps, "patience": PATIENCE,
                        "rollout_episodes": ROLLOUT_EPISODES, "choices": choices, "houses": HOUSES, "agent": POLICY, "seconds": time.perf_counter() - t0,
                        **{k: v for k, v in res.to_dict().items() if k not in ("trace", "generator")},
-                       "kept_edits": [e.model_dump(mode="json") for e in res.edits]}
+                       "kept_edits": [e.model_dump(mode="json") for e in res.edits], "outcomes": outcomes(res)}
                 if stop_gap is not None:
                     row["tolerance_stop"] = tolerance_stop(res, policy, name)
                 with out.open("a", encoding="utf-8") as f:
                     f.write(json.dumps(row) + "\n")
                 print(f"{g:13s} P={p:.2f} {name}: {res.line()} ({row['seconds']:.0f} s)", flush=True)
+
+
+def outcomes(res) -> dict[str, int]:
+    """How each proposed edit of a run ended: kept (success closer, or SPL only), G made none, invalid, success and
+    SPL no closer, success moved away from P, or past it."""
+    def kind(r) -> str:
+        if r.kept:
+            return "kept, success closer" if "closer to" in r.reason else "kept, SPL only"
+        for prefix, name in (("G made no edit", "no edit"), ("invalid", "invalid"), ("success unchanged", "no closer"),
+                             ("overshoots", "overshoots"), ("moves away", "moves away")):
+            if r.reason.startswith(prefix) or prefix in r.reason:
+                return name
+        return "other"
+    return dict(Counter(kind(r) for r in res.rounds))
 
 
 def tolerance_stop(res, policy, name: str) -> dict:
@@ -199,6 +215,21 @@ def starts(files: list[Path]) -> None:
                   f"{sum(near(r['fresh_success_before'], p) for r in sel)} |")
 
 
+def outcome_table(files: list[Path]) -> None:
+    """Per G: how the proposed edits of its runs ended (rows that record ``outcomes``), as counts and shares."""
+    rs = [r for f in files for r in rows(f) if "outcomes" in r]
+    kinds = sorted({k for r in rs for k in r["outcomes"]})
+    print("| G | runs | edits proposed | " + " | ".join(kinds) + " |")
+    print("|---|---|---|" + "---|" * len(kinds))
+    for g in dict.fromkeys(r["generator"] for r in rs):
+        total = Counter()
+        for r in rs:
+            total.update(r["outcomes"] if r["generator"] == g else {})
+        n = sum(total.values())
+        print(f"| {g} | {sum(r['generator'] == g for r in rs)} | {n} | "
+              + " | ".join(f"{total[k]} ({100 * total[k] / max(n, 1):.0f}%)" for k in kinds) + " |")
+
+
 def stops(files: list[Path]) -> None:
     """Per P, the ``+stopK`` runs within 0.10 of P on their own and on fresh draws, against the same runs where the
     tolerance alone would have stopped them (``tolerance_stop``), with the mean edits kept and fresh success."""
@@ -225,6 +256,9 @@ if __name__ == "__main__":
         sys.exit(0)
     if sys.argv[1:2] == ["stops"]:
         stops([Path(a) for a in sys.argv[2:]])
+        sys.exit(0)
+    if sys.argv[1:2] == ["outcomes"]:
+        outcome_table([Path(a) for a in sys.argv[2:]])
         sys.exit(0)
     if sys.argv[1:2] == ["starts"]:
         starts([Path(a) for a in sys.argv[2:]])
