@@ -317,6 +317,30 @@ def test_confirmed_edits_must_come_closer_on_other_draws_too(tiny):
     assert CONFIRM_SEED_STRIDE != FRESH_SEED_STRIDE and CONFIRM_SEED_STRIDE % 1000 == 0
 
 
+def test_refreshed_draws_measure_the_kept_house_anew(tiny):
+    from adaptenv.adapt.target import (
+        CONFIRM_SEED_STRIDE,
+        DRAW_SEED_STRIDE,
+        FRESH_SEED_STRIDE,
+        REFRESH_SEED_STRIDE,
+    )
+
+    plain = run(tiny, 0.7, tolerance=0.1)
+    kw = dict(tolerance=0.1, episodes=10, max_edits=8, patience=3, seed=0, name="tiny")
+    same = adapt_to_success(tiny, ShyExpert(home_of(tiny)), Pusher(3.0), 0.7, refresh=True, **kw)
+    # where every draw agrees, the refreshed measurements repeat the measured ones: the same edits, more rollouts
+    assert same.success_trace == plain.success_trace and same.measure_steps > plain.measure_steps
+    assert same.to_dict()["refresh"] is True and plain.to_dict()["refresh"] is False
+    # a gain on the measured draw alone is kept, but the house then measures 1.0 again on the refreshed draws, the
+    # next edits are measured there, and the run reports that figure rather than the selected one
+    noisy = adapt_to_success(tiny, ShyExpert(home_of(tiny), measured_only=True), Pusher(3.0), 0.7, **kw)
+    fresh = adapt_to_success(tiny, ShyExpert(home_of(tiny), measured_only=True), Pusher(3.0), 0.7, refresh=True, **kw)
+    assert noisy.success < 1.0 and fresh.edits and fresh.success == 1.0
+    assert fresh.success_trace[1] < 1.0 and fresh.stopped.startswith("no kept edit")
+    strides = {DRAW_SEED_STRIDE, FRESH_SEED_STRIDE, CONFIRM_SEED_STRIDE, REFRESH_SEED_STRIDE}
+    assert len(strides) == 4 and all(x % 1000 == 0 for x in strides)
+
+
 @pytest.mark.parametrize("draws", [0, 17, 1.5])
 def test_a_bad_number_of_draws_is_refused(tiny, draws):
     with pytest.raises(ConfigError, match="draws"):

@@ -11,7 +11,8 @@ Options (before OUT.jsonl): ``--generators a,b`` (default ``builtin,random,failu
 ``+checksK``, the learned G with ``checks=K``, in ``+choicesK``, K edits proposed and measured per round, and in
 ``+drawsD``, each measured episode run D times with its own sampling seeds, in ``+confirm``, an edit that comes
 closer kept only when it also comes closer on confirming draws, and in ``+relocate`` and ``+doors``, the failure-mode
-G's ``relocate_targets`` and ``door_edits``, and in ``+stopK``, editing stopped once the measured gap is at most K
+G's ``relocate_targets`` and ``door_edits``, in ``+refresh``, the house measured on new draws after each kept edit,
+and in ``+stopK``, editing stopped once the measured gap is at most K
 hundredths, the tolerance's own point then also measured: rows carry ``tolerance_stop``, the edits kept and the success
 on the measured and on the fresh draws when the gap first came within the tolerance, which is where the run would
 have stopped without ``+stopK``),
@@ -47,9 +48,10 @@ HOUSES = "preset:validation"
 
 
 def make(g: str):
-    """The generator ``g`` names, the choices per round, the draws per episode, whether edits are confirmed and the
-    stop gap (``learned+checks8+choices4+draws3+stop5``: the learned G with ``checks=8``, 4 edits measured per round,
-    each episode measured 3 times, editing stopped within 0.05 of P)."""
+    """The generator ``g`` names, the choices per round, the draws per episode, whether edits are confirmed, the
+    stop gap and whether the house is measured anew after each kept edit (``learned+checks8+choices4+draws3+stop5``:
+    the learned G with ``checks=8``, 4 edits measured per round, each episode measured 3 times, editing stopped within
+    0.05 of P)."""
     from adaptenv.adapt.generators import make_generator
 
     name, *mods = g.split("+")
@@ -60,7 +62,8 @@ def make(g: str):
     kw = {"checks": checks[0]} if checks else {}
     kw |= {"relocate_targets": True} if "relocate" in mods else {}
     kw |= {"door_edits": True} if "doors" in mods else {}
-    return make_generator(name, **kw), (choices or [1])[0], (draws or [1])[0], "confirm" in mods, (stop or [None])[0]
+    return (make_generator(name, **kw), (choices or [1])[0], (draws or [1])[0], "confirm" in mods, (stop or [None])[0],
+            "refresh" in mods)
 
 
 def run(out: Path, houses: int, steps: int) -> None:
@@ -80,11 +83,11 @@ def run(out: Path, houses: int, steps: int) -> None:
                 if (g, p, name) in done:
                     continue
                 t0 = time.perf_counter()
-                generator, choices, draws, confirm, stop_gap = make(g)
+                generator, choices, draws, confirm, stop_gap, refresh = make(g)
                 res = adapt_to_success(house, policy, generator, p, tolerance=TOLERANCE, episodes=EPISODES,
                                        max_edits=steps, patience=PATIENCE, seed=SEED, name=name,
                                        rollout_episodes=ROLLOUT_EPISODES, choices=choices, draws=draws,
-                                       confirm=confirm, stop_gap=stop_gap)
+                                       confirm=confirm, stop_gap=stop_gap, refresh=refresh)
                 row = {"generator": g, "target": p, "house": name, "steps": steps, "patience": PATIENCE,
                        "rollout_episodes": ROLLOUT_EPISODES, "choices": choices, "houses": HOUSES, "agent": POLICY, "seconds": time.perf_counter() - t0,
                        **{k: v for k, v in res.to_dict().items() if k not in ("trace", "generator")},

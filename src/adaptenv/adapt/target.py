@@ -19,7 +19,10 @@ measuring the original and the returned house again on ``fresh_draws`` fresh act
 each measured episode is run D times with its own sampling seeds, and success is the mean over all
 N x D runs, which one edit's noise moves less. With ``confirm=True`` an edit that comes closer is measured
 again on a second set of action draws (the same episodes, other sampling seeds) and kept only when it comes
-closer there too, so an edit whose gain was one draw's noise is dropped::
+closer there too, so an edit whose gain was one draw's noise is dropped. With ``refresh=True`` the house is
+measured again on new action draws after every kept edit, and those draws become the ones the next edits are
+measured on: the kept edit was chosen for measuring closer, so its own measurement is biased toward the target,
+and the next edits would otherwise be compared with that biased figure::
 
     result = adapt_to_success(house, policy, make_generator("builtin"), 0.5, episodes=20, max_edits=10)
     result.success_trace   # [1.0, 0.95, 0.85, ...]: success before and after each kept edit
@@ -68,9 +71,10 @@ SPL_TOL = 1e-3
 FRESH_DRAWS = 3
 #: Fresh action draws of the one episode an adaptation step works on (``adaptenv adapt``, ``adaptenv bench adapt``).
 EPISODE_FRESH_DRAWS = 8
-#: Seed offsets per measured, per fresh and per confirming draw (multiples of 1000, so ``seed % 1000`` still names
-#: the episode; the three primes keep the measured, the fresh and the confirming seeds apart).
+#: Seed offsets per measured, per fresh, per confirming and per refreshed draw (multiples of 1000, so ``seed % 1000``
+#: still names the episode; the four primes keep the measured, fresh, confirming and refreshed seeds apart).
 DRAW_SEED_STRIDE, FRESH_SEED_STRIDE, CONFIRM_SEED_STRIDE = 1000 * 1009, 1000 * 7919, 1000 * 3011
+REFRESH_SEED_STRIDE = 1000 * 5003
 #: Most action draws per measured episode.
 MAX_DRAWS = 16
 #: The default stop gap as a share of the tolerance: a run's own measurement is biased toward the target by the
@@ -176,6 +180,8 @@ class TargetResult:
     """The returned house on the same fresh draws."""
     confirm: bool = False
     """Whether each edit that came closer was kept only when it also came closer on the confirming draws."""
+    refresh: bool = False
+    """Whether the house was measured on new draws after each kept edit (``after`` is then that measurement)."""
     stop_gap: float | None = None
     """Editing stopped once the measured gap was at most this (None: half the tolerance)."""
 
@@ -231,6 +237,7 @@ class TargetResult:
         """Plain figures for JSON: target, reached success, gap, edits, rounds and the trace."""
         return {"target": self.target, "tolerance": self.tolerance, "generator": self.generator,
                 "episodes": len(self.episodes), "draws": self.draws, "confirm": self.confirm,
+                "refresh": self.refresh,
                 "stop_gap": stop_gap_of(self.stop_gap, self.tolerance),
                 "success_before": self.before.success,
                 "spl_before": self.before.spl, "success": self.after.success, "spl": self.after.spl,
@@ -334,7 +341,7 @@ def adapt_to_success(house: House, policy: Policy, generator: Generator, target:
                      target_type: str | None = None, name: str = "house",
                      rollout_episodes: int = 3, choices: int = 1, draws: int = 1,
                      fresh_draws: int = FRESH_DRAWS, confirm: bool = False,
-                     stop_gap: float | None = None) -> TargetResult:
+                     stop_gap: float | None = None, refresh: bool = False) -> TargetResult:
     """Edit ``house`` with ``generator`` until the policy's success on fixed episodes is within ``tolerance`` of
     ``target`` (see the module docstring).
 
@@ -361,6 +368,9 @@ def adapt_to_success(house: House, policy: Policy, generator: Generator, target:
             seeds, apart from the fresh ones) and keep it only when it comes closer there too.
         stop_gap: stop editing once ``|success - target|`` is at most this (0 to ``tolerance``; None: half the
             tolerance, :data:`STOP_SHARE`). Whether P was reached is still judged by ``tolerance``.
+        refresh: after each kept edit, measure the house on new action draws (``draws`` per episode, seeds apart from
+            every other set) and measure the next edits on those, so they are compared with a figure no edit was
+            selected on.
     """
     check_target(target, tolerance, what="target", tol_what="tolerance")
     if max_edits < 0 or patience < 1 or not isinstance(choices, (int, np.integer)) or choices < 1:
@@ -381,7 +391,8 @@ def adapt_to_success(house: House, policy: Policy, generator: Generator, target:
     first, trajs = measure(world, runs, policy)
     result = TargetResult(house, house, getattr(generator, "name", type(generator).__name__), float(target),
                           float(tolerance), eps, first, first, trajectories_before=trajs, trajectories_after=trajs,
-                          draws=int(draws), confirm=bool(confirm), stop_gap=stop)
+                          draws=int(draws), confirm=bool(confirm), stop_gap=stop,
+                          refresh=bool(refresh))
     result.measure_steps = first.steps
     confirming = drawn(eps, int(draws), CONFIRM_SEED_STRIDE, first=1) if confirm else []
     cur_c: Measurement | None = None
@@ -436,6 +447,10 @@ def adapt_to_success(house: House, policy: Policy, generator: Generator, target:
         _, i, current, world, cur, trajs, cur_c = best
         result.rounds[i] = replace(result.rounds[i], kept=True)
         misses, turn = 0, 0
+        if refresh:
+            runs = drawn(eps, int(draws), REFRESH_SEED_STRIDE, first=1 + (len(result.edits) - 1) * int(draws))
+            cur, trajs = measure(world, runs, policy)
+            result.measure_steps += cur.steps
     result.house, result.after, result.trajectories_after = current, cur, trajs
     if fresh_draws:
         result.fresh_before = fresh_measurement(world0, eps, policy, fresh_draws)
