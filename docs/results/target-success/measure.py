@@ -254,17 +254,9 @@ def stops(files: list[Path]) -> None:
 
 
 if __name__ == "__main__":
-    if sys.argv[1:2] == ["summary"]:
-        summary([Path(a) for a in sys.argv[2:]])
-        sys.exit(0)
-    if sys.argv[1:2] == ["stops"]:
-        stops([Path(a) for a in sys.argv[2:]])
-        sys.exit(0)
-    if sys.argv[1:2] == ["outcomes"]:
-        outcome_table([Path(a) for a in sys.argv[2:]])
-        sys.exit(0)
-    if sys.argv[1:2] == ["starts"]:
-        starts([Path(a) for a in sys.argv[2:]])
+    reports = {"summary": summary, "stops": stops, "outcomes": outcome_table, "starts": starts}
+    if sys.argv[1] in reports:  # `measure.py REPORT A.jsonl B.jsonl ...`
+        reports[sys.argv[1]]([Path(a) for a in sys.argv[2:]])
         sys.exit(0)
     while sys.argv[1].startswith("--"):  # --generators a,b / --patience N / --first K
         flag, value = sys.argv.pop(1), sys.argv.pop(1)
