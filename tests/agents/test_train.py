@@ -166,16 +166,16 @@ def test_resumed_run_is_about_as_fast_as_a_fresh_one(tmp_path):
 def test_bench_train_measures_the_recipe_it_is_given(capsys):
     from adaptenv.bench.train import run
 
-    small = run(as_json=True, envs=8, steps=4, houses="preset:tiny", iterations=0,
-                recipe={"hidden": 32, "feature_dim": 32, "conv_channels": 8, "updates_per_iter": 4})
-    default = run(as_json=True, envs=8, steps=4, houses="preset:tiny", iterations=0)
+    quick = {"envs": 8, "steps": 4, "houses": "preset:tiny", "iterations": 0, "grad_rounds": 1, "grad_repeats": 1}
+    small = run(as_json=True, **quick, recipe={"hidden": 32, "feature_dim": 32, "conv_channels": 8, "updates_per_iter": 4})
+    default = run(as_json=True, **quick)
     assert small["recipe"]["hidden"] == 32 and small["parameters"] < default["parameters"] / 4
     assert small["replay_ratio"] == default["replay_ratio"] / 2 == 1.0
     # both precisions are timed in every run; the headline figure is the recipe's own
     assert default["gradient_frames_per_s"] == default["gradient_frames_per_s_fp32"]
     assert default["gradient_bf16_speedup"] == pytest.approx(
         default["gradient_frames_per_s_bf16"] / default["gradient_frames_per_s_fp32"])
-    bf16 = run(as_json=True, envs=8, steps=4, houses="preset:tiny", iterations=0, recipe={"precision": "bf16"})
+    bf16 = run(as_json=True, **quick, recipe={"precision": "bf16"})
     assert bf16["gradient_frames_per_s"] == bf16["gradient_frames_per_s_bf16"]
     assert '"benchmark": "imitation-learning throughput"' in capsys.readouterr().out
 

@@ -226,11 +226,13 @@ def run_ppo(*, as_json: bool = False, iterations: int = 3, repeats: int = 3,
 
 
 def run(*, as_json: bool = False, envs: int = 256, steps: int = 200, houses: str = "preset:pretrain-train",
-        iterations: int = 3, repeats: int = 2, recipe: dict | None = None) -> dict:
+        iterations: int = 3, repeats: int = 2, recipe: dict | None = None, grad_rounds: int = 3,
+        grad_repeats: int = 7) -> dict:
     """Measure and print the figures (table or JSON); returns them.
 
     ``recipe``: TrainConfig fields that differ from the defaults, for every figure (for example
-    ``{"hidden": 128, "updates_per_iter": 4}``); they are reported with the figures.
+    ``{"hidden": 128, "updates_per_iter": 4}``); they are reported with the figures. The gradient step
+    is timed ``grad_repeats`` times per precision in each of ``grad_rounds`` alternating rounds.
     """
     import torch
     import torch.nn.functional as F
@@ -303,11 +305,11 @@ def run(*, as_json: bool = False, envs: int = 256, steps: int = 200, houses: str
         loss.backward()
         opt.step()
 
-    # both precisions, alternately (three rounds), so their ratio is measured side by side
+    # both precisions, alternately, so their ratio is measured side by side
     rounds: dict[str, list[tuple[float, float]]] = {}
-    for _ in range(3):
+    for _ in range(grad_rounds):
         for p in PRECISIONS:
-            rounds.setdefault(p, []).append(wall_and_cpu(lambda p=p: grad_step(p), repeats=7, warmup=2))
+            rounds.setdefault(p, []).append(wall_and_cpu(lambda p=p: grad_step(p), repeats=grad_repeats, warmup=2))
     grad = {p: (statistics.median(w for w, _ in r), statistics.median(c for _, c in r)) for p, r in rounds.items()}
     t_grad, c_grad = grad[cfg.precision]
 
