@@ -99,6 +99,12 @@ class TrainConfig:
     """Episodes start this geodesic distance (m) or more from the target (0: any)."""
     precision: str = "fp32"
     """Arithmetic of the gradient steps: fp32, or bf16 (autocast; about 2.4x faster on CPUs with AVX512_BF16)."""
+    snapshots: int = 0
+    """Also keep the policy after each 1/snapshots of the budget as OUTPUT stem + -f<frames>.pt (learning curves on
+    validation houses; 0: none)."""
+    perception: str = "labels"
+    """What a fresh network perceives of the objects its rays hit: labels (their class) or shape (height and
+    footprint only, the recognising mode; docs/agent.md). An --init checkpoint keeps its own."""
 
 
 @dataclass

@@ -27,6 +27,7 @@ import torch
 from torch import nn
 
 from adaptenv.sim.egomap import CROP, MAP_CHANNELS, EgoMap
+from adaptenv.sim.perception import CLASS_OBJECT, MAP_TARGET_MASK, N_SHAPE
 from adaptenv.sim.spec import END, N_ACTIONS, N_RAYS, n_classes
 
 
@@ -50,6 +51,14 @@ class NetConfig:
     """Pixels on a side of the map observation's windows."""
     map_dim: int = 128
     """Size of the map encoder's output."""
+    shape_features: int = 0
+    """Per-ray shape features read in place of object classes: 0 (``labels`` perception: told each object's class)
+    or ``perception.N_SHAPE`` (``shape``: the recognising mode, where every object reads as one class)."""
+
+    @property
+    def perception(self) -> str:
+        """``labels`` or ``shape`` (``adaptenv.sim.perception``)."""
+        return "shape" if self.shape_features else "labels"
 
     def resolved(self) -> NetConfig:
         """This config with ``n_classes`` filled in from the simulator spec."""
@@ -64,7 +73,8 @@ class NetConfig:
         return cls(hidden=settings.hidden, feature_dim=settings.feature_dim,  # type: ignore[attr-defined]
                    conv_channels=settings.conv_channels,  # type: ignore[attr-defined]
                    map_channels=MAP_CHANNELS if getattr(settings, "map", False) else 0,
-                   map_dim=settings.map_dim)  # type: ignore[attr-defined]
+                   map_dim=settings.map_dim,  # type: ignore[attr-defined]
+                   shape_features=N_SHAPE if getattr(settings, "perception", "labels") == "shape" else 0)
 
 
 def obs_to_tensors(obs: dict[str, np.ndarray], device: torch.device | str = "cpu") -> dict[str, torch.Tensor]:
@@ -78,6 +88,8 @@ def obs_to_tensors(obs: dict[str, np.ndarray], device: torch.device | str = "cpu
     }
     if "map" in obs:
         out["map"] = torch.as_tensor(np.asarray(obs["map"], dtype=np.uint8), device=device)
+    if "shape" in obs:
+        out["shape"] = torch.as_tensor(np.asarray(obs["shape"], dtype=np.float32), device=device)
     return out
 
 
@@ -120,7 +132,7 @@ class NavNet(nn.Module):
         c = cfg.conv_channels
         self.class_embed = nn.Embedding(cfg.n_classes, cfg.class_dim)
         self.conv = nn.Sequential(
-            nn.Conv1d(cfg.class_dim + 2, c, kernel_size=5, padding=2), nn.ReLU(),
+            nn.Conv1d(cfg.class_dim + 2 + cfg.shape_features, c, kernel_size=5, padding=2), nn.ReLU(),
             nn.Conv1d(c, c, kernel_size=5, stride=2, padding=2), nn.ReLU(),
         )
         conv_out = c * ((cfg.n_rays + 1) // 2)
@@ -150,8 +162,17 @@ class NavNet(nn.Module):
         depth = depth.reshape(-1, depth.shape[-1])
         sem = sem.reshape(-1, sem.shape[-1])
         target = obs["target"].reshape(-1)
-        is_target = (sem == target[:, None]).float()
-        rays = torch.cat([self.class_embed(sem), depth[..., None], is_target[..., None]], dim=-1)
+        if self.config.shape_features:  # the recognising mode: no class reaches the network, only shapes
+            if "shape" not in obs:
+                raise ValueError("this network perceives shapes: pass observations with the 'shape' key (BatchSim("
+                                 "shapes=True), or the Gym env's perception='shape')")
+            sem = sem.clamp(max=CLASS_OBJECT)
+            is_target = torch.zeros_like(depth)
+            extra = [obs["shape"].reshape(-1, depth.shape[-1], self.config.shape_features).float()]
+        else:
+            is_target = (sem == target[:, None]).float()
+            extra = []
+        rays = torch.cat([self.class_embed(sem), depth[..., None], is_target[..., None], *extra], dim=-1)
         scan = self.conv(rays.transpose(1, 2)).flatten(1)
         parts = [scan, self.target_embed(target), self.action_embed(obs["prev_action"].reshape(-1)),
                  self.collided_embed(obs["collided"].reshape(-1).clamp(0, 1))]
@@ -159,8 +180,19 @@ class NavNet(nn.Module):
             if "map" not in obs:
                 raise ValueError("this network reads the map memory: pass observations through MapObserver "
                                  "(adaptenv.agents.network) or run it as a NeuralPolicy")
-            parts.append(self.map_encoder(self._map_input(obs["map"], len(lead))))
+            parts.append(self.map_encoder(self._map_input(self._sensed_map(obs["map"], len(lead)), len(lead))))
         return self.features(torch.cat(parts, dim=-1)).reshape(*lead, -1)
+
+    def _sensed_map(self, m: torch.Tensor, lead_dims: int) -> torch.Tensor:
+        """The map as this network may read it: in the recognising mode without the target channels (packed crops
+        masked, the Gym env's unpacked channels zeroed)."""
+        if not self.config.shape_features:
+            return m
+        if m.dim() == lead_dims + 2:
+            return m & MAP_TARGET_MASK
+        keep = torch.ones(m.shape[-3], dtype=m.dtype, device=m.device)
+        keep[[2, 6]] = 0
+        return m * keep[:, None, None]
 
     def _map_input(self, m: torch.Tensor, lead_dims: int) -> torch.Tensor:
         """Encoder input (N, C, S, S) from packed crops (lead..., S, S) or the Gym env's unpacked (lead..., C, S, S)."""
@@ -301,6 +333,11 @@ class NeuralPolicy:
         for i in np.flatnonzero(done):
             self._slots[i] = np.random.default_rng([self.seed, int(self._context.seeds[i])])
         return np.array([g.random() for g in self._slots])
+
+    @property
+    def perception(self) -> str:
+        """What the network perceives (``labels`` or ``shape``): runners give a ``shape`` policy that observation."""
+        return self.net.config.perception
 
     @torch.no_grad()
     def act(self, obs: dict[str, np.ndarray], state: torch.Tensor, done: np.ndarray

@@ -322,6 +322,8 @@ def _train_ppo(cfg: PPOConfig, worlds: Sequence[Any] | None, init_net: NavNet | 
     observer = MapObserver.of(net, B)
     if observer is not None:
         obs_buf["map"] = np.zeros((T, B, net.config.map_crop, net.config.map_crop), np.uint8)
+    if net.config.shape_features:
+        obs_buf["shape"] = np.zeros((T, B, net.config.n_rays, net.config.shape_features), np.float32)
     first_buf = np.zeros((T, B), np.bool_)
     actions_buf = np.zeros((T, B), np.int64)
     logprobs_buf = np.zeros((T, B), np.float32)
@@ -332,7 +334,7 @@ def _train_ppo(cfg: PPOConfig, worlds: Sequence[Any] | None, init_net: NavNet | 
     feats_buf = torch.zeros(T, B, net.config.feature_dim) if freeze else None
 
     sampler = EpisodeSampler(worlds, min_distance=cfg.min_start_distance)
-    sim = BatchSim(worlds, max_steps=cfg.max_episode_steps)
+    sim = BatchSim(worlds, max_steps=cfg.max_episode_steps, shapes=bool(net.config.shape_features))
     teacher = (make_teacher(cfg.bc_teacher, sim, seed=cfg.seed, emap=observer.emap if observer else None)
                if cfg.bc_coef > 0 else None)
     obs, _ = sim.reset(*sampler.draw(rng, B))

@@ -96,11 +96,18 @@ from adaptenv.errors import ConfigError, TrainingDiverged
 from adaptenv.limits import check_numbers
 from adaptenv.progress import ProgressBar
 from adaptenv.scene.house import House
+from adaptenv.sim.perception import check_perception
 from adaptenv.sim.spec import END, N_RAYS
 from adaptenv.sim.vector import BatchSim, EpisodeSampler
 from adaptenv.sim.world import NavWorld
 
 __all__ = ["TrainConfig", "FinetuneConfig", "field_docs", "train", "finetune", "finetune_policy"]
+
+
+def snapshot_path(output: str | Path, frames: int) -> Path:
+    """Where ``--snapshots`` keeps the policy after ``frames`` frames: ``OUTPUT`` stem + ``-f<frames>.pt``."""
+    p = Path(output)
+    return p.with_name(f"{p.stem}-f{frames:09d}.pt")
 
 
 def check_config(cfg: TrainConfig) -> None:
@@ -113,6 +120,7 @@ def check_config(cfg: TrainConfig) -> None:
         raise ConfigError(f"--buffer-frames ({cfg.buffer_frames}) must hold at least one block of "
                           f"rollout_steps * num_envs = {cfg.rollout_steps * cfg.num_envs} frames")
     check_precision(cfg.precision, "--precision")
+    check_perception(cfg.perception)
 
 
 def sequence_logits(net: NavNet, obs: dict[str, torch.Tensor], first: torch.Tensor, h0: torch.Tensor,
@@ -136,7 +144,7 @@ class SequenceBuffer:
     """FIFO ring of collected blocks, each (T, B) steps, sampled as (chunk_len, N) sequences."""
 
     def __init__(self, capacity_blocks: int, steps: int, envs: int, chunk_len: int, hidden: int, n_rays: int,
-                 map_crop: int = 0):
+                 map_crop: int = 0, shape_features: int = 0):
         k, t, b = capacity_blocks, steps, envs
         self.capacity, self.steps, self.envs, self.chunk_len = k, t, b, chunk_len
         self.depth = np.zeros((k, t, b, n_rays), np.float16)
@@ -151,6 +159,9 @@ class SequenceBuffer:
         if map_crop:  # packed map crops (1 byte a pixel) for a map-reading network
             self.map = np.zeros((k, t, b, map_crop, map_crop), np.uint8)
             self.names += ("map",)
+        if shape_features:  # the recognising mode's per-ray shapes (metres, half precision)
+            self.shape = np.zeros((k, t, b, n_rays, shape_features), np.float16)
+            self.names += ("shape",)
         self.size = 0
         self.cursor = 0
 
@@ -175,6 +186,8 @@ class SequenceBuffer:
         t = chk[None, :] * self.chunk_len + np.arange(self.chunk_len)[:, None]
         idx = (blk[None, :], t, env[None, :])
         extra = {"map": torch.from_numpy(self.map[idx])} if "map" in self.names else {}
+        if "shape" in self.names:
+            extra["shape"] = torch.from_numpy(self.shape[idx].astype(np.float32))
         return {**extra,
             "depth": torch.from_numpy(self.depth[idx].astype(np.float32)),
             "semantic": torch.from_numpy(self.semantic[idx].astype(np.int64)),
@@ -298,7 +311,7 @@ def _train(cfg: TrainConfig, worlds: Sequence[NavWorld] | None, init_net: NavNet
     class_weight[END] = cfg.end_weight
     n_blocks = max(1, cfg.buffer_frames // (cfg.rollout_steps * cfg.num_envs))
     buffer = SequenceBuffer(n_blocks, cfg.rollout_steps, cfg.num_envs, cfg.chunk_len, hidden, N_RAYS,
-                            net.config.map_crop if net.config.map_channels else 0)
+                            net.config.map_crop if net.config.map_channels else 0, net.config.shape_features)
     frames, updates, iteration, wall_before = 0, 0, 0, 0.0
     learn_rng = np.random.default_rng([cfg.seed, 1])  # minibatches (its own stream: the learner may run in a thread)
     if saved is not None:
@@ -343,6 +356,8 @@ def _train(cfg: TrainConfig, worlds: Sequence[NavWorld] | None, init_net: NavNet
                  "label": np.empty((T, B), np.uint8), "h0": np.empty((T // L, B, hidden), np.float16)}
         if observer is not None:
             block["map"] = np.empty((T, B, *buffer.map.shape[-2:]), np.uint8)
+        if net.config.shape_features:
+            block["shape"] = np.empty((T, B, *buffer.shape.shape[-2:]), np.float16)
         ep_success, ep_length = [], []
         for t in range(T):
             if t % L == 0:
@@ -394,7 +409,8 @@ def _train(cfg: TrainConfig, worlds: Sequence[NavWorld] | None, init_net: NavNet
 
     sampler = EpisodeSampler(worlds, min_distance=cfg.min_start_distance)
     # with overlap the learner thread takes the second core, so the simulator kernel runs serially
-    sim = BatchSim(worlds, max_steps=cfg.max_episode_steps, threads=1 if cfg.overlap else None)
+    sim = BatchSim(worlds, max_steps=cfg.max_episode_steps, threads=1 if cfg.overlap else None,
+                   shapes=bool(net.config.shape_features))
     B, T, L = cfg.num_envs, cfg.rollout_steps, cfg.chunk_len
     eps, envs = new_episodes(B)
     obs, _ = sim.reset(eps, envs)
@@ -441,6 +457,12 @@ def _train(cfg: TrainConfig, worlds: Sequence[NavWorld] | None, init_net: NavNet
         if updates - last_save >= cfg.save_every:
             save_state()
             last_save = updates
+        done_frames, step = row["frames"], T * B
+        if cfg.snapshots and cfg.output and (done_frames - step) * cfg.snapshots // cfg.frames < \
+                done_frames * cfg.snapshots // cfg.frames:
+            save_checkpoint(snapshot_path(cfg.output, done_frames), net,
+                            {"frames": done_frames, "updates": updates, "houses": cfg.houses, "seed": cfg.seed,
+                             "end_threshold": cfg.end_threshold})
 
     try:
         while frames < cfg.frames:
