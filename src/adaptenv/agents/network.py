@@ -122,8 +122,17 @@ def unpack_map(packed: torch.Tensor, channels: int, dtype: torch.dtype = torch.f
     return torch.nn.functional.embedding(packed.int(), table).permute(0, 3, 1, 2)
 
 
+RAY_TARGET_DIM = 8
+"""Size of the target embedding every ray reads in the recognising mode (``NetConfig.shape_features`` > 0)."""
+
+
 class NavNet(nn.Module):
     """Recurrent ObjectNav policy network over the ``adaptenv.sim.spec`` observation."""
+
+    @staticmethod
+    def _shape_channels(cfg: NetConfig) -> int:
+        """Extra input channels of each ray in the recognising mode: its shape and the target's embedding."""
+        return cfg.shape_features + RAY_TARGET_DIM if cfg.shape_features else 0
 
     def __init__(self, config: NetConfig | None = None):
         super().__init__()
@@ -131,8 +140,11 @@ class NavNet(nn.Module):
         self.config = cfg
         c = cfg.conv_channels
         self.class_embed = nn.Embedding(cfg.n_classes, cfg.class_dim)
+        # the recognising mode: every ray also reads the target type, so the first convolution can match each
+        # ray's shape against the type asked for (the labelled mode gets that match as the is-target flag)
+        self.ray_target_embed = nn.Embedding(cfg.n_classes, RAY_TARGET_DIM) if cfg.shape_features else None
         self.conv = nn.Sequential(
-            nn.Conv1d(cfg.class_dim + 2 + cfg.shape_features, c, kernel_size=5, padding=2), nn.ReLU(),
+            nn.Conv1d(cfg.class_dim + 2 + self._shape_channels(cfg), c, kernel_size=5, padding=2), nn.ReLU(),
             nn.Conv1d(c, c, kernel_size=5, stride=2, padding=2), nn.ReLU(),
         )
         conv_out = c * ((cfg.n_rays + 1) // 2)
@@ -168,7 +180,8 @@ class NavNet(nn.Module):
                                  "shapes=True), or the Gym env's perception='shape')")
             sem = sem.clamp(max=CLASS_OBJECT)
             is_target = torch.zeros_like(depth)
-            extra = [obs["shape"].reshape(-1, depth.shape[-1], self.config.shape_features).float()]
+            extra = [obs["shape"].reshape(-1, depth.shape[-1], self.config.shape_features).float(),
+                     self.ray_target_embed(target)[:, None, :].expand(-1, depth.shape[-1], -1)]
         else:
             is_target = (sem == target[:, None]).float()
             extra = []
@@ -205,7 +218,7 @@ class NavNet(nn.Module):
 
     def encoder_modules(self) -> list[nn.Module]:
         """The modules :meth:`encode` runs (scan, map and embeddings): the observation encoder, without the memory and head."""
-        return [m for m in (self.class_embed, self.conv, self.target_embed, self.action_embed, self.collided_embed,
+        return [m for m in (self.class_embed, self.ray_target_embed, self.conv, self.target_embed, self.action_embed, self.collided_embed,
                             self.map_encoder, self.features) if m is not None]
 
     def initial_state(self, batch: int) -> torch.Tensor:

@@ -26,7 +26,13 @@ from adaptenv.scene.house import House, load_house
 from adaptenv.scene.procedural import generate_houses
 from adaptenv.sim import task
 from adaptenv.sim.egomap import CROP, MAP_CHANNELS, EgoMap, unpack
-from adaptenv.sim.perception import CLASS_OBJECT, N_SHAPE, check_perception, sensor_classes
+from adaptenv.sim.perception import (
+    CLASS_OBJECT,
+    N_SHAPE,
+    SHAPE_MAX,
+    check_perception,
+    sensor_classes,
+)
 from adaptenv.sim.spec import ACTIONS, MAX_STEPS, N_ACTIONS, N_RAYS, TARGET_TYPES, n_classes
 from adaptenv.sim.trajectory import Pose, Step, Trajectory
 from adaptenv.sim.vector import BatchSim, EpisodeSampler
@@ -59,7 +65,7 @@ def observation_space(map: bool = False, perception: str = "labels") -> spaces.D
     if map:
         parts["map"] = spaces.Box(0, 1, (MAP_CHANNELS, CROP, CROP), np.uint8)
     if shape:
-        parts["shape"] = spaces.Box(0.0, np.inf, (N_RAYS, N_SHAPE), np.float32)
+        parts["shape"] = spaces.Box(0.0, SHAPE_MAX, (N_RAYS, N_SHAPE), np.float32)
     return spaces.Dict(parts)
 
 

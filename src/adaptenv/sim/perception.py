@@ -41,6 +41,8 @@ PERCEPTIONS: tuple[str, ...] = ("labels", "shape")
 SHAPE_FEATURES = ("height", "long_side", "short_side")
 """Per-ray shape features of the recognising mode, metres (0 where the ray hits no object)."""
 N_SHAPE = len(SHAPE_FEATURES)
+SHAPE_MAX = 100.0
+"""Bound of a shape feature in the Gymnasium observation space (m; the catalog's largest side is 3.07 m)."""
 CLASS_OBJECT = 4
 """The one class every object reads as in the shape mode (the first object class id; walls, doors and windows
 keep 1-3)."""
