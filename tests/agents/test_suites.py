@@ -37,6 +37,9 @@ PINNED = {
     ("val-closed", "1"): "3b1fc845fb73554d",
     ("rearranged", "1"): "817c1c10a8b18a40",
     ("val-rearranged", "1"): "48339e38bbef4ac5",
+    ("unseen-assets", "1"): "1c175819892352ef",
+    ("val-unseen-assets", "1"): "8ead896ec9fd5272",
+    ("tail", "1"): "d248d9467980eadf",
 }
 
 
