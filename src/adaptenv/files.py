@@ -84,6 +84,7 @@ class FolderLock:
         self.path = self.folder / LOCK
         self._file: IO | None = None
         self._created: list[Path] = []
+        self._pid = os.getpid()
 
     def holder(self) -> int | None:
         """The process id of the run holding the lock now, or None (no run, or no locks on this system); reads only."""
@@ -133,15 +134,19 @@ class FolderLock:
             if same:
                 break
             f.close()
+        self._pid = os.getpid()
         f.seek(0)
         f.truncate()
-        f.write(f"{os.getpid()}\n")
+        f.write(f"{self._pid}\n")
         f.flush()
         self._file = f
         return self
 
     def release(self) -> None:
-        """Remove the lock file and unlock; then remove the folders acquire created, if they are empty."""
+        """Remove the lock file and unlock; then remove the folders acquire created, if they are empty. Only the
+        process that took the lock releases it (a forked worker that inherited it leaves it alone)."""
+        if os.getpid() != self._pid:
+            return
         if self._file is not None:
             self.path.unlink(missing_ok=True)
             self._file.close()
