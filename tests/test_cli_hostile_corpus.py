@@ -17,6 +17,7 @@ import contextlib
 import gzip
 import io
 import json
+import os
 import sys
 import tempfile
 import warnings
@@ -29,6 +30,7 @@ import torch
 import typer.main
 
 from adaptenv.cli import app, main
+from adaptenv.files import MANIFEST, FolderLock
 
 HOUSE = Path(__file__).parent / "data" / "procthor-10k-train-1.json"
 CONFIG = Path(__file__).parents[1] / "configs" / "experiment-small.json"
@@ -63,7 +65,11 @@ class Case:
     ``users_code`` marks a case where the user's own Python code raises: its traceback is theirs and is shown
     whole, so the case is counted but is not one line (README, "Errors"). ``output`` names the case's output
     folder where a command that streams its input may already have written (and recorded as its own) the part
-    before the damage; nothing outside it may change.
+    before the damage; nothing outside it may change. ``setup`` is the user's own files made in the case's folder
+    before the run, (path, text), where a text ``-> TARGET`` makes a symbolic link to TARGET: after the run each is
+    byte-identical (a link the same link). ``held`` names a folder of the case that another run is writing (holds
+    locked) while this one runs; ``{pid}`` in ``words`` is that run's process id. ``works`` marks a case that must
+    get past its checks and do its work for real (no stand-ins): exit 0, no error line, the user's files kept.
     """
 
     id: str
@@ -73,6 +79,9 @@ class Case:
     report: bool = False
     users_code: bool = False
     output: str = ""
+    setup: tuple[tuple[str, str], ...] = ()
+    held: str = ""
+    works: bool = False
 
 
 @dataclass(frozen=True)
@@ -84,6 +93,10 @@ class Outcome:
     touched: tuple[str, ...]
     escaped: str = ""
     out: tuple[str, ...] = ()
+    changed: tuple[str, ...] = ()
+    """The user's files of the case's ``setup`` that are not byte-identical after the run (or no longer the link)."""
+    work: str = ""
+    """The case's own folder (``{out}``)."""
 
     def line(self, case: Case) -> str | None:
         """The one line the case must end in, or None when there is not exactly one."""
@@ -100,7 +113,7 @@ class Outcome:
         """Whether the run is what the case demands: its exit code, one line with every word, no file changed."""
         line = self.line(case)
         return (not self.escaped and self.code == case.code and line is not None and "Traceback" not in line
-                and all(w in line for w in words) and not self.outside(case))
+                and all(w in line for w in words) and not self.outside(case) and not self.changed)
 
 
 def fill(line: str, **values: str) -> str:
@@ -395,6 +408,83 @@ OUTPUT_CASES = [
          " -o {in}/log-obj.jsonl --force", "{in}/log-obj.jsonl"),
 ]
 
+
+def made(id: str, args: str, *words: str, setup: dict[str, str], output: str = "", works: bool = False) -> Case:
+    """A case run among the user's own files and links ``setup`` (path -> text, or "-> TARGET" for a link)."""
+    return Case(id, tuple(args.split()), words, 0 if works else 1, output=output, setup=tuple(setup.items()),
+                works=works)
+
+
+USER = {"user.json": "my own notes, outside the output", "mine.png": "my own picture"}
+"""The user's files beside an output folder, that a link inside it points to."""
+USERS_RUN_DIR = {"D/state.pt": "my state", "D/config.json": '{"mine": true}', "D/notes.txt": "my notes",
+                 "D/tb/mine.txt": "my log"}
+"""A folder of the user's that happens to hold train's names (an older rule took any folder with a state.pt for
+train's own)."""
+LOOP_OWN = json.dumps({"folder": "loop", "files": {}})
+LINK_CASES = [
+    made("generate --force through a link", "houses generate --n 1 --rooms 2 -o {out}/out --force",
+         "-o {out}/out", "house_0000.json", "symbolic link", setup={**USER, "out/house_0000.json": "-> ../user.json"}),
+    made("rollout --force through links", "rollout " + H + " -o {out}/t.json --render {out}/t.png --force",
+         "-o {out}/t.json", "symbolic link", setup={**USER, "t.json": "-> user.json", "t.png": "-> mine.png"}),
+    made("rollout --force render through a link", "rollout " + H + " -o {out}/t.json --render {out}/t.png --force",
+         "--render {out}/t.png", "symbolic link", setup={**USER, "t.png": "-> mine.png"}),
+    made("train --force run-dir through a link", "train --houses preset:tiny " + TINY_TRAIN +
+         " -o {out}/p.pt --run-dir {out}/D --force", "--run-dir {out}/D", "config.json", "symbolic link",
+         setup={**USER, "D/config.json": "-> ../user.json"}),
+    made("report --force through a link", "report {in}/run-bad -o {out}/rep --force", "-o {out}/rep", "index.html",
+         "symbolic link", setup={**USER, "rep/index.html": "-> ../user.json"}),
+    made("train run-dir of the user's with a state.pt", "train --houses preset:tiny " + TINY_TRAIN +
+         " -o {out}/p.pt --run-dir {out}/D", "--run-dir {out}/D", "not written by adaptenv train", "--force",
+         setup=USERS_RUN_DIR),
+    made("demo into a folder with the old demo marker", "demo -o {out}/D", "-o {out}/D",
+         "not written by adaptenv demo", setup={"D/.adaptenv-demo": "", "D/houses/train/myhouse.json":
+                                                 HOUSE.read_text(encoding="utf-8")}),
+    made("loop resume of a level outside its run", "loop --houses preset:tiny --heldout tiny=preset:tiny -o {out}/D "
+         "--resume", "state.json", "'../../victim'",
+         setup={f"D/{MANIFEST}": LOOP_OWN, "victim.json": HOUSE.read_text(encoding="utf-8"),
+                "D/state.json": json.dumps({"config": {}, "state": {"iteration": 0, "pool": ["../../victim"]}})}),
+    made("loop resume of a buffer level outside its run", "loop --houses preset:tiny --heldout tiny=preset:tiny "
+         "-o {out}/D --resume", "state.json", "state.buffer", "'/tmp/victim'",
+         setup={f"D/{MANIFEST}": LOOP_OWN, "D/state.json": json.dumps(
+             {"config": {}, "state": {"iteration": 0, "buffer": {"level_ids": ["/tmp/victim"], "scores": [0.5],
+                                                                  "last_seen": [0], "parent_ids": [None],
+                                                                  "n_inserted": 1}}})}),
+    made("loop resume of a gallery scene outside its run", "loop --houses preset:tiny --heldout tiny=preset:tiny "
+         "-o {out}/D --resume", "iterations.jsonl", "'../x'",
+         setup={f"D/{MANIFEST}": LOOP_OWN, "D/state.json": json.dumps({"config": {}, "state": {"iteration": 0}}),
+                "D/iterations.jsonl": json.dumps({"iteration": 0, "env_steps": 0, "grad_updates": 0, "edits": 0,
+                                                  "gallery": [{"scene": "../x"}]}) + "\n"}),
+]
+"""Outputs where a link or the user's own files stand: a link is never written through, even with --force; a folder
+is adaptenv's only by its manifest; a resumed run reads only its own levels."""
+
+WRITERS = {"houses generate": "houses generate --n 1 -o {out}/busy", "evaluate":
+           "evaluate --houses preset:tiny -n 1 -o {out}/busy",
+           "train": "train --houses preset:tiny " + TINY_TRAIN + " -o {out}/p.pt --run-dir {out}/busy",
+           "loop": "loop --houses preset:tiny --heldout tiny=preset:tiny -o {out}/busy",
+           "experiment": f"experiment --config {CONFIG} -o {{out}}/busy", "report": "report {in}/run-bad -o {out}/busy",
+           "demo": "demo -o {out}/busy", "adapt": "adapt " + H + " -o {out}/busy"}
+BUSY_CASES = [Case(f"{name} into a folder another run writes", tuple(line.split()),
+                   ("{out}/busy", "another adaptenv run", "process id {pid}"), held="busy")
+              for name, line in WRITERS.items()]
+"""A second run into an output folder while a first one writes it: refused, naming the first's process id."""
+
+KEPT_CASES = [
+    made("train --force keeps the user's other files", "train --houses preset:tiny " + TINY_TRAIN +
+         " -o {out}/D/p.pt --run-dir {out}/D --force", setup={k: v for k, v in USERS_RUN_DIR.items()
+                                                                           if k in ("D/notes.txt", "D/tb/mine.txt")},
+         output="D", works=True),
+    made("report --force keeps the user's picture", "report {out}/run -o {out}/rep --force",
+         setup={"run/run.json": json.dumps({"method": "dr", "seed": 0}), "run/iterations.jsonl": json.dumps(
+             {"iteration": 0, "env_steps": 0, "grad_updates": 0, "edits": 0,
+              "heldout": {"tiny": {"success": 0.5, "spl": 0.4, "episodes": 2}}}) + "\n",
+                "rep/img/mine.png": "my own picture", "rep/notes.txt": "my notes"}, output="rep", works=True),
+    made("generate --force keeps the user's other files", "houses generate --n 1 --rooms 2 -o {out}/out --force",
+         setup={"out/notes.txt": "my notes", "out/sub/house_0000.json": "my house"}, output="out", works=True),
+]
+"""--force as promised: the command runs, replaces only files of the names it writes, and deletes nothing else."""
+
 USAGE_CASES = [
     case("unknown command", "frobnicate", "frobnicate", code=2),
     case("unknown subcommand", "houses frobnicate", "frobnicate", "adaptenv houses --help", code=2),
@@ -488,8 +578,8 @@ CHOICES = [
 """Names and words a command takes from a fixed set, and combinations of flags that cannot go together."""
 
 FILES = (HOUSE_CASES + SET_CASES + POLICY_CASES + TRAJ_CASES + CONFIG_CASES + LLM_CASES + ASSET_CASES + LOG_CASES
-         + ANNOTATION_CASES + REPORT_CASES + VALIDATE_CASES + OUTPUT_CASES + USAGE_CASES + ODD_TEXT + EXPORT_CASES
-         + CHOICES)
+         + ANNOTATION_CASES + REPORT_CASES + VALIDATE_CASES + OUTPUT_CASES + LINK_CASES + BUSY_CASES + USAGE_CASES
+         + ODD_TEXT + EXPORT_CASES + CHOICES)
 USERS_CODE = [Case(f"{command[0]} policy of the user's raising", (*command, "--policy", "{in}/my_policy.py:policy"),
                    ("RuntimeError: my policy's own bug",), users_code=True)
               for command in (("rollout", H, "-o", "{out}/t.json"), ("evaluate", "--houses", "preset:tiny", "-n", "1"),
@@ -533,13 +623,15 @@ def run_case(c: Case, inputs: Path, root: Path) -> Outcome:
     """Run one case through the console entry point, in a fresh folder under ``root``."""
     work = Path(tempfile.mkdtemp(prefix="case-", dir=root))
     args = [a.replace("{in}", str(inputs)).replace("{out}", str(work)) for a in c.args]
+    made = make_users_files(work, c.setup)
+    held = FolderLock(work / c.held).acquire("the other run") if c.held else None
     before = snapshot(inputs, work)
     err, out, code, escaped = io.StringIO(), io.StringIO(), None, ""
     with pytest.MonkeyPatch.context() as m:
         m.setattr(sys, "argv", ["adaptenv", *args])
         m.chdir(work)
         m.setattr(typer.main, "get_command", _get_command)
-        for target in WORK:
+        for target in WORK if not c.works else ():
             m.setattr(target, refuse_work, raising=False)
         with contextlib.redirect_stderr(err), contextlib.redirect_stdout(out), warnings.catch_warnings(record=True) as shown:
             _console_warning_filters()
@@ -552,8 +644,30 @@ def run_case(c: Case, inputs: Path, root: Path) -> Outcome:
                 escaped = f"{type(exc).__name__}: {exc}"
     err.write("".join(f"{w.category.__name__}: {w.message}\n" for w in shown))  # a console prints them on stderr
     after = snapshot(inputs, work)
+    if held is not None:
+        held.release()
     touched = tuple(sorted(k for k in before.keys() | after.keys() if before.get(k) != after.get(k)))
-    return Outcome(code, tuple(err.getvalue().splitlines()), touched, escaped, tuple(out.getvalue().splitlines()))
+    return Outcome(code, tuple(err.getvalue().splitlines()), touched, escaped, tuple(out.getvalue().splitlines()),
+                   changed=tuple(k for k, v in made.items() if users_file(work / k) != v), work=str(work))
+
+
+def users_file(path: Path) -> tuple[str, bytes | str] | None:
+    """What a file of the user's is: ("link", its target) or ("file", its bytes); None when it is gone."""
+    if path.is_symlink():
+        return "link", os.readlink(path)
+    return ("file", path.read_bytes()) if path.is_file() else None
+
+
+def make_users_files(folder: Path, setup: tuple[tuple[str, str], ...]) -> dict[str, tuple[str, bytes | str] | None]:
+    """Make a case's own files of the user's in ``folder`` (see :class:`Case`); returns what each one is."""
+    for rel, text in setup:
+        path = folder / rel
+        path.parent.mkdir(parents=True, exist_ok=True)
+        if text.startswith("-> "):
+            path.symlink_to(text[3:])
+        else:
+            path.write_text(text, encoding="utf-8")
+    return {rel: users_file(folder / rel) for rel, _ in setup}
 
 
 @pytest.fixture(scope="module")
@@ -573,7 +687,9 @@ def outcome(c: Case, dirs: tuple[Path, Path]) -> Outcome:
 
 
 def words_of(c: Case, dirs: tuple[Path, Path]) -> tuple[str, ...]:
-    return tuple(w.replace("{in}", str(dirs[0])) for w in c.words)
+    work = outcome(c, dirs).work
+    return tuple(w.replace("{in}", str(dirs[0])).replace("{out}", work).replace("{pid}", str(os.getpid()))
+                 for w in c.words)
 
 
 def check(c: Case, dirs: tuple[Path, Path]) -> None:
@@ -588,6 +704,7 @@ def check(c: Case, dirs: tuple[Path, Path]) -> None:
     assert line is not None, (result.lines, result.out)
     assert "Traceback" not in line and all(w in line for w in words), (words, line)
     assert not result.outside(c), result.touched
+    assert not result.changed, result.changed
 
 
 @pytest.mark.parametrize("c", NUMBERS, ids=[c.id for c in NUMBERS])
@@ -598,6 +715,15 @@ def test_a_number_is_refused_in_one_line_naming_its_flag(c, corpus_dirs):
 @pytest.mark.parametrize("c", FILES, ids=[c.id for c in FILES])
 def test_a_file_or_output_is_refused_in_one_line_naming_it(c, corpus_dirs):
     check(c, corpus_dirs)
+
+
+@pytest.mark.parametrize("c", KEPT_CASES, ids=[c.id for c in KEPT_CASES])
+def test_force_replaces_only_its_own_names_and_deletes_nothing(c, corpus_dirs):
+    result = outcome(c, corpus_dirs)
+    assert not result.escaped and result.code == 0, (result.escaped, result.code, result.lines)
+    assert not any(line.startswith("error") for line in result.lines), result.lines
+    assert not result.outside(c), result.touched
+    assert not result.changed, result.changed
 
 
 @pytest.mark.parametrize("c", USERS_CODE, ids=[c.id for c in USERS_CODE])

@@ -324,6 +324,7 @@ def loop_run(tmp_path_factory) -> tuple[Path, Path]:
     from adaptenv.agents.network import NavNet, NetConfig
     from adaptenv.curriculum.loop import LoopConfig, run_loop
     from adaptenv.curriculum.records import STATE
+    from adaptenv.files import MANIFEST
 
     root = tmp_path_factory.mktemp("loop")
     torch.manual_seed(0)
@@ -335,6 +336,7 @@ def loop_run(tmp_path_factory) -> tuple[Path, Path]:
     state = json.loads((root / "run" / STATE).read_text())
     state["config"] = asdict(LoopConfig(**small, iterations=2))  # as the command line below says
     (root / "run" / STATE).write_text(json.dumps(state))
+    (root / "run" / MANIFEST).write_text(json.dumps({"folder": "loop", "files": {}}))  # as adaptenv loop leaves it
     return policy, root / "run"
 
 

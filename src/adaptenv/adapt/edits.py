@@ -27,6 +27,7 @@ from typing import Literal
 from pydantic import BaseModel, ConfigDict, Field
 
 from adaptenv.errors import AdaptenvError
+from adaptenv.files import atomic_write_text
 from adaptenv.scene.house import House, move_object, set_door_openness
 
 StopReason = Literal["reached", "blocked_by_object", "blocked_by_wall", "left_room", "rotation_blocked",
@@ -123,8 +124,7 @@ class EditLog(BaseModel):
 
     def save(self, path: str | Path) -> Path:
         p = Path(path)
-        p.parent.mkdir(parents=True, exist_ok=True)
-        p.write_text(self.to_json(), encoding="utf-8")
+        atomic_write_text(p, self.to_json())
         return p
 
     @classmethod

@@ -40,6 +40,7 @@ from adaptenv.adapt.plausibility import audit
 from adaptenv.adapt.validation import validate_scene, world_fits
 from adaptenv.agents.policy import ExpertPolicy, Policy, as_policy
 from adaptenv.agents.rollout import rollout
+from adaptenv.files import atomic_write_text
 from adaptenv.render.compare import render_before_after
 from adaptenv.render.topdown import save_render
 from adaptenv.scene.geometry import SceneGeometry
@@ -238,7 +239,7 @@ def write_outputs(result: AdaptResult, summary: dict[str, Any], out: Path) -> di
 
 
 def _write_json(path: Path, doc: Any) -> Path:
-    path.write_text(json.dumps(doc, indent=1, default=_json_default), encoding="utf-8")
+    atomic_write_text(path, json.dumps(doc, indent=1, default=_json_default))
     return path
 
 

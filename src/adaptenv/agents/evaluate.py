@@ -36,6 +36,7 @@ from adaptenv.agents.policy import ExpertPolicy, Policy, policy_name
 from adaptenv.agents.registry import resolve_policy, weights_record
 from adaptenv.agents.runner import EpisodeResult, Recorded, run_episodes
 from adaptenv.agents.suites import EpisodeFloor, sample_floored
+from adaptenv.files import atomic_path, atomic_write_text
 from adaptenv.sim import task
 from adaptenv.sim.spec import ACTIONS, MAX_STEPS
 from adaptenv.sim.trajectory import Pose, Step, Trajectory
@@ -274,14 +275,15 @@ def write_report(report: EvalReport, house_set: HouseSet, out: Path, *, command:
     paths = {"summary": out / "summary.json", "episodes": out / "episodes.csv", "houses": out / "houses.csv"}
     doc = {"policy": report.policy, "weights": weights_record(report.policy), "houses": report.houses,
            "seed": report.seed, "command": command, **report.summary}
-    paths["summary"].write_text(json.dumps(doc, indent=1, default=float) + "\n", encoding="utf-8")
+    atomic_write_text(paths["summary"], json.dumps(doc, indent=1, default=float) + "\n")
     rows = [asdict(r) for r in report.results]
     _write_csv(paths["episodes"], rows)
     _write_csv(paths["houses"], per_house(report.results))
     grid = failure_grid(report, house_set, render=render) if render is not None else None
     if grid is not None:
         paths["failures"] = out / "failures.png"
-        grid.save(paths["failures"])
+        with atomic_path(paths["failures"]) as tmp:
+            grid.save(tmp)
     tdir = out / "failed"
     for r in report.results:
         if not r.success and r.index in report.recordings:
@@ -292,9 +294,9 @@ def write_report(report: EvalReport, house_set: HouseSet, out: Path, *, command:
 
 def _write_csv(path: Path, rows: list[dict[str, Any]]) -> None:
     if not rows:
-        path.write_text("", encoding="utf-8")
+        atomic_write_text(path, "")
         return
-    with path.open("w", newline="", encoding="utf-8") as f:
+    with atomic_path(path) as tmp, tmp.open("w", newline="", encoding="utf-8") as f:
         w = csv.DictWriter(f, fieldnames=list(rows[0]))
         w.writeheader()
         w.writerows(rows)

@@ -87,6 +87,7 @@ from adaptenv.agents.stop import calibrate_end_threshold
 from adaptenv.agents.suites import EpisodeFloor
 from adaptenv.agents.teachers import TEACHERS, make_teacher
 from adaptenv.errors import ConfigError, TrainingDiverged
+from adaptenv.files import atomic_write_text
 from adaptenv.limits import check_numbers
 from adaptenv.progress import ProgressBar
 from adaptenv.sim.egomap import EgoMap
@@ -300,7 +301,7 @@ def _train_ppo(cfg: PPOConfig, worlds: Sequence[Any] | None, init_net: NavNet | 
     run_dir = default_ppo_run_dir(cfg)
     if run_dir:
         run_dir.mkdir(parents=True, exist_ok=True)
-        (run_dir / "config.json").write_text(json.dumps(asdict(cfg), indent=1) + "\n", encoding="utf-8")
+        atomic_write_text(run_dir / "config.json", json.dumps(asdict(cfg), indent=1) + "\n")
     torch.manual_seed(cfg.seed)
     rng = np.random.default_rng(cfg.seed)
     worlds = list(worlds) if worlds is not None else load_house_set(cfg.houses).worlds
@@ -547,6 +548,6 @@ def _train_ppo(cfg: PPOConfig, worlds: Sequence[Any] | None, init_net: NavNet | 
     logger.close()
     if cfg.output:
         save_checkpoint(cfg.output, net, {k: v for k, v in card.items() if k != "config"})
-        Path(cfg.output).with_suffix(".json").write_text(json.dumps(card, indent=1) + "\n", encoding="utf-8")
+        atomic_write_text(Path(cfg.output).with_suffix(".json"), json.dumps(card, indent=1) + "\n")
     return TrainResult(net, card, logger.rows,
                        learner=copy.deepcopy({"value": agent.value.state_dict(), "optimizer": optimizer.state_dict()}))

@@ -93,6 +93,7 @@ from adaptenv.agents.runlog import (
 from adaptenv.agents.stop import calibrate_end_threshold
 from adaptenv.agents.teachers import make_teacher
 from adaptenv.errors import ConfigError, TrainingDiverged
+from adaptenv.files import atomic_write_text
 from adaptenv.limits import check_numbers
 from adaptenv.progress import ProgressBar
 from adaptenv.scene.house import House
@@ -304,7 +305,7 @@ def _train(cfg: TrainConfig, worlds: Sequence[NavWorld] | None, init_net: NavNet
         net = NavNet(NetConfig.of(cfg))
     if run_dir:  # the houses and the --init checkpoint loaded: the run starts
         run_dir.mkdir(parents=True, exist_ok=True)
-        (run_dir / "config.json").write_text(json.dumps(asdict(cfg), indent=1) + "\n", encoding="utf-8")
+        atomic_write_text(run_dir / "config.json", json.dumps(asdict(cfg), indent=1) + "\n")
     hidden = net.config.hidden
     optimizer = torch.optim.Adam(net.parameters(), lr=cfg.learning_rate, eps=1e-5)
     class_weight = torch.ones(net.config.n_actions)
@@ -422,7 +423,7 @@ def _train(cfg: TrainConfig, worlds: Sequence[NavWorld] | None, init_net: NavNet
     teacher = make_teacher(cfg.teacher, sim, mix=cfg.teacher_mix, seed=cfg.seed,  # agents/teachers.py
                            emap=observer.emap if observer else None)
     first = np.ones(B, dtype=bool)
-    logger = RunLogger(run_dir, cfg.tensorboard)
+    logger = RunLogger(run_dir, cfg.tensorboard, fresh=not cfg.resume)
     progress = ProgressBar("DAgger" if cfg.progress else None, cfg.frames, transient=False).start()
     progress.update(frames)
     pool = ThreadPoolExecutor(max_workers=1) if cfg.overlap else None
@@ -527,7 +528,7 @@ def _train(cfg: TrainConfig, worlds: Sequence[NavWorld] | None, init_net: NavNet
     save_state()
     if cfg.output:
         save_checkpoint(cfg.output, net, {k: v for k, v in card.items() if k != "config"})
-        Path(cfg.output).with_suffix(".json").write_text(json.dumps(card, indent=1) + "\n", encoding="utf-8")
+        atomic_write_text(Path(cfg.output).with_suffix(".json"), json.dumps(card, indent=1) + "\n")
     net.eval()
     return TrainResult(net, card, logger.rows)
 

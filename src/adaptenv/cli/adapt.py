@@ -20,6 +20,7 @@ from adaptenv.cli import _numbers as numbers
 from adaptenv.cli._common import HOUSE_HELP, JSON_OPTION, load_house_argument
 from adaptenv.cli._outputs import FORCE_OPTION, output_folder
 from adaptenv.errors import AdaptenvError, ConfigError
+from adaptenv.files import atomic_write_text
 
 if TYPE_CHECKING:
     from adaptenv.sim.trajectory import Trajectory
@@ -406,8 +407,8 @@ def _target_one(h, name: str, out: Path, policy, analyzer, generator, *, steps: 
     pair = render_before_after(h, res.house, res.trajectories_before[0], res.trajectories_after[0],
                                [o["id"] for o in counts["objects"] if o["changed"]])
     save_render(pair.side_by_side(), out / "before_after.png")
-    (out / "edits.json").write_text(json.dumps(res.generation_log(), indent=1, default=str), encoding="utf-8")
-    (out / "summary.json").write_text(json.dumps(summary, indent=1, default=str), encoding="utf-8")
+    atomic_write_text(out / "edits.json", json.dumps(res.generation_log(), indent=1, default=str))
+    atomic_write_text(out / "summary.json", json.dumps(summary, indent=1, default=str))
     return {**summary, "target_success": doc}
 
 
@@ -477,8 +478,7 @@ def _finish_folder(house: Path, out: Path, summaries: list[dict], skipped: list,
     valid = sum(bool(s["valid"]) for s in summaries)
     doc = {"houses": str(house), "adapted": len(summaries), "valid": valid, "skipped": len(skipped),
            "skipped_houses": {h.name: h.reason for h in skipped}}
-    out.mkdir(parents=True, exist_ok=True)
-    (out / "summary.json").write_text(json.dumps(doc, indent=1) + "\n", encoding="utf-8")
+    atomic_write_text(out / "summary.json", json.dumps(doc, indent=1) + "\n")
     if as_json:
         typer.echo(json.dumps({**doc, "summaries": summaries}, indent=1, default=str))
     else:

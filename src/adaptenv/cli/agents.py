@@ -16,7 +16,15 @@ import typer
 
 from adaptenv.cli import _numbers as numbers
 from adaptenv.cli._common import JSON_OPTION, interrupted
-from adaptenv.cli._outputs import FORCE_OPTION, OutputFolder, output_file, output_folder, recording
+from adaptenv.cli._outputs import (
+    FORCE_OPTION,
+    OutputFolder,
+    continued_folder,
+    output_file,
+    output_folder,
+    recording,
+)
+from adaptenv.files import atomic_write_text
 
 if TYPE_CHECKING:
     from adaptenv.agents.config import PPOConfig, TrainConfig
@@ -97,9 +105,8 @@ def check_outputs(cfg: TrainConfig | PPOConfig, run_dir: Path | None, command: s
     if run_dir is None:
         return files, None
     if resume:  # the run's own folder, continued: train checks its state.pt before writing anything
-        return files, OutputFolder(run_dir, command, own=True, remove=[], keep=True)
-    return files, output_folder(run_dir, "--run-dir", command, force=force, inputs=inputs, owns=RUN_DIR_OWNS,
-                                legacy=lambda p: (p / "state.pt").is_file())
+        return files, continued_folder(run_dir, "--run-dir", command)
+    return files, output_folder(run_dir, "--run-dir", command, force=force, inputs=inputs, owns=RUN_DIR_OWNS)
 
 
 def _recorded_output(run_dir: Path) -> str | None:
@@ -288,11 +295,10 @@ def evaluate(
                 console.print(f"drop {base_spec} -> {spec}: success {d_s['drop']:+.3f} "
                               f"[{d_s['ci95'][0]:+.3f}, {d_s['ci95'][1]:+.3f}], SPL {d_p['drop']:+.3f} "
                               f"[{d_p['ci95'][0]:+.3f}, {d_p['ci95'][1]:+.3f}]")
-            out.mkdir(parents=True, exist_ok=True)
-            (out / "comparison.json").write_text(json.dumps(
+            atomic_write_text(out / "comparison.json", json.dumps(
                 {"policy": policy, "episodes": episodes, "seed": seed, "command": command,
                  "sets": {spec: s for spec, s, _ in summaries}, "drop_from": base_spec, "drops": drops},
-                indent=1, default=float) + "\n", encoding="utf-8")
+                indent=1, default=float) + "\n")
         console.print(f"wrote results to [bold]{out}[/]")
 
 

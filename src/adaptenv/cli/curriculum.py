@@ -100,6 +100,9 @@ def check_resumable(out: Path) -> None:
     if not (out / STATE).is_file() and not (out / RUN_INFO).is_file():
         raise ConfigError(f"--resume: {out} holds no loop run (no {STATE}); pass the -o of the interrupted run, or "
                           "start without --resume in a new folder")
+    from adaptenv.curriculum.loop import check_run_files
+
+    check_run_files(out)
 
 
 def loop(
@@ -199,13 +202,12 @@ def loop(
 
     from adaptenv.curriculum.executor import ExecutorOptions
     from adaptenv.curriculum.loop import LoopConfig, run_loop
-    from adaptenv.curriculum.records import RUN_INFO, STATE
 
-    folder = output_folder(out, "-o", "loop", inputs=[houses, policy, match_run or None, learned_scorer], keep=True, force_flag=None,
-                           legacy=lambda p: (p / STATE).is_file() or (p / RUN_INFO).is_file())
-    if resume:
+    if resume and not out.is_dir():  # before the folder is locked (and so made)
         check_resumable(out)
-    else:
+    folder = output_folder(out, "-o", "loop", inputs=[houses, policy, match_run or None, learned_scorer], keep=True,
+                           force_flag=None, then=(lambda: check_resumable(out)) if resume else None)
+    if not resume:
         check_start_policy(policy)
     console = Console()
     llm = loop_llm_section(llm_config_file, model=model, base_url=base_url, api=api, api_key_env=api_key_env,
@@ -277,8 +279,7 @@ def experiment(
     cfg = ExperimentConfig.load(config)
     check_executor(executor, workers, address)
     out = out or Path("runs") / config.stem
-    folder = output_folder(out, "-o", "experiment", inputs=[config], keep=True, force_flag=None,
-                           legacy=lambda p: (p / "experiment.json").is_file())
+    folder = output_folder(out, "-o", "experiment", inputs=[config], keep=True, force_flag=None)
     ref = cfg.loop_config(cfg.reference, cfg.seeds[0])
     check_house_sets([ref.houses, *ref.heldout.values()], strict, console.print)
     # one run per task: runs are long, and in order a stopped experiment leaves whole seeds

@@ -75,10 +75,9 @@ def rollout(
     console.print(table)
     console.print(f"wrote the trajectory to [bold]{out}[/]")
     if render is not None:
-        from adaptenv.render.topdown import render_house
+        from adaptenv.render.topdown import render_house, save_render
 
-        render.parent.mkdir(parents=True, exist_ok=True)
-        render_house(house_model, trajectory=traj).save(render)
+        save_render(render_house(house_model, trajectory=traj), render)
         record_file(render, "rollout")
         console.print(f"wrote the top-down image to [bold]{render}[/]")
 

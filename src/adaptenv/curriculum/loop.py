@@ -42,10 +42,14 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-import torch
 
 from adaptenv.adapt.llm.accounting import run_changes, scenes_usage
-from adaptenv.agents.checkpoint import load_checkpoint, load_tensors, save_checkpoint
+from adaptenv.agents.checkpoint import (
+    atomic_torch_save,
+    load_checkpoint,
+    load_tensors,
+    save_checkpoint,
+)
 from adaptenv.agents.config import FinetuneConfig
 from adaptenv.agents.evaluate import EpisodeResult, EvalReport, mean_se, summarize, write_report
 from adaptenv.agents.houses import load_house_set
@@ -88,6 +92,7 @@ from adaptenv.curriculum.records import (
     write_iterations,
 )
 from adaptenv.errors import ConfigError
+from adaptenv.files import BOOKKEEPING
 from adaptenv.render.topdown import render_house
 
 #: The fix a corrupt state.json's errors suggest.
@@ -244,7 +249,7 @@ def _run_loop(cfg: LoopConfig, run_dir: str | Path, resume: bool, executor: Exec
         save_checkpoint(iteration_dir(run_dir, t) / "policy.pt", net,
                         {"iteration": t, "method": cfg.method, "end_threshold": pi_next.end_threshold})
         if tuned.learner is not None and cfg.finetune_keep_learner:
-            torch.save(tuned.learner, iteration_dir(run_dir, t) / LEARNER_FILE)
+            atomic_torch_save(tuned.learner, iteration_dir(run_dir, t) / LEARNER_FILE)
 
         # 4. held-out evaluation of pi_{t+1}
         say(f"t={t}: evaluating on the held-out sets")
@@ -257,10 +262,9 @@ def _run_loop(cfg: LoopConfig, run_dir: str | Path, resume: bool, executor: Exec
                                        edits=state.edits, train=train_metrics, heldout=heldout, gallery=it.gallery,
                                        wall_time_s=round(time.perf_counter() - start, 2),
                                        stage_seconds=stages.seconds, llm_usage=llm_usage))
-        (iteration_dir(run_dir, t) / "scenes.json").write_text(json.dumps(
+        atomic_write_text(iteration_dir(run_dir, t) / "scenes.json", json.dumps(
             {"rolled_out": rolled, "replayed": it.replayed, "trained_on": train_names,
-             "edits_this_iteration": state.edits - edits_before, "parents": it.parents}),
-            encoding="utf-8")
+             "edits_this_iteration": state.edits - edits_before, "parents": it.parents}))
         _checkpoint(run_dir, cfg, state, records)
     return records
 
@@ -333,18 +337,12 @@ def _open_run(cfg: LoopConfig, run_dir: Path, resume: bool, command: str
     """The state, records and command to continue from: a resumed run's, or a fresh run's in an empty folder."""
     state_path = run_dir / STATE
     if resume and state_path.is_file():
-        saved = read_json(state_path, "loop state (written by the loop)")
-        if not isinstance(saved, dict) or not isinstance(saved.get("config"), dict):
-            raise ConfigError(f"{state_path}: expected {{\"config\": ..., \"state\": ...}} as the loop writes it; "
-                              f"{STATE_FIX}")
+        saved, state = read_state(state_path)
         old = saved["config"]  # a field added to LoopConfig since the run started counts as its default
         changed = run_changes({**asdict(LoopConfig()), **old, **_moved_match_run(old, cfg)}, asdict(cfg))
         if changed:
             raise ConfigError(f"{run_dir}: --resume with other settings than the interrupted run: {', '.join(map(printable, changed))}; "
                               "pass the same options (its run.json lists them) or a new output folder")
-        state = parse_config(LoopState, saved.get("state"), str(state_path), prefix="state", fix=STATE_FIX)
-        if state.buffer:
-            lb.LevelBufferState.from_dict(state.buffer, f"{state_path}: state.buffer")
         records = read_iterations(run_dir)[: state.iteration + 1]
         check_resume_files(cfg, run_dir, state, records)
         info = run_dir / "run.json"
@@ -354,11 +352,35 @@ def _open_run(cfg: LoopConfig, run_dir: Path, resume: bool, command: str
             except (OSError, ValueError) as exc:  # pydantic's ValidationError is a ValueError
                 raise ConfigError(f"{info}: not the run.json the loop wrote ({type(exc).__name__}); {STATE_FIX}") from None
         return state, records, command
-    if run_dir.exists() and any(run_dir.iterdir()) and not resume:
+    if run_dir.exists() and any(p.name not in BOOKKEEPING for p in run_dir.iterdir()) and not resume:
         raise ConfigError(f"{run_dir}: the output folder is not empty; pass --resume to continue it or "
                           "choose a new folder")
     run_dir.mkdir(parents=True, exist_ok=True)
     return LoopState(), [], command
+
+
+def read_state(path: Path) -> tuple[dict[str, Any], LoopState]:
+    """The saved document and the state of a run's ``state.json``, checked: its shape, its fields, and every level id
+    (pool, archive, buffer) a plain name inside the run folder; each failure one line naming the file and value."""
+    saved = read_json(path, "loop state (written by the loop)")
+    if not isinstance(saved, dict) or not isinstance(saved.get("config"), dict):
+        raise ConfigError(f"{path}: expected {{\"config\": ..., \"state\": ...}} as the loop writes it; {STATE_FIX}")
+    state = parse_config(LoopState, saved.get("state"), str(path), prefix="state", fix=STATE_FIX)
+    for where, ids in (("pool", state.pool), ("archive", state.archive)):
+        for level_id in ids:
+            if (problem := lb.level_id_problem(level_id)) is not None:
+                raise ConfigError(f"{path}: state.{where}: {problem}; {STATE_FIX}")
+    if state.buffer:
+        lb.LevelBufferState.from_dict(state.buffer, f"{path}: state.buffer")
+    return saved, state
+
+
+def check_run_files(run_dir: Path) -> None:
+    """Before any work on --resume: the run's state.json and iterations.jsonl name only the run's own levels and
+    files (see :func:`read_state`); one line naming the file and the value otherwise."""
+    if (run_dir / STATE).is_file():
+        read_state(run_dir / STATE)
+    read_iterations(run_dir)
 
 
 def _checkpoint(run_dir: Path, cfg: LoopConfig, state: LoopState, records: list[IterationRecord]) -> None:

@@ -33,6 +33,7 @@ from pathlib import Path
 from typing import Any, Literal
 
 from adaptenv.errors import ConfigError
+from adaptenv.files import atomic_write_text
 from adaptenv.scene.assets import load_catalog
 
 #: Catalog type of an asset whose annotation names no catalog type: a generic floor decoration,
@@ -235,6 +236,5 @@ def objathor_table(path: str | Path, out: str | Path, *, unmapped: Unmapped = "k
         raise ConfigError(f"{path}: no annotation has both a usable size and a catalog type; nothing to write "
                           "(pass --unmapped keep to keep untyped assets)")
     o = Path(out)
-    o.parent.mkdir(parents=True, exist_ok=True)
-    o.write_text(json.dumps(table.to_json(Path(path).name), indent=1), encoding="utf-8")
+    atomic_write_text(o, json.dumps(table.to_json(Path(path).name), indent=1))
     return table

@@ -14,6 +14,7 @@ from pathlib import Path
 from pydantic import BaseModel, Field
 
 from adaptenv.errors import AdaptenvError
+from adaptenv.files import atomic_write_text
 from adaptenv.sim.spec import ACTIONS
 
 
@@ -87,8 +88,7 @@ class Trajectory(BaseModel):
 
     def save(self, path: str | Path) -> Path:
         p = Path(path)
-        p.parent.mkdir(parents=True, exist_ok=True)
-        p.write_text(self.model_dump_json(indent=1), encoding="utf-8")
+        atomic_write_text(p, self.model_dump_json(indent=1))
         return p
 
     @classmethod
