@@ -88,6 +88,7 @@ from adaptenv.curriculum.records import (
     write_iterations,
 )
 from adaptenv.errors import ConfigError
+from adaptenv.limits import STATE_BYTES
 from adaptenv.render.topdown import render_house
 
 #: The fix a corrupt state.json's errors suggest.
@@ -333,7 +334,7 @@ def _open_run(cfg: LoopConfig, run_dir: Path, resume: bool, command: str
     """The state, records and command to continue from: a resumed run's, or a fresh run's in an empty folder."""
     state_path = run_dir / STATE
     if resume and state_path.is_file():
-        saved = read_json(state_path, "loop state (written by the loop)")
+        saved = read_json(state_path, "loop state (written by the loop)", limit=STATE_BYTES)
         if not isinstance(saved, dict) or not isinstance(saved.get("config"), dict):
             raise ConfigError(f"{state_path}: expected {{\"config\": ..., \"state\": ...}} as the loop writes it; "
                               f"{STATE_FIX}")
