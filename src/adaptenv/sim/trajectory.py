@@ -20,9 +20,9 @@ from adaptenv.files import FileRefused, loads_json, read_bytes
 from adaptenv.limits import TRAJECTORY_BYTES
 from adaptenv.sim.spec import ACTIONS, MOVE_STEP, ROTATE_LARGE
 
-JUMP_SLACK = 0.05
+JUMP_SLACK = 0.06
 """How much farther (m) than one move (``MOVE_STEP``) a recorded pose may lie from the one before: float noise, and
-AI2-THOR's default 0.25 m moves."""
+AI2-THOR's default 0.25 m moves with their noise."""
 TURN_SLACK = 1.0
 """How much more (degrees) than one turn (``ROTATE_LARGE``) a recorded yaw may differ from the one before."""
 MOVE_SLACK = 0.01
