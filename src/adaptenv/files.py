@@ -52,8 +52,8 @@ def _size(n: int) -> str:
 
 
 def too_large(size: int | None, limit: int, what: str) -> str:
-    """The reason a ``what`` (a noun after "a": ``house file``) of ``size`` bytes (None: unknown, more than ``limit``)
-    is refused."""
+    """The reason a ``what`` (a noun: ``house``) of ``size`` bytes (None: unknown, more than ``limit``) is
+    refused."""
     got = f"{_size(size)}, " if size is not None else ""
     return f"{got}over the {_size(limit)} limit of the {what} (README, \"Limits\"); pass a smaller file or split it"
 

@@ -173,7 +173,7 @@ class CheckedPolicy:
         done = np.asarray(done, dtype=bool).reshape(-1)
         self._count(done)
         out = self.policy.act(obs, state, done)
-        if not isinstance(out, tuple) or len(out) != 2:
+        if not isinstance(out, (tuple, list)) or len(out) != 2:
             raise PolicyError(f"--policy {printable(self.spec)}: act() returned {type(out).__name__}, not the pair "
                               "(actions, state); fix its act() (see docs/agent.md)")
         actions, new_state = out
