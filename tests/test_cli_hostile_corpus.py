@@ -744,3 +744,191 @@ def test_the_corpus_is_counted_and_every_case_is_one_line(corpus_dirs, record_pr
     assert {k for k, v in ok.items() if not v} == {c.id for c in USERS_CODE}
     readme = (Path(__file__).parents[1] / "README.md").read_text(encoding="utf-8")
     assert f"{len(USERS_CODE)} cases of the hostile-input corpus" in readme  # where the docs say so
+
+
+# -- evidence, bounds, waiting and contracts ----------------------------------------------------------------
+# A trajectory is evidence, not a verdict: its metrics are recomputed from its poses and its house, and a pose that
+# does not follow the one before by one action is refused. Only regular files are read, each kind up to its size
+# limit, JSON up to JSON_DEPTH_MAX deep. A silent LLM server is said, attempt by attempt. A user's policy that breaks
+# the contract (an action that is none, a wrong number of actions) is one line naming the policy, episode and value.
+
+_CORPUS_USER_FILES = user_files
+
+
+def _traj_doc(folder: Path) -> dict:
+    return json.loads((folder / "t.json").read_text(encoding="utf-8"))
+
+
+def _cut(doc: dict, n: int, **metrics) -> dict:
+    """The first ``n`` steps of the recorded episode, its stored metrics (those of the whole run) changed."""
+    return {**doc, "steps": doc["steps"][:n], "final_pose": doc["steps"][n]["pose"],
+            "metrics": {**doc["metrics"], **metrics}}
+
+
+def _silent_server() -> str:
+    """The base URL of a socket on 127.0.0.1 that accepts connections (the kernel's backlog) and never answers."""
+    import atexit
+    import socket
+
+    silent = socket.socket()
+    silent.bind(("127.0.0.1", 0))
+    silent.listen(64)
+    atexit.register(silent.close)
+    return f"http://127.0.0.1:{silent.getsockname()[1]}/v1"
+
+
+def evidence_files(folder: Path) -> None:
+    """Forged trajectories, special files, files over their size limit, a silent LLM server's config and policies
+    that break the contract, in the user's folder."""
+    import os
+
+    from adaptenv import limits
+
+    doc = _traj_doc(folder)
+    n = len(doc["steps"])
+    turned = json.loads(json.dumps(doc))
+    turned["steps"][3]["pose"]["yaw"] = (turned["steps"][2]["pose"]["yaw"] + 90) % 360
+    blocked = json.loads(json.dumps(doc))
+    move = next(i for i, s in enumerate(blocked["steps"][:-1]) if s["action"] == "m" and s["moved"])
+    blocked["steps"][move]["moved"] = False
+    docs = {
+        "t-cut-spl.json": _cut(doc, 5, spl=5.0),
+        "t-repeated.json": {**doc, "steps": doc["steps"] * (104_000 // n),
+                            "metrics": {**doc["metrics"], "episode_length": n * (104_000 // n)}},
+        "t-sight-past-end.json": _cut(doc, 5, first_sight_step=n - 10, success=False, spl=0.0, sel=0.0),
+        "t-turned.json": turned, "t-blocked-moved.json": blocked,
+    }
+    for name, d in docs.items():
+        (folder / name).write_text(json.dumps(d), encoding="utf-8")
+    url = _silent_server()
+    for name, retries in (("llm-silent.json", 0), ("llm-silent-retry.json", 1)):
+        (folder / name).write_text(json.dumps({"provider": "openai-compatible", "base_url": url, "timeout_s": 0.2,
+                                               "max_retries": retries, "backoff_base_s": 0.0}), encoding="utf-8")
+    for name, size in (("huge.json", limits.HOUSE_BYTES), ("huge-assets.json", limits.ASSET_TABLE_BYTES),
+                       ("huge-config.json", limits.CONFIG_BYTES), ("huge-t.json", limits.TRAJECTORY_BYTES)):
+        with open(folder / name, "wb") as f:  # sparse: its size is all a reader may look at
+            f.truncate(size + 1)
+    with open(folder / "huge-line.jsonl", "wb") as f:
+        f.truncate(limits.DATASET_LINE_BYTES + 1)
+    (folder / "bad_policy.py").write_text(
+        "import numpy as np\n\n\nclass Fixed:\n    def __init__(self, action, extra=0):\n"
+        "        self.action, self.extra = action, extra\n\n    def initial_state(self, batch):\n        return None\n\n"
+        "    def act(self, obs, state, done):\n        return np.full(len(done) + self.extra, self.action), state\n\n\n"
+        "action_12345 = Fixed(12345)\nfive_actions = Fixed(0, extra=3)\nhalf_action = Fixed(2.5)\n", encoding="utf-8")
+    os.mkfifo(folder / "fifo.json")
+
+
+def user_files(folder: Path) -> Path:  # noqa: F811  (the corpus's files, plus those of the cases below)
+    """The corpus's user files and :func:`evidence_files`."""
+    _CORPUS_USER_FILES(folder)
+    evidence_files(folder)
+    return folder
+
+
+FORGED = [("repeated", "t-repeated.json", ("steps[", "jumps", "farther than one move (0.2 m)")),
+          ("turned", "t-turned.json", ("steps[3].pose", "turns 90 degrees", "more than one turn (30 degrees)")),
+          ("blocked-but-moved", "t-blocked-moved.json", (".moved", "marked blocked")),
+          ("fifo", "fifo.json", ("FIFO", "not a regular file")),
+          ("over-limit", "huge-t.json", ("over the 64.0 MiB limit of the trajectory",))]
+EVIDENCE_CASES = [Case(f"{reader} trajectory {fid}", tuple(fill(line, t=f"{{in}}/{name}").split()), words)
+                  for reader, line in TRAJ_READERS.items() for fid, name, words in FORGED]
+"""Trajectories whose poses cannot be an episode, and files that are no trajectory to read: refused in one line."""
+
+H_ = "{in}/house.json"
+BOUNDED_CASES = [
+    case("validate a FIFO", "validate {in}/fifo.json", "fifo.json", "FIFO", report=True),
+    case("validate /dev/zero", "validate /dev/zero", "/dev/zero", "character device", report=True),
+    case("validate a house over its limit", "validate {in}/huge.json", "huge.json", "over the 32.0 MiB limit",
+         report=True),
+    case("validate a dataset line over its limit", "validate {in}/huge-line.jsonl", "huge-line.jsonl line 1",
+         "over the 32.0 MiB limit"),
+    case("render a FIFO house", "render {in}/fifo.json -o {out}/m.png", "fifo.json"),
+    case("--assets /dev/zero", "--assets /dev/zero validate " + H_, "--assets /dev/zero", "character device"),
+    case("--assets a FIFO", "validate " + H_ + " --assets {in}/fifo.json", "fifo.json", "FIFO"),
+    case("--assets over its limit", "--assets {in}/huge-assets.json validate " + H_, "huge-assets.json",
+         "over the 64.0 MiB limit"),
+    case("experiment --config a FIFO", "experiment --config {in}/fifo.json -o {out}/x", "fifo.json", "FIFO"),
+    case("experiment --config over its limit", "experiment --config {in}/huge-config.json -o {out}/x",
+         "huge-config.json", "over the 1.0 MiB limit"),
+    case("experiment --config deep", "experiment --config {in}/deep.json -o {out}/x", "deep.json", "64 deep"),
+    case("--assets deep", "--assets {in}/deep.json validate " + H_, "deep.json", "64 deep"),
+    case("analyze --llm-config deep", "analyze " + H_ + " {in}/t.json --llm-config {in}/deep.json", "deep.json",
+         "64 deep"),
+    case("adapt --llm-config deep", "adapt " + H_ + " -o {out}/a --llm-config {in}/deep.json", "deep.json",
+         "64 deep"),
+    case("from-objathor deep", "assets from-objathor {in}/deep.json -o {out}/table.json", "deep.json", "64 deep"),
+    case("from-objathor a FIFO", "assets from-objathor {in}/fifo.json -o {out}/table.json", "fifo.json", "FIFO"),
+    case("from-ai2thor a FIFO", "trajectory from-ai2thor {in}/fifo.json --house " + H_ + " -o {out}/t.json",
+         "fifo.json", "FIFO"),
+    case("from-ai2thor /dev/zero", "trajectory from-ai2thor /dev/zero --house " + H_ + " -o {out}/t.json",
+         "/dev/zero", "character device"),
+    case("analyze --llm a silent server", "analyze " + H_ + " {in}/t.json --llm --llm-config {in}/llm-silent.json",
+         "127.0.0.1", "after 1 attempt", "timed out after 0.2 s"),
+]
+"""Special files, files over their size limit, JSON nested too deeply, a server that never answers: one line each."""
+
+CORPUS.extend(EVIDENCE_CASES + BOUNDED_CASES)
+
+
+@pytest.mark.parametrize("c", EVIDENCE_CASES + BOUNDED_CASES, ids=[c.id for c in EVIDENCE_CASES + BOUNDED_CASES])
+def test_a_forged_trajectory_or_an_unbounded_read_is_refused_in_one_line(c, corpus_dirs):
+    check(c, corpus_dirs)
+
+
+RECOMPUTED = [
+    ("analyze cut with spl 5", ("analyze", H_, "{in}/t-cut-spl.json"), "",
+     ("t-cut-spl.json", "stored spl 5.00 differs from recomputed 0.00", "stored episode_length",
+      "the recomputed figures are used"), "Outcome: failure"),
+    ("analyze sight past the end", ("analyze", H_, "{in}/t-sight-past-end.json"), "",
+     ("t-sight-past-end.json", "stored first_sight_step", "differs from recomputed"), "within 5 steps"),
+    ("render cut with spl 5", ("render", H_, "-t", "{in}/t-cut-spl.json", "-o", "{out}/r/map.png"), "r",
+     ("stored spl 5.00 differs from recomputed 0.00",), "wrote"),
+]
+"""(id, args, output folder, the words of the one stderr line, what stdout holds): a trajectory whose stored
+metrics its poses contradict is analyzed and drawn with the recomputed ones, and the difference said in one line."""
+
+
+@pytest.mark.parametrize("id_, args, output, words, said", RECOMPUTED, ids=[r[0] for r in RECOMPUTED])
+def test_stored_metrics_are_recomputed_and_the_difference_said_in_one_line(id_, args, output, words, said,
+                                                                          corpus_dirs):
+    c = Case(id_, args, words, code=0, output=output)
+    result = run_case(c, *corpus_dirs)
+    assert not result.escaped and result.code == 0, (result.escaped, result.lines)
+    assert len(result.lines) == 1 and all(w in result.lines[0] for w in words), result.lines
+    assert any(said in line for line in result.out), result.out
+    assert not result.outside(c), result.touched
+    if id_.startswith("analyze cut"):
+        assert not any("SPL 5" in line for line in result.out)
+
+
+def test_a_silent_llm_server_is_said_at_each_retry_then_in_one_error(corpus_dirs):
+    c = Case("analyze --llm a silent server, one retry",
+             ("analyze", H_, "{in}/t.json", "--llm", "--llm-config", "{in}/llm-silent-retry.json"), ())
+    result = run_case(c, *corpus_dirs)
+    assert not result.escaped and result.code == 1, (result.escaped, result.lines)
+    assert len(result.lines) == 2, result.lines
+    notice, error = result.lines
+    assert notice.startswith("LLM: attempt 1 of 2 at http://127.0.0.1:") and "timed out after 0.2 s" in notice
+    assert error.startswith("error: ") and "after 2 attempt" in error
+    assert not result.touched
+
+
+CONTRACT = [
+    ("rollout action 12345", ("rollout", H_, "--policy", "{in}/bad_policy.py:action_12345", "-o", "{out}/t.json"),
+     "", ("--policy {in}/bad_policy.py:action_12345", "action 12345", "episode 0", "from 0 to 6")),
+    ("rollout half an action", ("rollout", H_, "--policy", "{in}/bad_policy.py:half_action", "-o", "{out}/t.json"),
+     "", ("bad_policy.py:half_action", "action 2.5", "episode 0")),
+    ("evaluate five actions for two episodes", ("evaluate", "--houses", H_, "-n", "2", "--policy",
+                                                "{in}/bad_policy.py:five_actions", "-o", "{out}/ev"), "ev",
+     ("--policy {in}/bad_policy.py:five_actions", "5 actions for 2 episodes")),
+    ("adapt action 12345", ("adapt", H_, "--policy", "{in}/bad_policy.py:action_12345", "-o", "{out}/a"), "a",
+     ("bad_policy.py:action_12345", "action 12345")),
+]
+"""(id, args, output folder, words): a user's policy whose answers break the contract, run for real."""
+
+
+@pytest.mark.parametrize("id_, args, output, words", CONTRACT, ids=[r[0] for r in CONTRACT])
+def test_a_policy_that_breaks_the_contract_is_one_line_naming_it(id_, args, output, words, corpus_dirs, monkeypatch):
+    monkeypatch.setattr(sys.modules[__name__], "WORK", [])  # the policy must really be asked
+    c = Case(id_, args, words, output=output)
+    check(c, corpus_dirs)

@@ -199,12 +199,13 @@ def recorded(tmp_path_factory) -> dict:
 
 
 def _poses_shifted(doc):
-    for s in doc["steps"]:
-        s["pose"]["x"] += 500.0
+    """Every pose 500 m to the east: an episode that follows itself, off the house's floor."""
+    for pose in [doc["start"], doc["final_pose"], *(s["pose"] for s in doc["steps"])]:
+        pose["x"] += 500.0
 
 
 TRAJECTORIES = [
-    ("500-m-outside", _poses_shifted, "step 0 stands at", "off the house's floor"),
+    ("500-m-outside", _poses_shifted, "start stands at", "off the house's floor"),
     ("no-steps", lambda d: d.update(steps=[]), "at steps: the episode has no steps", ""),
     ("nan-step", lambda d: d["steps"][2]["pose"].update(x=float("nan")), "at steps[2].pose.x: nan is not a finite", ""),
     ("unknown-action", lambda d: d["steps"][1].update(action="fly"), "at steps[1].action: unknown action 'fly'", ""),

@@ -19,7 +19,7 @@ import typer
 from adaptenv.cli import _numbers as numbers
 from adaptenv.cli._common import HOUSE_HELP, JSON_OPTION, load_house_argument
 from adaptenv.cli._outputs import FORCE_OPTION, output_folder
-from adaptenv.errors import AdaptenvError, ConfigError
+from adaptenv.errors import AdaptenvError, ConfigError, PolicyError
 from adaptenv.files import atomic_write_text
 
 if TYPE_CHECKING:
@@ -310,7 +310,7 @@ def adapt(
                     s = _adapt_one(h, name, where, pol, f, gen, steps=steps, seed=seed, target=target,
                                    diagnose=diagnose, before=before)
             except AdaptenvError as exc:
-                if not many or strict:
+                if not many or strict or isinstance(exc, PolicyError):  # a broken policy breaks every house
                     raise
                 log.warning("skipping house %s: %s", name, exc)
                 skipped.append(SkippedHouse(name, str(exc)))

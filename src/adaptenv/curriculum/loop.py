@@ -93,6 +93,7 @@ from adaptenv.curriculum.records import (
 )
 from adaptenv.errors import ConfigError
 from adaptenv.files import BOOKKEEPING
+from adaptenv.limits import STATE_BYTES
 from adaptenv.render.topdown import render_house
 
 #: The fix a corrupt state.json's errors suggest.
@@ -362,7 +363,7 @@ def _open_run(cfg: LoopConfig, run_dir: Path, resume: bool, command: str
 def read_state(path: Path) -> tuple[dict[str, Any], LoopState]:
     """The saved document and the state of a run's ``state.json``, checked: its shape, its fields, and every level id
     (pool, archive, buffer) a plain name inside the run folder; each failure one line naming the file and value."""
-    saved = read_json(path, "loop state (written by the loop)")
+    saved = read_json(path, "loop state (written by the loop)", limit=STATE_BYTES)
     if not isinstance(saved, dict) or not isinstance(saved.get("config"), dict):
         raise ConfigError(f"{path}: expected {{\"config\": ..., \"state\": ...}} as the loop writes it; {STATE_FIX}")
     state = parse_config(LoopState, saved.get("state"), str(path), prefix="state", fix=STATE_FIX)

@@ -22,7 +22,6 @@ is read as a file of one asset.
 
 from __future__ import annotations
 
-import gzip
 import json
 import math
 import re
@@ -33,7 +32,8 @@ from pathlib import Path
 from typing import Any, Literal
 
 from adaptenv.errors import ConfigError
-from adaptenv.files import atomic_write_text
+from adaptenv.files import FileRefused, atomic_write_text, gunzip, loads_json, read_bytes
+from adaptenv.limits import ANNOTATIONS_BYTES
 from adaptenv.scene.assets import load_catalog
 
 #: Catalog type of an asset whose annotation names no catalog type: a generic floor decoration,
@@ -184,11 +184,14 @@ def read_annotations(path: str | Path) -> dict[str, dict[str, Any]]:
     fix = ("pass objathor's annotations.json.gz (python -m objathor.dataset.download_annotations "
            "--version 2023_07_28), see docs/scene.md")
     try:
-        raw = p.read_bytes()
-        doc = json.loads((gzip.decompress(raw) if raw[:2] == b"\x1f\x8b" else raw).decode("utf-8"))
+        raw = read_bytes(p, ANNOTATIONS_BYTES, "annotation file")
+        doc = loads_json((gunzip(raw, ANNOTATIONS_BYTES, "annotation file", p) if raw[:2] == b"\x1f\x8b"
+                          else raw).decode("utf-8"))
     except FileNotFoundError:
         raise ConfigError(f"{p}: no such annotation file; {fix}") from None
-    except (OSError, EOFError, zlib.error, UnicodeDecodeError, json.JSONDecodeError) as exc:
+    except FileRefused:
+        raise
+    except (OSError, EOFError, zlib.error, UnicodeDecodeError, ValueError) as exc:  # ValueError: bad or deep JSON
         raise ConfigError(f"{p}: cannot read it as JSON or gzipped JSON ({exc}); {fix}") from None
     if isinstance(doc, dict) and isinstance(doc.get("uid"), str) and not isinstance(doc.get(doc["uid"]), dict):
         doc = {doc["uid"]: doc}  # one asset's own annotation file
