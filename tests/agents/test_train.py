@@ -91,7 +91,7 @@ def test_bf16_gradient_steps_learn_as_fp32_does_and_unknown_precisions_are_refus
     assert losses["bf16"][0] == pytest.approx(losses["fp32"][0], abs=0.02)  # the same weights and data at first
     assert np.mean(losses["bf16"][-2:]) < losses["bf16"][0] - 0.2  # and it learns as the fp32 run does
     assert abs(np.mean(losses["bf16"][-2:]) - np.mean(losses["fp32"][-2:])) < 0.1
-    with pytest.raises(ConfigError, match="--precision must be one of fp32, bf16"):
+    with pytest.raises(ConfigError, match="--precision must be one of auto, fp32, bf16"):
         train(tiny_config(tmp_path, precision="fp16"))
 
 

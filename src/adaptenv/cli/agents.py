@@ -386,8 +386,9 @@ def bench_train(as_json: bool = JSON_OPTION,
                 updates_per_iter: int | None = typer.Option(None, "--updates-per-iter", min=1,
                                                             help="Gradient steps per collection, i.e. the replay ratio "
                                                                  "(default: TrainConfig's)."),
-                precision: str | None = typer.Option(None, "--precision", help="fp32 or bf16: the gradient steps of "
-                                                     "the recipe and of the end-to-end figure (default: TrainConfig's).")
+                precision: str | None = typer.Option(None, "--precision", help="auto, fp32 or bf16: the gradient steps "
+                                                     "of the recipe and of the end-to-end figure (default: "
+                                                     "TrainConfig's, auto; both are timed either way).")
                 ) -> None:
     """Training throughput: labelled, gradient and end-to-end frames/s, inference steps/s, parameter count."""
     from adaptenv.bench.train import run, run_map, run_ppo

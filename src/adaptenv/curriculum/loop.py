@@ -49,7 +49,13 @@ from adaptenv.agents.checkpoint import load_checkpoint, load_tensors, save_check
 from adaptenv.agents.config import FinetuneConfig
 from adaptenv.agents.evaluate import EpisodeResult, EvalReport, mean_se, summarize, write_report
 from adaptenv.agents.houses import load_house_set
-from adaptenv.agents.network import NavNet, NeuralPolicy, torch_threads
+from adaptenv.agents.network import (
+    NavNet,
+    NeuralPolicy,
+    resolve_precision,
+    same_arithmetic,
+    torch_threads,
+)
 from adaptenv.agents.ppo import learner_problem
 from adaptenv.agents.registry import resolve_policy, weights_record
 from adaptenv.agents.train import finetune
@@ -174,8 +180,10 @@ def _run_loop(cfg: LoopConfig, run_dir: str | Path, resume: bool, executor: Exec
     state, records, command = _open_run(cfg, run_dir, resume, command)
     skipped = skipped_houses([cfg.houses, *cfg.heldout.values()])
     weights = _pi0_weights(cfg, run_dir, fresh=state.iteration == 0 and not records)
+    precision = resolve_precision(cfg.finetune_precision, "finetune_precision")
     atomic_write_text(run_dir / "run.json", RunInfo(method=cfg.method, seed=cfg.seed, config=asdict(cfg), command=command,
-                                                    skipped_houses=skipped, weights=weights).model_dump_json(indent=1))
+                                                    skipped_houses=skipped, weights=weights,
+                                                    finetune_precision=precision).model_dump_json(indent=1))
     store = SceneStore(run_dir / "scenes")
     ex = executor if executor is not None else InProcessExecutor()
     method = METHODS[cfg.method]()
@@ -328,6 +336,12 @@ def _moved_match_run(saved: dict[str, Any], cfg: LoopConfig) -> dict[str, str]:
     return {}
 
 
+def _same_precision(saved: dict[str, Any], cfg: LoopConfig) -> dict[str, str]:
+    """``finetune_precision`` as now when the saved one computes alike on this CPU (fp32 saved, auto meaning fp32)."""
+    old = saved.get("finetune_precision", LoopConfig.finetune_precision)
+    return {"finetune_precision": cfg.finetune_precision} if same_arithmetic(old, cfg.finetune_precision) else {}
+
+
 def _open_run(cfg: LoopConfig, run_dir: Path, resume: bool, command: str
               ) -> tuple[LoopState, list[IterationRecord], str]:
     """The state, records and command to continue from: a resumed run's, or a fresh run's in an empty folder."""
@@ -338,7 +352,8 @@ def _open_run(cfg: LoopConfig, run_dir: Path, resume: bool, command: str
             raise ConfigError(f"{state_path}: expected {{\"config\": ..., \"state\": ...}} as the loop writes it; "
                               f"{STATE_FIX}")
         old = saved["config"]  # a field added to LoopConfig since the run started counts as its default
-        changed = run_changes({**asdict(LoopConfig()), **old, **_moved_match_run(old, cfg)}, asdict(cfg))
+        changed = run_changes({**asdict(LoopConfig()), **old, **_moved_match_run(old, cfg), **_same_precision(old, cfg)},
+                              asdict(cfg))
         if changed:
             raise ConfigError(f"{run_dir}: --resume with other settings than the interrupted run: {', '.join(map(printable, changed))}; "
                               "pass the same options (its run.json lists them) or a new output folder")
