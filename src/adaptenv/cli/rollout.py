@@ -34,7 +34,7 @@ def resolve_policy(name: str, seed: int | None = None):
 
 def rollout(
     house: Path = _HOUSE,
-    policy: str = typer.Option("expert", "--policy", help="Who acts: pretrained (the strongest shipped agent), pretrained-map, pretrained-scan, expert, explorer, map-explorer, random, a checkpoint (.pt) or module:attribute."),
+    policy: str = typer.Option("pretrained", "--policy", help="Who acts: pretrained (the strongest shipped agent), pretrained-map, pretrained-scan, expert, explorer, map-explorer, random, a checkpoint (.pt) or module:attribute."),
     target: str | None = typer.Option(None, "--target", help="Target object type (default: drawn among the solvable ones)."),
     seed: int = typer.Option(0, "--seed", callback=numbers.seed, help="Seed of the episode draw (and of the random policy)."),
     use_house_start: bool = typer.Option(False, "--use-house-start", help="Start at the house's metadata agent pose."),
