@@ -386,3 +386,18 @@ def test_run_json_records_the_precision_used_and_an_fp32_run_resumes_under_auto(
     assert figures(run_loop(auto, tmp_path / "r", resume=True)) == figures(first)
     with pytest.raises(ConfigError, match=r"finetune_precision \(was 'fp32', now 'bf16'\)"):
         run_loop(tiny_config(tiny_policy, "none", iterations=1, finetune_precision="bf16"), tmp_path / "r", resume=True)
+
+
+def test_every_iteration_says_what_g_made_and_why_fewer(tiny_policy, tmp_path):
+    lines: list[str] = []
+    run_loop(tiny_config(tiny_policy, "ours", iterations=1, edit_steps=2), tmp_path / "r", progress=lines.append)
+    [made] = [x for x in lines if x.startswith("t=1: G made")]
+    scenes = json.loads((tmp_path / "r" / "iter_0001" / "scenes.json").read_text())
+    assert made.startswith(f"t=1: {scenes['generation']} (") and made.endswith(" s)")
+    assert scenes["edits_requested"] == 4 and f"G made {scenes['edits_this_iteration']} of 4 edits" in made
+    assert scenes["edits_this_iteration"] > 0, "the failure-mode G edits whether or not F finds a failure"
+    if scenes["edits_this_iteration"] < 4:
+        assert "fewer because: " in made
+    lines.clear()
+    run_loop(tiny_config(tiny_policy, "none", iterations=1), tmp_path / "n", progress=lines.append)
+    assert any(x.startswith("t=1: none makes no edits") for x in lines)

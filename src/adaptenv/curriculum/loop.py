@@ -67,6 +67,7 @@ from adaptenv.curriculum.jobs import (
     Rollout,
     RolloutJob,
     eval_jobs,
+    generation_line,
     heldout_set,
     run_eval,
     run_rollout,
@@ -232,6 +233,9 @@ def _run_loop(cfg: LoopConfig, run_dir: str | Path, resume: bool, executor: Exec
         new = method.make_scenes(it, rolled, rollouts)
         train_names = method.train_on(it, rolled, new)
         stages.lap("scenes")
+        made_line = generation_line([m for _, m in it.made], cfg.edit_steps) if it.made else ""
+        say(f"t={t}: {made_line or f'{cfg.method} makes no edits'} ({len(new)} new scene{'s' * (len(new) != 1)}, "
+            f"{stages.seconds['scenes']:.0f} s)")
         llm_usage = None
         if method.uses_llm:
             made = [m for _, m in it.made]
@@ -267,7 +271,8 @@ def _run_loop(cfg: LoopConfig, run_dir: str | Path, resume: bool, executor: Exec
                                        stage_seconds=stages.seconds, llm_usage=llm_usage))
         (iteration_dir(run_dir, t) / "scenes.json").write_text(json.dumps(
             {"rolled_out": rolled, "replayed": it.replayed, "trained_on": train_names,
-             "edits_this_iteration": state.edits - edits_before, "parents": it.parents}),
+             "edits_this_iteration": state.edits - edits_before, "parents": it.parents,
+             "edits_requested": cfg.edit_steps * len(it.made), "generation": made_line}),
             encoding="utf-8")
         _checkpoint(run_dir, cfg, state, records)
     return records
