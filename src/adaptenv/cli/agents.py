@@ -208,7 +208,7 @@ def evaluate(
     from rich.console import Console
     from rich.table import Table
 
-    from adaptenv.agents.evaluate import drop, write_report
+    from adaptenv.agents.evaluate import by_rooms_line, drop, write_report
     from adaptenv.agents.evaluate import evaluate as run_eval
     from adaptenv.agents.houses import load_house_set
     from adaptenv.agents.network import configure_torch
@@ -275,6 +275,10 @@ def evaluate(
         for spec, s, _ in summaries:
             if "floor_left_out" in s:
                 console.print(floor_line(spec, s), highlight=False)
+        for spec, s, _ in summaries:
+            if len(s["by_rooms"]) > 1 or len(summaries) == 1:
+                console.print(f"{by_rooms_line(s['by_rooms'])}" + (f" on {spec}" if len(summaries) > 1 else ""),
+                              highlight=False, soft_wrap=True)
         for spec, s, _ in summaries:
             if s["failure_modes"]:
                 console.print(f"failures on {spec} (built-in analysis F): "
