@@ -192,5 +192,7 @@ def test_the_edits_line_says_what_g_made_and_why_fewer():
     line = edits_line(4, 0, Counter(), scenes=2, refused=2, no_failure=(2, 6))
     assert line.startswith("G made 0 of 4 edits in 2 scenes; fewer because: the final validation refused")
     assert "F found no failure in 6 episodes of 2 scenes" in line
+    assert edits_line(2, 1, Counter(), stopped=["the LLM budget is used up", ""]) == (
+        "G made 1 of 2 edits; fewer because: G stopped early: the LLM budget is used up")
     random_log = {"edits": [{"accepted": False, "problems": ["overlaps Sofa|1"]}, {"accepted": True, "changed": True}]}
     assert missed_edit_reasons(random_log) == Counter({"overlaps Sofa|1": 1})

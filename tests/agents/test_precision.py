@@ -41,9 +41,9 @@ def test_the_bf16_flag_of_another_architecture_does_not_count():
 def fp32_cpu(monkeypatch):
     """This machine as an AVX2-only CPU, the warning not yet given in this process."""
     monkeypatch.setattr(network, "auto_precision", lambda: "fp32")
-    network._warn_slow_bf16.cache_clear()
+    network._warned_slow_bf16.clear()
     yield
-    network._warn_slow_bf16.cache_clear()
+    network._warned_slow_bf16.clear()
 
 
 def test_auto_is_fp32_and_an_explicit_bf16_warns_once_on_a_cpu_without_it(fp32_cpu, capsys):
@@ -54,12 +54,14 @@ def test_auto_is_fp32_and_an_explicit_bf16_warns_once_on_a_cpu_without_it(fp32_c
     lines = capsys.readouterr().err.splitlines()
     assert len(lines) == 1
     assert "--precision bf16 on a CPU without native bf16" in lines[0] and "about 8 times slower" in lines[0]
+    assert resolve_precision("bf16", "--finetune-precision") == "bf16"  # once per process, whichever option
+    assert capsys.readouterr().err == ""
     assert same_arithmetic("fp32", "auto") and not same_arithmetic("bf16", "auto")
 
 
 def test_auto_is_bf16_where_the_cpu_has_it_and_bf16_then_says_nothing(monkeypatch, capsys):
     monkeypatch.setattr(network, "auto_precision", lambda: "bf16")
-    network._warn_slow_bf16.cache_clear()
+    network._warned_slow_bf16.clear()
     assert resolve_precision("auto") == resolve_precision("bf16") == "bf16"
     assert capsys.readouterr().err == ""
 

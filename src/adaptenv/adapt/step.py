@@ -19,7 +19,7 @@ from __future__ import annotations
 import json
 import math
 from collections import Counter
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
@@ -182,13 +182,15 @@ def missed_edit_reasons(log: Mapping[str, Any]) -> Counter[str]:
 
 
 def edits_line(requested: int, applied: int, reasons: Mapping[str, int], *, scenes: int = 1, refused: int = 0,
-               no_failure: tuple[int, int] = (0, 0)) -> str:
+               no_failure: tuple[int, int] = (0, 0), stopped: Sequence[str] = ()) -> str:
     """One line on what G made: ``applied`` of ``requested`` edits (in ``scenes`` scenes), and where fewer, why: the
     steps' reasons with their counts, the scenes whose edited house the final validation ``refused``; and
-    ``no_failure`` = (scenes, episodes) in which F found no failure (G then made the house harder without one)."""
+    ``no_failure`` = (scenes, episodes) in which F found no failure (G then made the house harder without one); why G
+    ``stopped`` early (LLM unavailable, budget used up), where it did."""
     where = f" in {scenes} scene{'s' * (scenes != 1)}" if scenes != 1 else ""
     line = f"G made {applied} of {requested} edit{'s' * (requested != 1)}{where}"
     why = [f"{r} ({n} step{'s' * (n != 1)})" for r, n in sorted(reasons.items(), key=lambda kv: -kv[1])]
+    why += [f"G stopped early: {x}" for x in dict.fromkeys(x for x in stopped if x)]
     if refused:
         why.append(f"the final validation refused the edited house ({refused} scene{'s' * (refused != 1)}; its edits "
                    "were dropped)")
@@ -212,7 +214,7 @@ def result_edits_line(result: AdaptResult, requested: int) -> str:
     else:
         no_failure = (1, 1) if result.before.metrics.success else (0, 0)
     return edits_line(requested, result.edits_applied if result.valid else 0, missed_edit_reasons(log),
-                      refused=int(not result.valid), no_failure=no_failure)
+                      refused=int(not result.valid), no_failure=no_failure, stopped=[result.generation.stopped])
 
 
 def house_types(*houses: House) -> dict[str, str | None]:

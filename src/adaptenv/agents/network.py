@@ -367,8 +367,14 @@ def auto_precision() -> str:
     return "bf16" if native_bf16() else "fp32"
 
 
-@functools.cache
+_warned_slow_bf16: list[str] = []
+"""Where the bf16 warning was given in this process (it is given once, whichever option asked for bf16)."""
+
+
 def _warn_slow_bf16(where: str) -> None:
+    if _warned_slow_bf16:
+        return
+    _warned_slow_bf16.append(where)
     print(f"adaptenv: warning: {where} bf16 on a CPU without native bf16 (no avx512_bf16 or amx_bf16 flag): "
           f"{BF16_SLOWDOWN}; pass {where} auto or fp32", file=sys.stderr, flush=True)
 

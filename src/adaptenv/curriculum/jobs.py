@@ -363,7 +363,8 @@ def generation_line(made: Sequence[Generated], requested: int) -> str:
             no_failure[0] += 1
             no_failure[1] += 1
     return edits_line(requested * len(made), sum(m.edits for m in made), reasons, scenes=len(made),
-                      refused=sum(not m.valid for m in made), no_failure=(no_failure[0], no_failure[1]))
+                      refused=sum(not m.valid for m in made), no_failure=(no_failure[0], no_failure[1]),
+                      stopped=[m.stopped for m in made])
 
 
 def check_steps(generation: GenerationResult) -> int:

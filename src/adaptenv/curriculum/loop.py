@@ -181,7 +181,7 @@ def _run_loop(cfg: LoopConfig, run_dir: str | Path, resume: bool, executor: Exec
     state, records, command = _open_run(cfg, run_dir, resume, command)
     skipped = skipped_houses([cfg.houses, *cfg.heldout.values()])
     weights = _pi0_weights(cfg, run_dir, fresh=state.iteration == 0 and not records)
-    precision = resolve_precision(cfg.finetune_precision, "finetune_precision")
+    precision = resolve_precision(cfg.finetune_precision, "--finetune-precision")
     atomic_write_text(run_dir / "run.json", RunInfo(method=cfg.method, seed=cfg.seed, config=asdict(cfg), command=command,
                                                     skipped_houses=skipped, weights=weights,
                                                     finetune_precision=precision).model_dump_json(indent=1))
