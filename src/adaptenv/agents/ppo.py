@@ -73,6 +73,7 @@ from adaptenv.agents.network import (
     count_parameters,
     obs_to_tensors,
     observe,
+    resolve_precision,
     torch_threads,
 )
 from adaptenv.agents.registry import init_checkpoint
@@ -299,6 +300,7 @@ def train_ppo(cfg: PPOConfig, *, worlds: Sequence[Any] | None = None, init_net: 
 def _train_ppo(cfg: PPOConfig, worlds: Sequence[Any] | None, init_net: NavNet | None,
                learner: dict[str, Any] | None, command: str, threads: int) -> TrainResult:
     run_dir = default_ppo_run_dir(cfg)
+    precision = resolve_precision(cfg.precision)  # what "auto" means on this CPU; the card records it
     if run_dir:
         run_dir.mkdir(parents=True, exist_ok=True)
         atomic_write_text(run_dir / "config.json", json.dumps(asdict(cfg), indent=1) + "\n")
@@ -447,7 +449,7 @@ def _train_ppo(cfg: PPOConfig, worlds: Sequence[Any] | None, init_net: NavNet | 
                 chunk, env = mb // B, mb % B
                 tt = chunk[None, :] * L + np.arange(L)[:, None]  # (L, mb)
                 idx = (torch.from_numpy(tt), torch.from_numpy(env)[None, :])
-                with torch.autocast("cpu", dtype=torch.bfloat16, enabled=cfg.precision == "bf16"):
+                with torch.autocast("cpu", dtype=torch.bfloat16, enabled=precision == "bf16"):
                     if feats_buf is None:
                         logits, new_value, _ = agent({k: v[idx] for k, v in b_obs.items()}, b_first[idx],
                                                      h0_buf[chunk, env], detach_value=warmup)
@@ -539,7 +541,7 @@ def _train_ppo(cfg: PPOConfig, worlds: Sequence[Any] | None, init_net: NavNet | 
         "updates": updates, "wall_time_s": round(wall, 1), "seed": cfg.seed, "init": cfg.init,
         "parameters": count_parameters(net), "final_train_success": final["success"],
         "final_train_success_ci95": final["success_ci95"], "final_train_spl": final["spl"],
-        "final_eval_episodes": final["episodes"], "end_threshold": end_threshold,
+        "final_eval_episodes": final["episodes"], "end_threshold": end_threshold, "precision": precision,
         "end_threshold_calibration": calibration.card() if calibration else None,
         "torch_threads": threads, "cpus": os.cpu_count(), "config": card_config(cfg, net),
         "net_config": asdict(net.config)}

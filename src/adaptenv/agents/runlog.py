@@ -20,7 +20,7 @@ from adaptenv.files import atomic_write_text, open_append
 
 
 def check_precision(precision: str, where: str) -> None:
-    """Raise a ConfigError unless ``precision`` names an arithmetic of the gradient steps (fp32 or bf16)."""
+    """Raise a ConfigError unless ``precision`` names an arithmetic of the gradient steps (auto, fp32 or bf16)."""
     if precision not in PRECISIONS:
         raise ConfigError(f"{where} must be one of {', '.join(PRECISIONS)}, got {precision!r}")
 

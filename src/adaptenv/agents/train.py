@@ -78,6 +78,8 @@ from adaptenv.agents.network import (
     count_parameters,
     obs_to_tensors,
     observe,
+    resolve_precision,
+    same_arithmetic,
     torch_threads,
 )
 from adaptenv.agents.ppo import train_ppo
@@ -240,7 +242,10 @@ def load_resume_state(cfg: TrainConfig, state_path: Path | None) -> dict[str, An
     if not isinstance(saved, dict) or not set(STATE_KEYS) <= set(saved) or not isinstance(saved["config"], dict):
         raise ConfigError(f"{state_path}: not a resume state adaptenv train wrote (missing fields); start the run "
                           "again without --resume, in a new --run-dir")
-    changed = changed_settings({**asdict(TrainConfig()), **saved["config"]}, asdict(cfg), RESUME_MAY_CHANGE)
+    old = {**asdict(TrainConfig()), **saved["config"]}
+    if same_arithmetic(old["precision"], cfg.precision):  # fp32 saved, auto now: the same steps on this CPU
+        old["precision"] = cfg.precision
+    changed = changed_settings(old, asdict(cfg), RESUME_MAY_CHANGE)
     if changed:
         raise ConfigError(f"--resume: {state_path} was saved with other settings: {', '.join(changed)}; pass the "
                           "interrupted run's values (its config.json) or start a new --run-dir")
@@ -288,6 +293,7 @@ def _train(cfg: TrainConfig, worlds: Sequence[NavWorld] | None, init_net: NavNet
     run_dir = default_run_dir(cfg)
     state_path = run_dir / "state.pt" if run_dir else None
     saved = load_resume_state(cfg, state_path) if cfg.resume else None  # checked before anything is written
+    precision = resolve_precision(cfg.precision)  # what "auto" means on this CPU; the card records it
 
     # seeding: one root seed for torch, the data generator and the episode sampler
     torch.manual_seed(cfg.seed)
@@ -394,7 +400,7 @@ def _train(cfg: TrainConfig, worlds: Sequence[NavWorld] | None, init_net: NavNet
             group["lr"] = lr
         for _ in range(cfg.updates_per_iter):
             batch = buffer.sample(cfg.batch_chunks, learn_rng)
-            logits = sequence_logits(net, batch, batch["first"], batch["h0"], cfg.precision)
+            logits = sequence_logits(net, batch, batch["first"], batch["h0"], precision)
             loss = F.cross_entropy(logits.reshape(-1, logits.shape[-1]), batch["label"].reshape(-1),
                                    weight=class_weight)
             optimizer.zero_grad()
@@ -518,7 +524,7 @@ def _train(cfg: TrainConfig, worlds: Sequence[NavWorld] | None, init_net: NavNet
         "wall_time_s": round(wall, 1), "seed": cfg.seed, "parameters": count_parameters(net),
         "final_train_success": final["success"], "final_train_success_ci95": final["success_ci95"],
         "final_train_spl": final["spl"], "final_eval_episodes": final["episodes"],
-        "end_threshold": end_threshold, "end_weight": cfg.end_weight,
+        "end_threshold": end_threshold, "end_weight": cfg.end_weight, "precision": precision,
         "end_threshold_calibration": calibration.card() if calibration else None,
         "torch_threads": threads, "cpus": os.cpu_count(), "config": card_config(cfg, net),
         "net_config": asdict(net.config)}

@@ -161,9 +161,9 @@ def analyze(
 def adapt(
     house: Path = ADAPT_HOUSE_ARGUMENT,
     out: Path = OUT_OPTION,
-    policy: str = typer.Option("expert", "--policy", help="pretrained (the strongest shipped agent), "
-                               "pretrained-map, pretrained-scan, expert, explorer, map-explorer, random, a checkpoint "
-                               "(.pt), or module:attribute."),
+    policy: str = typer.Option("pretrained", "--policy", help="The agent G adapts the house to: pretrained (the "
+                               "strongest shipped agent), pretrained-map, pretrained-scan, expert (shortest path, by "
+                               "name only), explorer, map-explorer, random, a checkpoint (.pt), or module:attribute."),
     steps: int = typer.Option(5, "--steps", min=1, max=50, help="Single-object edits to make."),
     generator: str = typer.Option("builtin", "--generator", help="builtin (offline), failure-modes (offline, aims at "
                                   "F's failure families), learned (offline, a trained scorer ranks edits), llm, or random."),
@@ -335,7 +335,7 @@ def _adapt_one(h, name: str, out: Path, policy, analyzer, generator, *, steps: i
     With ``before`` (an episode recorded in this house) F analyzes it instead of a rollout of ``policy``.
     """
     from adaptenv.adapt.diagnosis import hard_episodes
-    from adaptenv.adapt.step import adapt_scene, summarize, write_outputs
+    from adaptenv.adapt.step import adapt_scene, result_edits_line, summarize, write_outputs
     from adaptenv.adapt.target import EPISODE_FRESH_DRAWS, fresh_measurement
     from adaptenv.agents.rollout import draw_episode
     from adaptenv.progress import ProgressBar
@@ -353,6 +353,7 @@ def _adapt_one(h, name: str, out: Path, policy, analyzer, generator, *, steps: i
                              rng=np.random.default_rng(seed), name=name, render=True, render_dir=out / "steps",
                              episodes=episodes, before=before)
     s = summarize(result, analyzer=analyzer, seed=seed)
+    s["edits_line"] = result_edits_line(result, steps)
     if result.valid and result.world is not None:  # G's own rollouts include the episode's draw; these do not
         fresh = [fresh_measurement(w, [episode], policy, EPISODE_FRESH_DRAWS) for w in (world, result.world)]
         s["fresh"] = {"draws": EPISODE_FRESH_DRAWS, "success_before": fresh[0].success,
@@ -503,6 +504,7 @@ def _print_adapt_summary(console, s: dict, h, out: Path) -> None:
                   f"generator {s['generator']}")
     console.print(f"edits applied: {s['edits_applied']} of {s['steps_requested']} "
                   f"({s['edits_verified']} verified); moves are in grid units (0..100 across the house)")
+    console.print(s["edits_line"], highlight=False, soft_wrap=True)
     console.print(edit_counts_text(s["edit_counts"]), highlight=False)
     console.print("objectives along the episode's route (before -> after):")
     for k in ob:

@@ -215,7 +215,7 @@ def evaluate(
     from rich.console import Console
     from rich.table import Table
 
-    from adaptenv.agents.evaluate import drop, write_report
+    from adaptenv.agents.evaluate import by_rooms_line, drop, write_report
     from adaptenv.agents.evaluate import evaluate as run_eval
     from adaptenv.agents.houses import load_house_set
     from adaptenv.agents.network import configure_torch
@@ -282,6 +282,10 @@ def evaluate(
         for spec, s, _ in summaries:
             if "floor_left_out" in s:
                 console.print(floor_line(spec, s), highlight=False)
+        for spec, s, _ in summaries:
+            if len(s["by_rooms"]) > 1 or len(summaries) == 1:
+                console.print(f"{by_rooms_line(s['by_rooms'])}" + (f" on {spec}" if len(summaries) > 1 else ""),
+                              highlight=False, soft_wrap=True)
         for spec, s, _ in summaries:
             if s["failure_modes"]:
                 console.print(f"failures on {spec} (built-in analysis F): "
@@ -392,8 +396,9 @@ def bench_train(as_json: bool = JSON_OPTION,
                 updates_per_iter: int | None = typer.Option(None, "--updates-per-iter", min=1,
                                                             help="Gradient steps per collection, i.e. the replay ratio "
                                                                  "(default: TrainConfig's)."),
-                precision: str | None = typer.Option(None, "--precision", help="fp32 or bf16: the gradient steps of "
-                                                     "the recipe and of the end-to-end figure (default: TrainConfig's).")
+                precision: str | None = typer.Option(None, "--precision", help="auto, fp32 or bf16: the gradient steps "
+                                                     "of the recipe and of the end-to-end figure (default: "
+                                                     "TrainConfig's, auto; both are timed either way).")
                 ) -> None:
     """Training throughput: labelled, gradient and end-to-end frames/s, inference steps/s, parameter count."""
     from adaptenv.bench.train import run, run_map, run_ppo

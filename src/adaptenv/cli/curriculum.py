@@ -149,8 +149,10 @@ def loop(
                                            "episodes (600 for the map-reading agent)."),
     finetune_min_start: float = typer.Option(0.0, "--finetune-min-start", min=0.0, callback=numbers.finite, help="Fine-tuning episodes start "
                                              "at least this geodesic distance (m) from the target (0: uniform)."),
-    finetune_precision: str = typer.Option("fp32", "--finetune-precision", help="Arithmetic of fine-tuning's "
-                                           "gradient steps: fp32, or bf16 (faster on CPUs with AVX512_BF16)."),
+    finetune_precision: str = typer.Option("auto", "--finetune-precision", help="Arithmetic of fine-tuning's "
+                                           "gradient steps: auto (bf16 where the CPU computes it natively, else "
+                                           "fp32), fp32, or bf16 (faster on CPUs with AVX512_BF16, about 8x slower "
+                                           "on AVX2-only ones)."),
     focus_training: bool = typer.Option(False, "--focus-training", help="Fine-tuning episodes in adapted scenes ask "
                                         "for the target type G's edits aimed at."),
     relocate_targets: bool = typer.Option(False, "--relocate-targets", help="The failure-mode G may move a target "

@@ -53,7 +53,13 @@ from adaptenv.agents.checkpoint import (
 from adaptenv.agents.config import FinetuneConfig
 from adaptenv.agents.evaluate import EpisodeResult, EvalReport, mean_se, summarize, write_report
 from adaptenv.agents.houses import load_house_set
-from adaptenv.agents.network import NavNet, NeuralPolicy, torch_threads
+from adaptenv.agents.network import (
+    NavNet,
+    NeuralPolicy,
+    resolve_precision,
+    same_arithmetic,
+    torch_threads,
+)
 from adaptenv.agents.ppo import learner_problem
 from adaptenv.agents.registry import resolve_policy, weights_record
 from adaptenv.agents.train import finetune
@@ -65,6 +71,7 @@ from adaptenv.curriculum.jobs import (
     Rollout,
     RolloutJob,
     eval_jobs,
+    generation_line,
     heldout_set,
     run_eval,
     run_rollout,
@@ -180,8 +187,10 @@ def _run_loop(cfg: LoopConfig, run_dir: str | Path, resume: bool, executor: Exec
     state, records, command = _open_run(cfg, run_dir, resume, command)
     skipped = skipped_houses([cfg.houses, *cfg.heldout.values()])
     weights = _pi0_weights(cfg, run_dir, fresh=state.iteration == 0 and not records)
+    precision = resolve_precision(cfg.finetune_precision, "--finetune-precision")
     atomic_write_text(run_dir / "run.json", RunInfo(method=cfg.method, seed=cfg.seed, config=asdict(cfg), command=command,
-                                                    skipped_houses=skipped, weights=weights).model_dump_json(indent=1))
+                                                    skipped_houses=skipped, weights=weights,
+                                                    finetune_precision=precision).model_dump_json(indent=1))
     store = SceneStore(run_dir / "scenes")
     ex = executor if executor is not None else InProcessExecutor()
     method = METHODS[cfg.method]()
@@ -230,6 +239,9 @@ def _run_loop(cfg: LoopConfig, run_dir: str | Path, resume: bool, executor: Exec
         new = method.make_scenes(it, rolled, rollouts)
         train_names = method.train_on(it, rolled, new)
         stages.lap("scenes")
+        made_line = generation_line([m for _, m in it.made], cfg.edit_steps) if it.made else ""
+        say(f"t={t}: {made_line or f'{cfg.method} makes no edits'} ({len(new)} new scene{'s' * (len(new) != 1)}, "
+            f"{stages.seconds['scenes']:.0f} s)")
         llm_usage = None
         if method.uses_llm:
             made = [m for _, m in it.made]
@@ -265,7 +277,8 @@ def _run_loop(cfg: LoopConfig, run_dir: str | Path, resume: bool, executor: Exec
                                        stage_seconds=stages.seconds, llm_usage=llm_usage))
         atomic_write_text(iteration_dir(run_dir, t) / "scenes.json", json.dumps(
             {"rolled_out": rolled, "replayed": it.replayed, "trained_on": train_names,
-             "edits_this_iteration": state.edits - edits_before, "parents": it.parents}))
+             "edits_this_iteration": state.edits - edits_before, "parents": it.parents,
+             "edits_requested": cfg.edit_steps * len(it.made), "generation": made_line}))
         _checkpoint(run_dir, cfg, state, records)
     return records
 
@@ -333,6 +346,12 @@ def _moved_match_run(saved: dict[str, Any], cfg: LoopConfig) -> dict[str, str]:
     return {}
 
 
+def _same_precision(saved: dict[str, Any], cfg: LoopConfig) -> dict[str, str]:
+    """``finetune_precision`` as now when the saved one computes alike on this CPU (fp32 saved, auto meaning fp32)."""
+    old = saved.get("finetune_precision", LoopConfig.finetune_precision)
+    return {"finetune_precision": cfg.finetune_precision} if same_arithmetic(old, cfg.finetune_precision) else {}
+
+
 def _open_run(cfg: LoopConfig, run_dir: Path, resume: bool, command: str
               ) -> tuple[LoopState, list[IterationRecord], str]:
     """The state, records and command to continue from: a resumed run's, or a fresh run's in an empty folder."""
@@ -340,7 +359,8 @@ def _open_run(cfg: LoopConfig, run_dir: Path, resume: bool, command: str
     if resume and state_path.is_file():
         saved, state = read_state(state_path)
         old = saved["config"]  # a field added to LoopConfig since the run started counts as its default
-        changed = run_changes({**asdict(LoopConfig()), **old, **_moved_match_run(old, cfg)}, asdict(cfg))
+        changed = run_changes({**asdict(LoopConfig()), **old, **_moved_match_run(old, cfg), **_same_precision(old, cfg)},
+                              asdict(cfg))
         if changed:
             raise ConfigError(f"{run_dir}: --resume with other settings than the interrupted run: {', '.join(map(printable, changed))}; "
                               "pass the same options (its run.json lists them) or a new output folder")

@@ -100,9 +100,10 @@ class LoopConfig:
     finetune_min_start: float = 0.0
     """Fine-tuning episodes start at least this geodesic distance (m) from the target where a house allows
     (0: uniform starts; the long suites use 6 m)."""
-    finetune_precision: str = "fp32"
-    """Arithmetic of fine-tuning's gradient steps: fp32, or bf16 autocast (on CPUs with AVX512_BF16 DAgger's steps
-    about 2.4x faster and PPO end to end 1.4x, slower elsewhere; docs/BENCHMARKS.md)."""
+    finetune_precision: str = "auto"
+    """Arithmetic of fine-tuning's gradient steps: auto (bf16 where the CPU computes it natively, else fp32; run.json
+    records which), fp32, or bf16 autocast (on CPUs with AVX512_BF16 DAgger's steps about 2.4x faster and PPO end
+    to end 1.4x; about 8x slower on AVX2-only CPUs; docs/BENCHMARKS.md)."""
     finetune_beta: float = FinetuneConfig.beta
     """Probability that the teacher's action is executed while fine-tuning (DAgger's beta, constant)."""
     finetune_max_steps: int = FinetuneConfig.max_episode_steps

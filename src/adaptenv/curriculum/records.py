@@ -148,6 +148,9 @@ class RunInfo(BaseModel):
     """Per house-set spec (training houses and held-out sets), the unusable houses left out of it."""
     weights: dict[str, str] | None = None
     """pi_0's weights: the ``--policy`` name, its file and sha256 (None for a run written before they were kept)."""
+    finetune_precision: str | None = None
+    """The arithmetic fine-tuning's gradient steps used on the machine that ran it (``auto`` resolved: fp32 or bf16;
+    None for a run written before it was kept)."""
 
 
 def read_iterations(run_dir: Path) -> list[IterationRecord]:

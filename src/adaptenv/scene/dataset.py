@@ -84,8 +84,9 @@ def house_name(index: int) -> str:
 
 
 def line_label(path: Path, index: int) -> str:
-    """How errors name the line of index ``index`` (1-based, as editors count)."""
-    return f"{path} line {index + 1}"
+    """How errors name the line of index ``index``: 1-based, as editors count, with the 0-based index that slices
+    (FILE.jsonl.gz:START:STOP) and house names (house-000002) use, e.g. ``train.jsonl line 3 (index 2)``."""
+    return f"{path} line {index + 1} (index {index})"
 
 
 @contextmanager
