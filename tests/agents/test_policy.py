@@ -240,3 +240,18 @@ def test_the_default_policy_is_the_strongest_shipped_agent_and_runs_record_its_w
     assert record == {"name": "pretrained", "file": "pretrained-ppo.pt", "sha256": digest}
     assert weights_record("pretrained-scan")["sha256"] != digest
     assert weights_record("expert") is None and weights_record("no/such.pt") is None
+
+
+def test_scratch_specs_build_fresh_map_reading_networks_drawn_from_the_seed():
+    from adaptenv.agents.registry import init_checkpoint
+
+    state = torch.get_rng_state()
+    a, b, c = (resolve_policy(spec, seed=s) for spec, s in (("scratch-shape", 1), ("scratch-shape", 1), ("scratch", 2)))
+    assert torch.equal(torch.get_rng_state(), state), "torch's global generator is left as it was"
+    assert isinstance(a, NeuralPolicy) and a.net.config.perception == "shape" and a.net.config.map_channels
+    assert c.net.config.perception == "labels" and c.net.config.map_channels
+    assert all(torch.equal(x, y) for x, y in zip(a.net.state_dict().values(), b.net.state_dict().values(), strict=True))
+    other = resolve_policy("scratch-shape", seed=2).net.state_dict()
+    assert any(not torch.equal(x, other[k]) for k, x in a.net.state_dict().items())
+    with pytest.raises(ConfigError, match="no network to start from"):
+        init_checkpoint("scratch")
