@@ -278,3 +278,18 @@ def test_adaptenvs_own_policies_are_not_wrapped():
     from adaptenv.agents.registry import CheckedPolicy
 
     assert not isinstance(resolve_policy("adaptenv.agents.policy:RandomPolicy"), CheckedPolicy)
+
+
+def test_scratch_specs_build_fresh_map_reading_networks_drawn_from_the_seed():
+    from adaptenv.agents.registry import init_checkpoint
+
+    state = torch.get_rng_state()
+    a, b, c = (resolve_policy(spec, seed=s) for spec, s in (("scratch-shape", 1), ("scratch-shape", 1), ("scratch", 2)))
+    assert torch.equal(torch.get_rng_state(), state), "torch's global generator is left as it was"
+    assert isinstance(a, NeuralPolicy) and a.net.config.perception == "shape" and a.net.config.map_channels
+    assert c.net.config.perception == "labels" and c.net.config.map_channels
+    assert all(torch.equal(x, y) for x, y in zip(a.net.state_dict().values(), b.net.state_dict().values(), strict=True))
+    other = resolve_policy("scratch-shape", seed=2).net.state_dict()
+    assert any(not torch.equal(x, other[k]) for k, x in a.net.state_dict().items())
+    with pytest.raises(ConfigError, match="no network to start from"):
+        init_checkpoint("scratch")

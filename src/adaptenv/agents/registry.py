@@ -12,6 +12,10 @@ Accepted specs (every command taking ``--policy`` uses :func:`resolve_policy`):
 - ``map-explorer``: the same search planned on the agent's own EgoMap only (no privileged
   information; :mod:`adaptenv.agents.map_explorer`).
 - ``random`` or ``random:SEED``: uniformly random actions.
+- ``scratch`` / ``scratch-shape``: a freshly initialised map-reading network (``adaptenv train``'s default sizes
+  with ``--map``), its weights drawn from the seed; ``scratch`` is told the classes of what its rays hit,
+  ``scratch-shape`` perceives shapes only (the recognising mode, ``--perception shape``). What ``adaptenv loop``
+  starts from to learn from scratch (docs/curriculum.md).
 - a path to a checkpoint file (``*.pt``) written by ``adaptenv train``.
 - ``module:attribute`` or ``path/to/file.py:attribute``: user code. The attribute may be a policy
   object, a policy class, or a zero-argument factory returning a policy.
@@ -28,6 +32,7 @@ from pathlib import Path
 
 import numpy as np
 
+from adaptenv.agents.config import TrainConfig
 from adaptenv.agents.explorer import ExplorerPolicy
 from adaptenv.agents.map_explorer import MapExplorerPolicy
 from adaptenv.agents.policy import ExpertPolicy, Policy, RandomPolicy
@@ -40,11 +45,14 @@ SHIPPED_FILES = {"pretrained": "pretrained-ppo", "pretrained-ppo": "pretrained-p
 """Shipped checkpoint names -> their file stem in ``adaptenv/agents/data``: ``pretrained`` is the strongest
 (the map-reading agent after anchored PPO), then it before PPO, then the scan-only agent (docs/agent.md)."""
 SHIPPED = tuple(SHIPPED_FILES)
-BUILTINS = (*SHIPPED, "expert", "explorer", "map-explorer", "random")
-_HELP = ("expected pretrained, pretrained-map, pretrained-scan, expert, explorer, map-explorer, random, a checkpoint "
-         "path (.pt) or module:attribute (e.g. examples/my_policy.py:policy)")
+SCRATCH = {"scratch": "labels", "scratch-shape": "shape"}
+"""Fresh map-reading networks by name -> their perception (``TrainConfig.perception``)."""
+BUILTINS = (*SHIPPED, "expert", "explorer", "map-explorer", "random", *SCRATCH)
+_HELP = ("expected pretrained, pretrained-map, pretrained-scan, expert, explorer, map-explorer, random, scratch, "
+         "scratch-shape, a checkpoint path (.pt) or module:attribute (e.g. examples/my_policy.py:policy)")
 POLICY_HELP = ("Policy: pretrained (the strongest shipped agent), pretrained-map, pretrained-scan, expert, explorer, "
-               "map-explorer, random, a checkpoint path (.pt), or module:attribute.")
+               "map-explorer, random, scratch or scratch-shape (fresh weights), a checkpoint path (.pt), or "
+               "module:attribute.")
 
 
 def pretrained_path(name: str = "pretrained") -> Path:
@@ -76,11 +84,26 @@ def load_pretrained(name: str = "pretrained", *, greedy: bool = False, seed: int
     return policy
 
 
+def scratch_policy(perception: str = "labels", *, seed: int = 0) -> Policy:
+    """A freshly initialised map-reading policy (``adaptenv train --map``'s sizes) in ``perception`` mode (labels or
+    shape), its weights drawn from ``seed`` (torch's global generator is left as it was)."""
+    # torch: only when a network is built
+    import torch
+
+    from adaptenv.agents.network import NavNet, NetConfig, NeuralPolicy
+
+    with torch.random.fork_rng(devices=[]):
+        torch.manual_seed(seed)
+        net = NavNet(NetConfig.of(TrainConfig(map=True, perception=perception)))
+    name = next(k for k, v in SCRATCH.items() if v == perception)
+    return NeuralPolicy(net, seed=seed, name=name)
+
+
 def init_checkpoint(spec: str, *, flag: str = "--init") -> Path:
     """The checkpoint a warm start (``--init``) names: a SHIPPED name for a shipped one, else a path.
 
-    The other ``--policy`` names (expert, explorer, map-explorer, random, module:attribute) have no network to
-    start from and raise ConfigError.
+    The other ``--policy`` names (expert, explorer, map-explorer, random, scratch, module:attribute) have no
+    checkpoint to start from and raise ConfigError (``adaptenv train`` starts from fresh weights without ``--init``).
     """
     spec = spec.strip()
     if spec in SHIPPED:
@@ -101,6 +124,8 @@ def resolve_policy(spec: str, *, seed: int = 0) -> Policy:
         return ExplorerPolicy()
     if spec == "map-explorer":
         return MapExplorerPolicy()
+    if spec in SCRATCH:
+        return scratch_policy(SCRATCH[spec], seed=seed)
     if spec == "random" or spec.startswith("random:"):
         tail = spec.partition(":")[2]
         if tail and not tail.isdigit():

@@ -82,8 +82,10 @@ def check_start_policy(spec: str) -> None:
     """Refuse a ``--policy`` the loop cannot fine-tune (no network, no such file, a checkpoint that does not load)
     before any work; the loop loads it again when it starts."""
     from adaptenv.agents.checkpoint import load_checkpoint
-    from adaptenv.agents.registry import init_checkpoint
+    from adaptenv.agents.registry import SCRATCH, init_checkpoint
 
+    if spec.strip() in SCRATCH:
+        return  # fresh weights: nothing to load
     path = init_checkpoint(spec, flag="--policy")
     if not path.is_file():
         raise ConfigError(f"--policy {spec}: no such checkpoint file; pass pretrained or the path of a .pt checkpoint")
@@ -106,12 +108,12 @@ def check_resumable(out: Path) -> None:
 
 
 def loop(
-    policy: str = typer.Option("pretrained", "--policy", help="Starting policy: pretrained (the strongest shipped agent), pretrained-map, pretrained-scan or a checkpoint path."),
+    policy: str = typer.Option("pretrained", "--policy", help="Starting policy: pretrained (the strongest shipped agent), pretrained-map, pretrained-scan, scratch or scratch-shape (a fresh map-reading network: labels or the recognising mode) or a checkpoint path."),
     houses: str = typer.Option("preset:pretrain-train", "--houses", help="Training scenes: a folder of house "
                                 "JSON files, a house file, a dataset FILE.jsonl[.gz][:START:STOP] or preset:NAME."),
     iterations: int = typer.Option(3, "--iterations", "-T", min=1, help="Loop iterations."),
-    method: str = typer.Option("ours", "--method", help="none, random, dr, dr-matched, sfl, plr, accel, ours, "
-                                "ours-noselect, ours-randomscene, ours-nof, ours-dr, ours-learned or ours-llm."),
+    method: str = typer.Option("ours", "--method", help="none, random, dr, dr-matched, sfl, oracle, rearrange, swap, plr, accel, "
+                                "ours, ours-noselect, ours-randomscene, ours-nof, ours-dr, ours-learned or ours-llm."),
     seed: int = typer.Option(0, "--seed", callback=numbers.seed, help="Root seed."),
     out: Path = typer.Option(Path("runs/loop"), "-o", "--out", help="Run folder."),
     resume: bool = typer.Option(False, "--resume", help="Continue the run in --out from its last iteration."),
@@ -153,6 +155,10 @@ def loop(
                                            "gradient steps: auto (bf16 where the CPU computes it natively, else "
                                            "fp32), fp32, or bf16 (faster on CPUs with AVX512_BF16, about 8x slower "
                                            "on AVX2-only ones)."),
+    grounded: bool = typer.Option(False, "--grounded", help="sfl, plr, accel and ours take their new levels from the "
+                                  "training homes and random edits of them instead of fresh procedural houses."),
+    appearance_edits: bool = typer.Option(False, "--appearance-edits", help="Random edits (random, accel, grounded "
+                                          "levels) may also swap an object's asset or change a room's material."),
     focus_training: bool = typer.Option(False, "--focus-training", help="Fine-tuning episodes in adapted scenes ask "
                                         "for the target type G's edits aimed at."),
     relocate_targets: bool = typer.Option(False, "--relocate-targets", help="The failure-mode G may move a target "
@@ -227,6 +233,7 @@ def loop(
                      finetune_min_start=finetune_min_start, finetune_precision=finetune_precision,
                      finetune_beta=finetune_beta, finetune_max_steps=finetune_max_steps,
                      relocate_targets=relocate_targets, door_edits=door_edits, focus_training=focus_training,
+                     grounded=grounded, appearance_edits=appearance_edits,
                      learned_scorer=str(learned_scorer) if learned_scorer else None,
                      heldout_episodes=heldout_episodes, llm=llm, target_success=target_success,
                      target_tolerance=target_tolerance, target_episodes=target_episodes,

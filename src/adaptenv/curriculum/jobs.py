@@ -229,6 +229,9 @@ class GenerateJob:
     """``failure-modes`` and ``llm``: G may open or shut interior doors (``LoopConfig.door_edits``)."""
     learned_scorer: str | None = None
     """``learned``: the scorer file (``LoopConfig.learned_scorer``); None: the shipped one."""
+    appearance: float = 0.0
+    """``random``: share of the edits that swap an asset or change a material instead of moving an object
+    (``LoopConfig.appearance_edits``; 0: moves only)."""
     target_success: float | None = None
     """When set: edit toward pi_t's success rate P on ``target_episodes`` fixed episodes
     (:func:`~adaptenv.adapt.target.adapt_to_success`, ``edit_steps`` the budget) instead of the most difficulty."""
@@ -277,7 +280,7 @@ def run_generate(job: GenerateJob) -> Generated:
     """Apply the job's generator to its parent scene."""
     rng = np.random.default_rng(list(job.seed))
     if job.kind == "random":
-        child, log = random_single_edits(job.house, job.edit_steps, rng)
+        child, log = random_single_edits(job.house, job.edit_steps, rng, appearance=job.appearance)
         moved = [e.object_id for e in log.edits if e.accepted and e.changed]
         return Generated(child, log.model_dump(mode="json"), len(moved), moved=moved)
     if job.target_success is not None:
