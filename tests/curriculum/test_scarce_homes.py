@@ -8,7 +8,7 @@ import torch
 from adaptenv.curriculum import buffer as lb
 from adaptenv.curriculum import methods as M
 from adaptenv.curriculum.executor import InProcessExecutor
-from adaptenv.curriculum.loop import LoopConfig, LoopState, run_loop
+from adaptenv.curriculum.loop import LoopConfig, LoopState
 from adaptenv.scene.procedural import generate_preset, preset_spec
 from adaptenv.scene.procedural.variations import vary_house
 
@@ -70,18 +70,19 @@ def test_without_grounded_the_same_methods_draw_fresh_houses_and_dr_always_does(
     assert all(n.startswith("dr") for n in M.METHODS["dr"]().scenes_to_roll_out(grounded)), "the upper bound"
 
 
-def test_a_loop_learns_from_scratch_in_the_recognising_mode(tmp_path):
-    cfg = LoopConfig(method="swap", policy="scratch-shape", houses="preset:tiny", heldout={"tiny": "preset:tiny"},
-                     iterations=1, scenes_per_iteration=1, finetune_frames=256, finetune_envs=8,
-                     finetune_teacher="map-explorer", finetune_max_steps=600, finetune_lr=1e-3, heldout_episodes=2,
-                     gallery=0, seed=3)
-    records = run_loop(cfg, tmp_path / "run")
-    from adaptenv.agents.checkpoint import load_checkpoint
+def test_the_loops_fine_tuning_learns_a_scratch_network_in_the_recognising_mode():
+    """What run_loop does with ``policy: scratch-shape``: resolve pi_0 from the seed, fine-tune it by DAgger from the
+    map explorer with the loop's recipe; the network keeps its map and its perception."""
+    from adaptenv.agents.houses import load_house_set
     from adaptenv.agents.registry import resolve_policy
+    from adaptenv.agents.train import finetune
+    from adaptenv.curriculum.loop import finetune_config
 
-    pi0, pi1 = (load_checkpoint(tmp_path / "run" / f"iter_{t:04d}" / "policy.pt").net for t in (0, 1))
-    assert pi0.config.perception == "shape" and pi1.config.perception == "shape" and pi0.config.map_channels
-    fresh = resolve_policy("scratch-shape", seed=3).net
-    assert all(torch.equal(a, b) for a, b in zip(pi0.state_dict().values(), fresh.state_dict().values(), strict=True))
-    assert any(not torch.equal(a, b) for a, b in zip(pi0.state_dict().values(), pi1.state_dict().values(), strict=True))
-    assert records[-1].grad_updates > 0 and records[-1].env_steps >= 256
+    cfg = LoopConfig(policy="scratch-shape", finetune_frames=256, finetune_envs=8, finetune_teacher="map-explorer",
+                     finetune_lr=1e-3, finetune_max_steps=600, seed=3)
+    pi0 = resolve_policy(cfg.policy, seed=cfg.seed)
+    tuned = finetune(pi0.net, load_house_set("preset:tiny").worlds[:1], finetune_config(cfg, pi0.end_threshold), seed=0)
+    assert tuned.net.config == pi0.net.config and tuned.net.config.perception == "shape" and tuned.net.config.map_channels
+    assert any(not torch.equal(a, b) for a, b in zip(pi0.net.state_dict().values(), tuned.net.state_dict().values(),
+                                                     strict=True))
+    assert tuned.card["frames"] >= 256 and tuned.card["updates"] > 0

@@ -25,7 +25,8 @@ def report(folder: Path = FOLDER_ARGUMENT, out: Path | None = OUT_OPTION, force:
     from adaptenv.report.data import detect
     from adaptenv.report.html import OWNS
 
-    detect(folder)  # a missing or foreign folder is named before its default report folder is made (and locked)
+    if not folder.is_dir():  # named before its default report folder, folder/report, is made (and locked)
+        detect(folder)
     target = out if out is not None else folder / "report"
     with output_folder(target, "-o", "report", force=force, inputs=[folder], owns=OWNS):
         index = build_report(folder, out)
