@@ -25,7 +25,6 @@ its own map from the classes, as a teacher may.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Literal
 
 import numba
 import numpy as np
@@ -36,7 +35,6 @@ from adaptenv.sim.egomap import TARGET
 from adaptenv.sim.scan import RAY_COS, RAY_SIN
 from adaptenv.sim.spec import MAX_RANGE, N_RAYS
 
-Perception = Literal["labels", "shape"]
 PERCEPTIONS: tuple[str, ...] = ("labels", "shape")
 SHAPE_FEATURES = ("height", "long_side", "short_side")
 """Per-ray shape features of the recognising mode, metres (0 where the ray hits no object)."""
