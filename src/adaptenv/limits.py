@@ -100,7 +100,7 @@ SEEDS = ("seed",)
 POSITIVE_COUNTS = ("frames", "num_envs", "rollout_steps", "chunk_len", "batch_chunks", "updates_per_iter",
                    "buffer_frames", "max_episode_steps", "eval_episodes", "save_every", "num_minibatches",
                    "update_epochs")
-COUNTS = ("eval_every", "final_eval_episodes", "calibrate_episodes", "value_warmup_iters")
+COUNTS = ("eval_every", "final_eval_episodes", "calibrate_episodes", "value_warmup_iters", "snapshots")
 WIDTHS = ("hidden", "feature_dim", "conv_channels", "map_dim")
 PROBABILITIES = ("beta_start", "beta_end", "beta_decay_fraction", "beta", "end_threshold", "teacher_mix", "gamma",
                  "gae_lambda")
