@@ -12,7 +12,6 @@ from __future__ import annotations
 import numpy as np
 
 from adaptenv.scene.assets import AssetCatalog, load_catalog, object_role
-from adaptenv.scene.geometry import footprint_corners
 from adaptenv.scene.house import House
 from adaptenv.scene.procedural.checks import (
     Navigation,
@@ -21,18 +20,12 @@ from adaptenv.scene.procedural.checks import (
     reachable_target_types,
 )
 from adaptenv.scene.procedural.config import GenerationConfig, GenerationError
-from adaptenv.scene.procedural.furniture import RoomFloor, floor_assets
+from adaptenv.scene.procedural.furniture import RoomFloor, _footprint_box, floor_assets
 from adaptenv.scene.procedural.generate import _check_seed
 from adaptenv.scene.procedural.structure import _FLOOR_MATERIALS, _WALL_MATERIALS, pick_name
 
 CANDIDATES = 8
 """Other assets tried for each object before it keeps its own."""
-
-
-def _box(x: float, z: float, sx: float, sz: float, yaw: float) -> np.ndarray:
-    """Axis-aligned bounds (x0, z0, x1, z1) of a rotated footprint."""
-    c = footprint_corners(x, z, sx, sz, yaw)
-    return np.array([c[:, 0].min(), c[:, 1].min(), c[:, 0].max(), c[:, 1].max()])
 
 
 def _overlaps(box: np.ndarray, others: np.ndarray) -> np.ndarray:
@@ -50,8 +43,7 @@ def swap_assets(house: House, rng: np.random.Generator, catalog: AssetCatalog, s
     objs = [o for o in house.objects if o.assetId in catalog.assets
             and object_role(catalog.assets[o.assetId].object_type,
                             o.position.y - catalog.assets[o.assetId].size[1] / 2, False) == "floor"]
-    boxes = np.array([_box(o.position.x, o.position.z, catalog.assets[o.assetId].size[0],
-                           catalog.assets[o.assetId].size[2], o.rotation.y) for o in objs]).reshape(-1, 4)
+    boxes = np.array([_footprint_box(o, catalog.assets[o.assetId]) for o in objs]).reshape(-1, 4)
     swapped = 0
     for k in rng.permutation(len(objs)).tolist():
         obj = objs[k]
@@ -66,7 +58,7 @@ def swap_assets(house: House, rng: np.random.Generator, catalog: AssetCatalog, s
         before = _overlaps(boxes[k], others)
         for j in rng.permutation(len(pool))[:CANDIDATES].tolist():
             new = pool[j]
-            box = _box(obj.position.x, obj.position.z, new.size[0], new.size[2], obj.rotation.y)
+            box = _footprint_box(obj, new)  # the new asset in the old place
             if room.contains(box)[0] and not (_overlaps(box, others) & ~before).any():
                 base = obj.position.y - old.size[1] / 2  # the object stands where it stood
                 obj.assetId = new.asset_id
