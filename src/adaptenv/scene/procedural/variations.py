@@ -14,14 +14,11 @@ import numpy as np
 from adaptenv.scene.assets import AssetCatalog, load_catalog, object_role
 from adaptenv.scene.house import House
 from adaptenv.scene.procedural.checks import (
-    Navigation,
     house_problems,
-    overlapping_pairs,
-    reachable_target_types,
 )
 from adaptenv.scene.procedural.config import GenerationConfig, GenerationError
 from adaptenv.scene.procedural.furniture import RoomFloor, _footprint_box, floor_assets
-from adaptenv.scene.procedural.generate import _check_seed
+from adaptenv.scene.procedural.generate import _check_seed, kept_guarantees
 from adaptenv.scene.procedural.structure import _FLOOR_MATERIALS, _WALL_MATERIALS, pick_name
 
 CANDIDATES = 8
@@ -93,12 +90,7 @@ def vary_house(house: House, seed: int, cfg: GenerationConfig | None = None,
     cfg = (cfg or GenerationConfig()).check()
     catalog = catalog or load_catalog()
     seed = _check_seed(seed)
-    nav = Navigation.of(house, catalog, cfg.agent_radius)
-    allowed = frozenset(frozenset((i, j)) for i, j, _ in overlapping_pairs(nav.geometry))
-    pose = house.agent_pose()
-    required: tuple[str, ...] = ()
-    if pose is not None and (start := nav.component_at(pose[0], pose[1])):
-        required = tuple(sorted(reachable_target_types(nav, start, cfg.target_reach)))
+    allowed, required = kept_guarantees(house, cfg, catalog)
     last = "no attempt was made"
     for attempt in range(cfg.max_attempts):
         rng_assets, rng_materials = (np.random.default_rng(s)
