@@ -50,3 +50,18 @@ def test_every_command_takes_the_global_options():
     assert len(commands) > 20
     assert all(any(p.name == "assets" for p in c.params) for c in commands)
     assert all(any(p.name == "skip_unknown_assets" for p in c.params) for c in commands)
+
+
+def test_loop_options_default_to_the_loop_configs_defaults():
+    """`adaptenv loop` and an experiment config that names nothing fine-tune alike: the recipe that made pretrained."""
+    from dataclasses import fields
+
+    from adaptenv.curriculum.loop import LoopConfig
+
+    loop = typer.main.get_command(app).commands["loop"]
+    options = {p.name: p.default for p in loop.params}
+    shared = [f for f in fields(LoopConfig) if f.name.startswith("finetune_") and f.name in options]
+    assert len(shared) >= 12
+    for f in shared:
+        assert options[f.name] == f.default, f.name
+    assert (LoopConfig.finetune_algo, LoopConfig.finetune_max_steps, LoopConfig.policy) == ("ppo", 600, "pretrained")

@@ -120,11 +120,11 @@ def loop(
     scenes: int = typer.Option(8, "--scenes", min=1, help="Scenes rolled out and made per iteration."),
     edit_steps: int = typer.Option(5, "--edit-steps", min=0, help="Single-object edits per adapted scene."),
     finetune_frames: int = typer.Option(16_384, "--finetune-frames", min=1, help="Fine-tuning frames per iteration."),
-    finetune_algo: str = typer.Option("dagger", "--finetune-algo", help="Fine-tuning: dagger (imitation of "
-                                      "--finetune-teacher) or ppo (anchored PPO on the simulator's reward)."),
-    finetune_kl_coef: float = typer.Option(0.0, "--finetune-kl-coef", min=0.0, callback=numbers.finite, help="ppo: weight of the KL anchor "
+    finetune_algo: str = typer.Option("ppo", "--finetune-algo", help="Fine-tuning: ppo (anchored PPO on the simulator's "
+                                      "reward, the recipe that made pretrained) or dagger (imitation of --finetune-teacher)."),
+    finetune_kl_coef: float = typer.Option(0.03, "--finetune-kl-coef", min=0.0, callback=numbers.finite, help="ppo: weight of the KL anchor "
                                            "to pi_t (0.3 in docs/agent.md's runs)."),
-    finetune_explore_bonus: float = typer.Option(0.0, "--finetune-explore-bonus", min=0.0, callback=numbers.finite, help="ppo: reward per "
+    finetune_explore_bonus: float = typer.Option(0.002, "--finetune-explore-bonus", min=0.0, callback=numbers.finite, help="ppo: reward per "
                                                  "newly seen map cell (0.002 in docs/agent.md's runs)."),
     finetune_bc_coef: float = typer.Option(0.0, "--finetune-bc-coef", min=0.0, callback=numbers.finite, help="ppo: weight of a "
                                            "cross-entropy to --finetune-teacher's labels of the visited states."),
@@ -147,9 +147,9 @@ def loop(
                                          "or mix."),
     finetune_beta: float = typer.Option(0.8, "--finetune-beta", min=0.0, max=1.0, help="Probability that the "
                                         "teacher's action is executed while fine-tuning (DAgger's beta)."),
-    finetune_max_steps: int = typer.Option(300, "--finetune-max-steps", min=1, help="Episode cap of fine-tuning's "
-                                           "episodes (600 for the map-reading agent)."),
-    finetune_min_start: float = typer.Option(0.0, "--finetune-min-start", min=0.0, callback=numbers.finite, help="Fine-tuning episodes start "
+    finetune_max_steps: int = typer.Option(600, "--finetune-max-steps", min=1, help="Episode cap of fine-tuning's "
+                                           "episodes (the evaluation's 600)."),
+    finetune_min_start: float = typer.Option(6.0, "--finetune-min-start", min=0.0, callback=numbers.finite, help="Fine-tuning episodes start "
                                              "at least this geodesic distance (m) from the target (0: uniform)."),
     finetune_precision: str = typer.Option("auto", "--finetune-precision", help="Arithmetic of fine-tuning's "
                                            "gradient steps: auto (bf16 where the CPU computes it natively, else "
@@ -261,6 +261,11 @@ def loop(
                       *[f"{r.heldout[s].success:.3f} ({r.heldout[s].success - records[0].heldout[s].success:+.3f})"
                         for s in sets])
     console.print(table)
+    from adaptenv.curriculum.experiment import against_pi0
+    from adaptenv.curriculum.verdict import initial_lines
+
+    for line in initial_lines({"initial_effects": {method: against_pi0([out])}}):
+        console.print(line, style="bold", markup=False)
     console.print(f"run folder: [bold]{out}[/]  (report: adaptenv report {out})")
 
 

@@ -47,7 +47,7 @@ def demo(
     from adaptenv.curriculum.experiment import ExperimentConfig, run_experiment, verdict_lines
     from adaptenv.curriculum.experiment import run_dir as experiment_run_dir
     from adaptenv.curriculum.records import read_iterations
-    from adaptenv.curriculum.verdict import budget_line
+    from adaptenv.curriculum.verdict import budget_line, initial_lines
     from adaptenv.progress import ProgressBar
     from adaptenv.report import build_report
     from adaptenv.scene.house import save_house
@@ -86,7 +86,8 @@ def demo(
                 console.print(f"    {method:>4} t={r.iteration}: {figs}  ({r.edits} edits, {r.env_steps:,} env steps{took})")
         console.print(f"    Each figure comes from {loop['heldout_episodes']} episodes per set; t=0 is the starting policy "
                       "(the same for both methods).")
-        for line in verdict_lines(summary) or ["Verdict: none (no held-out episodes evaluated by both methods)."]:
+        lines = verdict_lines(summary) or ["Verdict: none (no held-out episodes evaluated by both methods)."]
+        for line in lines + initial_lines(summary):
             console.print(line, style="bold", markup=False)
         if budget := budget_line(summary):
             console.print(budget, markup=False)

@@ -58,7 +58,7 @@ from adaptenv.curriculum.records import (
     iteration_dir,
     read_iterations,
 )
-from adaptenv.curriculum.verdict import lever_lines, verdict_lines
+from adaptenv.curriculum.verdict import initial_lines, lever_lines, verdict_lines
 from adaptenv.errors import AdaptenvError, ConfigError, RunsFailed
 from adaptenv.files import atomic_path, open_append
 
@@ -317,19 +317,21 @@ def summarize(out: str | Path, cfg: ExperimentConfig | None = None, failed: list
     out = Path(out)
     cfg = cfg or ExperimentConfig(**json.loads((out / "experiment.json").read_text(encoding="utf-8")))
     summary = write_summary(out, cfg, final_figures(out, cfg), episode_effects=episode_effects(out, cfg),
-                            unfinished=unfinished_runs(out, cfg), failed=failed)
+                            initial_effects=initial_effects(out, cfg), unfinished=unfinished_runs(out, cfg),
+                            failed=failed)
     _plots(out, cfg)
     return summary
 
 
 def write_summary(out: Path, cfg: ExperimentConfig, table: dict[str, dict[int, dict[str, float]]],
                   suffix: str = "", episodes: int | None = None,
-                  episode_effects: dict[str, Any] | None = None, unfinished: dict[str, str] | None = None,
-                  failed: list[str] | None = None) -> dict[str, Any]:
+                  episode_effects: dict[str, Any] | None = None, initial_effects: dict[str, Any] | None = None,
+                  unfinished: dict[str, str] | None = None, failed: list[str] | None = None) -> dict[str, Any]:
     """From method -> seed -> figures: ``<method>/per_seed{suffix}.csv`` and ``summary{suffix}.json/md``.
 
     ``episodes``: episodes per held-out set behind each figure (the final evaluation's), recorded when given;
-    ``episode_effects``: :func:`episode_effects`' result, recorded when given.
+    ``episode_effects`` and ``initial_effects``: :func:`episode_effects`' and :func:`initial_effects`' results,
+    recorded when given.
     """
     metrics = sorted({k for seeds in table.values() for row in seeds.values() for k in row})
     for m, seeds in table.items():
@@ -369,6 +371,8 @@ def write_summary(out: Path, cfg: ExperimentConfig, table: dict[str, dict[int, d
         summary["lever"] = lever_reading(table, cfg.lever)
     if episode_effects is not None:
         summary["episode_effects"] = episode_effects
+    if initial_effects is not None:
+        summary["initial_effects"] = initial_effects
     summary["skipped_houses"] = {k: v.model_dump() for k, v in skipped_in_runs(out, cfg).items()}
     if unfinished:
         summary["unfinished_runs"] = unfinished
@@ -408,14 +412,18 @@ def lever_reading(table: dict[str, dict[int, dict[str, float]]], rule: LeverRule
     return {**asdict(rule), "seeds": len(common), "effect": effect, "exists": exists}
 
 
-def _episode_successes(folder: Path) -> dict[tuple[str, int], float]:
-    """(set, episode index) -> success of a run's last held-out evaluation (empty before iteration 1)."""
+def _episode_successes(folder: Path, first: bool = False) -> dict[tuple[str, int], float]:
+    """(set, episode index) -> success of a run's last held-out evaluation (empty before iteration 1), or with
+    ``first`` of pi_0's at t=0 (empty for runs written before t=0 kept its episodes)."""
     recs = read_iterations(folder)
     if not recs or recs[-1].iteration < 1:
         return {}
+    rec = recs[0] if first else recs[-1]
+    if first and rec.iteration != 0:
+        return {}
     found = {}
-    for name in recs[-1].heldout:
-        path = iteration_dir(folder, recs[-1].iteration) / HELDOUT_DIR / name / "episodes.csv"
+    for name in rec.heldout:
+        path = iteration_dir(folder, rec.iteration) / HELDOUT_DIR / name / "episodes.csv"
         if path.is_file():
             with path.open(newline="", encoding="utf-8") as f:
                 found.update({(name, int(row["index"])): float(row["success"] == "True") for row in csv.DictReader(f)})
@@ -449,6 +457,26 @@ def episode_effects(out: Path, cfg: ExperimentConfig) -> dict[str, dict[str, dic
             e = paired_effect(a, b)
             effects[m][group] = None if e is None else {**e, "p_episodes": paired_test(a, b), "episodes": len(a)}
     return effects
+
+
+def against_pi0(folders: list[Path]) -> dict[str, float] | None:
+    """The runs' last held-out success minus pi_0's at t=0, paired over their episodes (the loop evaluates every
+    iteration on the same ones): mean, 95% interval and ``episodes``; None without t=0 episodes to pair."""
+    a, b = [], []
+    for folder in folders:
+        last, first = _episode_successes(folder), _episode_successes(folder, first=True)
+        for key in sorted(set(last) & set(first)):
+            a.append(last[key])
+            b.append(first[key])
+    e = paired_effect(a, b)
+    return None if e is None else {**e, "episodes": len(a)}
+
+
+def initial_effects(out: Path, cfg: ExperimentConfig) -> dict[str, dict[str, float] | None]:
+    """Per method: :func:`against_pi0` over its finished seeds."""
+    left = unfinished_runs(out, cfg)
+    return {m: against_pi0([run_dir(out, m, s) for s in cfg.seeds if f"{m} seed {s}" not in left])
+            for m in cfg.methods}
 
 
 def skipped_in_runs(out: Path, cfg: ExperimentConfig) -> dict[str, SkippedHouses]:
@@ -547,7 +575,7 @@ def summary_markdown(summary: dict[str, Any]) -> str:
     keys = sorted({k for v in summary["methods"].values() for k in v if k.split(":")[0] in TESTED})
     ref = summary["reference"]
     head = "| method | " + " | ".join(keys) + " | env steps | updates |"
-    verdicts = lever_lines(summary) + verdict_lines(summary)
+    verdicts = lever_lines(summary) + verdict_lines(summary) + initial_lines(summary)
     lines = [*verdicts, *([""] if verdicts else []), *primary_markdown(summary.get("primary")), head,
              "|" + "---|" * (len(keys) + 3)]
     for m, figs in summary["methods"].items():

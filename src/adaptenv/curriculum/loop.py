@@ -209,7 +209,9 @@ def _run_loop(cfg: LoopConfig, run_dir: str | Path, resume: bool, executor: Exec
         say("evaluating pi_0 on the held-out sets")
         records = [IterationRecord(iteration=0, env_steps=0, grad_updates=0, edits=0,
                                    heldout=evaluate_sets(PolicyWeights.of(policy), cfg.heldout,
-                                                         cfg.heldout_episodes, cfg.seed, ex))]
+                                                         cfg.heldout_episodes, cfg.seed, ex,
+                                                         out_dir=iteration_dir(run_dir, 0) / HELDOUT_DIR,
+                                                         label="pi_0"))]
         _checkpoint(run_dir, cfg, state, records)
 
     for t in range(state.iteration + 1, cfg.iterations + 1):

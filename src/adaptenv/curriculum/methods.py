@@ -88,9 +88,9 @@ class LoopConfig:
     """dr-matched: that run's folder (an experiment fills it in: OUT/<match_method>/seed_<seed>)."""
     edit_steps: int = 5
     """Single-object edits per adapted scene (editing methods)."""
-    finetune_algo: str = "dagger"
-    """How pi_t is fine-tuned: dagger (imitation of finetune_teacher) or ppo (anchored PPO on the simulator's
-    reward, docs/agent.md)."""
+    finetune_algo: str = "ppo"
+    """How pi_t is fine-tuned: ppo (anchored PPO on the simulator's reward, the recipe that made ``pretrained``;
+    docs/curriculum.md, "The fine-tuning recipe") or dagger (imitation of finetune_teacher)."""
     finetune_frames: int = FinetuneConfig.frames
     """Environment frames of fine-tuning per iteration (identical for every method)."""
     finetune_envs: int = FinetuneConfig.num_envs
@@ -101,7 +101,7 @@ class LoopConfig:
     finetune_teacher: str = "expert"
     """Who labels fine-tuning's states (DAgger's, or PPO's imitation term finetune_bc_coef): expert (shortest path),
     explorer or map-explorer (search, docs/agent.md) or mix."""
-    finetune_min_start: float = 0.0
+    finetune_min_start: float = 6.0
     """Fine-tuning episodes start at least this geodesic distance (m) from the target where a house allows
     (0: uniform starts; the long suites use 6 m)."""
     finetune_precision: str = "auto"
@@ -110,12 +110,12 @@ class LoopConfig:
     to end 1.4x; about 8x slower on AVX2-only CPUs; docs/BENCHMARKS.md)."""
     finetune_beta: float = FinetuneConfig.beta
     """Probability that the teacher's action is executed while fine-tuning (DAgger's beta, constant)."""
-    finetune_max_steps: int = FinetuneConfig.max_episode_steps
-    """Episode cap of fine-tuning's episodes (the map-reading agent trains to the evaluation's 600)."""
-    finetune_kl_coef: float = 0.0
+    finetune_max_steps: int = 600
+    """Episode cap of fine-tuning's episodes (the evaluation's 600, to which the map-reading agent trains)."""
+    finetune_kl_coef: float = 0.03
     """ppo: weight of the KL anchor to pi_t (0.3 in the PPO runs of docs/agent.md)."""
-    finetune_explore_bonus: float = 0.0
-    """ppo: reward per newly seen map cell (0.002 in the PPO runs of docs/agent.md)."""
+    finetune_explore_bonus: float = 0.002
+    """ppo: reward per newly seen map cell (as in the PPO runs of docs/agent.md)."""
     finetune_bc_coef: float = 0.0
     """ppo: weight of a cross-entropy to finetune_teacher's labels of the states PPO visits (an imitation term;
     0: off)."""

@@ -28,6 +28,24 @@ def verdict_lines(summary: dict[str, Any]) -> list[str]:
     return lines
 
 
+def initial_lines(summary: dict[str, Any]) -> list[str]:
+    """One line per method against pi_0: its last held-out success minus pi_0's at t=0 on the same episodes, with
+    the 95% interval, saying plainly when the method ended below pi_0 beyond noise."""
+    lines = []
+    for m, e in summary.get("initial_effects", {}).items():
+        if e is None:
+            continue
+        if e["high"] < 0.0:
+            say = f"{m} ended below pi_0 beyond noise: fine-tuning made the agent worse"
+        elif e["low"] > 0.0:
+            say = f"{m} ended above pi_0 beyond noise"
+        else:
+            say = "within noise of pi_0"
+        lines.append(f"Against t=0: {m} - pi_0 held-out success = {100 * e['diff']:+.1f} points, 95% interval "
+                     f"[{100 * e['low']:+.1f}, {100 * e['high']:+.1f}] over the same {e['episodes']} episodes; {say}.")
+    return lines
+
+
 def lever_lines(summary: dict[str, Any]) -> list[str]:
     """The lever test's one line (none when the experiment declares no lever rule): the arm minus the control on
     the held-out set, its 95% interval over seeds, and whether the mean reaches the declared threshold."""

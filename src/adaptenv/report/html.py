@@ -31,7 +31,7 @@ from adaptenv.curriculum.records import (
     IterationRecord,
     SetMetrics,
 )
-from adaptenv.curriculum.verdict import budget_line, lever_lines, verdict_lines
+from adaptenv.curriculum.verdict import budget_line, initial_lines, lever_lines, verdict_lines
 from adaptenv.errors import AdaptenvError
 from adaptenv.files import atomic_path, atomic_write_text
 from adaptenv.render.compare import BeforeAfter, render_before_after
@@ -746,7 +746,7 @@ def verdict_html(exp: ExperimentData) -> str:
     """The page's opening lines: summary.json's lever line and verdict of the reference against each method."""
     summary = exp.summary if isinstance(exp.summary, dict) else {}
     try:
-        lines = lever_lines(summary) + verdict_lines(summary) if summary.get("reference") else []
+        lines = lever_lines(summary) + verdict_lines(summary) + initial_lines(summary) if summary.get("reference") else []
         lines += [b] if lines and (b := budget_line(summary)) else []
     except (KeyError, TypeError):  # a summary.json written by something else
         lines = []
