@@ -8,8 +8,10 @@ from adaptenv.curriculum.loop import LoopConfig
 
 
 def tiny_config(policy: Path, method: str, **kw) -> LoopConfig:
-    """Two iterations on the tiny preset with the smallest budgets that still exercise every stage."""
+    """Two iterations on the tiny preset with the smallest budgets that still exercise every stage (fine-tuning by
+    DAgger, whose smallest budget is smaller than PPO's 128-step rollout; test_loop.py runs the default, PPO)."""
     base = dict(method=method, policy=str(policy), houses="preset:tiny", heldout={"tiny": "preset:tiny"},
+                finetune_algo="dagger", finetune_max_steps=300, finetune_min_start=0.0,
                 iterations=2, scenes_per_iteration=2, edit_steps=1, finetune_frames=512, finetune_envs=16,
                 heldout_episodes=3, gallery=1, buffer_capacity=4, diagnose_episodes=1)
     return LoopConfig(**{**base, **kw})

@@ -42,7 +42,7 @@ def test_config_errors_name_the_field():
 
 
 def test_the_fine_tuning_recipe_carries_the_loop_settings():
-    cfg = LoopConfig(finetune_frames=4096, finetune_envs=16, finetune_lr=3e-4, finetune_teacher="explorer",
+    cfg = LoopConfig(finetune_algo="dagger", finetune_frames=4096, finetune_envs=16, finetune_lr=3e-4, finetune_teacher="explorer",
                      finetune_min_start=6.0, finetune_beta=0.5, finetune_max_steps=600).check()
     ft = finetune_config(cfg, end_threshold=0.7)
     assert (ft.frames, ft.num_envs, ft.learning_rate, ft.teacher, ft.end_threshold, ft.min_start_distance,
@@ -124,11 +124,19 @@ def test_loop_config_refuses_ppo_settings_that_do_not_apply():
     with pytest.raises(ConfigError, match="finetune_algo"):
         LoopConfig(finetune_algo="sac").check()
     with pytest.raises(ConfigError, match="ppo only"):
-        LoopConfig(finetune_kl_coef=0.3).check()
+        LoopConfig(finetune_algo="dagger", finetune_kl_coef=0.3).check()
     with pytest.raises(ConfigError, match="finetune_bc_coef apply to ppo only"):
-        LoopConfig(finetune_freeze_encoder=True).check()
+        LoopConfig(finetune_algo="dagger", finetune_freeze_encoder=True).check()
     with pytest.raises(ConfigError, match="finetune_bc_coef apply to ppo only"):
-        LoopConfig(finetune_bc_coef=0.1).check()
+        LoopConfig(finetune_algo="dagger", finetune_bc_coef=0.1).check()
+    LoopConfig(finetune_algo="dagger").check()  # ppo's settings at their defaults (the default algo's) or off
+    LoopConfig(finetune_algo="dagger", finetune_kl_coef=0.0, finetune_explore_bonus=0.0).check()
+    LoopConfig(finetune_kl_coef=0.3, finetune_freeze_encoder=True, finetune_bc_coef=0.1).check()
+    with pytest.raises(ConfigError, match="finetune_beta and finetune_teacher apply to dagger"):
+        LoopConfig(finetune_teacher="map-explorer").check()  # the default algo is ppo, which would ignore it
+    with pytest.raises(ConfigError, match="set finetune_algo to dagger"):
+        LoopConfig(finetune_beta=0.5).check()
+    LoopConfig(finetune_teacher="map-explorer", finetune_bc_coef=0.1).check()
     with pytest.raises(ConfigError, match="finetune_precision must be one of auto, fp32, bf16"):
         LoopConfig(finetune_algo="ppo", finetune_precision="fp16").check()
     with pytest.raises(ConfigError, match="level_score"):

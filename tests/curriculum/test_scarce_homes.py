@@ -79,8 +79,8 @@ def test_the_loops_fine_tuning_learns_a_scratch_network_in_the_recognising_mode(
     from adaptenv.curriculum.loop import finetune_config
 
     # two collections of 8 x 32 frames: the learning rate is annealed to zero at the end of an iteration's frames
-    cfg = LoopConfig(policy="scratch-shape", finetune_frames=512, finetune_envs=8, finetune_teacher="map-explorer",
-                     finetune_lr=1e-3, finetune_max_steps=600, seed=3)
+    cfg = LoopConfig(policy="scratch-shape", finetune_algo="dagger", finetune_frames=512, finetune_envs=8,
+                     finetune_teacher="map-explorer", finetune_lr=1e-3, finetune_max_steps=600, seed=3)
     pi0 = resolve_policy(cfg.policy, seed=cfg.seed)
     tuned = finetune(pi0.net, load_house_set("preset:tiny").worlds[:1], finetune_config(cfg, pi0.end_threshold), seed=0)
     assert tuned.net.config == pi0.net.config and tuned.net.config.perception == "shape" and tuned.net.config.map_channels

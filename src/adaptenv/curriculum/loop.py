@@ -148,9 +148,9 @@ def evaluate_sets(weights: PolicyWeights, specs: dict[str, str], episodes: int, 
 def finetune_config(cfg: LoopConfig, end_threshold: float) -> FinetuneConfig:
     """The loop's fine-tuning recipe (identical for every method): DAgger at ``finetune_beta`` with
     ``finetune_teacher``'s labels, or anchored PPO; episodes start ``finetune_min_start`` or more from the target."""
-    return FinetuneConfig(algo=cfg.finetune_algo, kl_coef=cfg.finetune_kl_coef,
-                          explore_bonus=cfg.finetune_explore_bonus, freeze_encoder=cfg.finetune_freeze_encoder,
-                          bc_coef=cfg.finetune_bc_coef, frames=cfg.finetune_frames, num_envs=cfg.finetune_envs, learning_rate=cfg.finetune_lr,
+    ppo = {"kl_coef": cfg.finetune_kl_coef, "explore_bonus": cfg.finetune_explore_bonus,
+           "freeze_encoder": cfg.finetune_freeze_encoder, "bc_coef": cfg.finetune_bc_coef} if cfg.finetune_algo == "ppo" else {}
+    return FinetuneConfig(algo=cfg.finetune_algo, **ppo, frames=cfg.finetune_frames, num_envs=cfg.finetune_envs, learning_rate=cfg.finetune_lr,
                           end_threshold=end_threshold, teacher=cfg.finetune_teacher,
                           min_start_distance=cfg.finetune_min_start, precision=cfg.finetune_precision,
                           beta=cfg.finetune_beta, max_episode_steps=cfg.finetune_max_steps)

@@ -20,7 +20,7 @@ every random choice comes from a named :class:`Stream` of ``(seed, t)``. The run
 from __future__ import annotations
 
 import time
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, fields
 from enum import IntEnum
 from pathlib import Path
 from typing import Any, ClassVar
@@ -52,6 +52,10 @@ from adaptenv.limits import check_float, check_seed
 from adaptenv.scene.house import House
 from adaptenv.scene.procedural import generate_house, preset_spec, rearrange_house
 from adaptenv.scene.procedural.variations import vary_house
+
+
+PPO_ONLY = ("finetune_kl_coef", "finetune_explore_bonus", "finetune_freeze_encoder", "finetune_bc_coef")
+"""LoopConfig fields that only anchored PPO reads (DAgger takes them at their defaults or 0)."""
 
 
 @dataclass
@@ -198,8 +202,8 @@ class LoopConfig:
         check_precision(self.finetune_precision, f"{source}: finetune_precision")
         if self.finetune_algo not in ("dagger", "ppo"):
             raise ConfigError(f"{source}: finetune_algo must be dagger or ppo, got {self.finetune_algo!r}")
-        if self.finetune_algo == "dagger" and (self.finetune_kl_coef or self.finetune_explore_bonus
-                                               or self.finetune_freeze_encoder or self.finetune_bc_coef):
+        defaults = {f.name: f.default for f in fields(LoopConfig)}
+        if self.finetune_algo == "dagger" and any(getattr(self, k) not in (0, defaults[k]) for k in PPO_ONLY):
             raise ConfigError(f"{source}: finetune_kl_coef, finetune_explore_bonus, finetune_freeze_encoder and "
                               "finetune_bc_coef apply to ppo only; set finetune_algo to ppo or leave them unset")
         if not 0.0 <= self.finetune_beta <= 1.0 or self.finetune_max_steps < 1:
@@ -218,6 +222,10 @@ class LoopConfig:
         if self.finetune_teacher not in TEACHERS:
             raise ConfigError(f"{source}: finetune_teacher {self.finetune_teacher!r} is unknown; use one of "
                               f"{', '.join(TEACHERS)}")
+        if self.finetune_algo == "ppo" and (self.finetune_beta != defaults["finetune_beta"] or (
+                self.finetune_teacher != defaults["finetune_teacher"] and not self.finetune_bc_coef)):
+            raise ConfigError(f"{source}: finetune_beta and finetune_teacher apply to dagger (the teacher also to ppo "
+                              "with finetune_bc_coef); set finetune_algo to dagger or leave them unset")
         if self.method == "ours-llm" and not self.llm:
             raise ConfigError(f"{source}: method ours-llm needs an llm section (provider, model, base_url); "
                               "see docs/llm.md")
