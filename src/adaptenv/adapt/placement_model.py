@@ -8,8 +8,9 @@ A person judges a moved object by a few things they read at a glance. Per floor 
   wall, facing the room; 90: side to it; 180: facing it), the smallest over the walls within 0.05 m of the nearest;
 - ``anchor_distance``: m between its footprint and the nearest footprint of its group's anchor type in its room
   (:func:`anchors`: chairs to a dining table or desk, nightstands to a bed, ...);
-- ``anchor_facing``: degrees its heading misses that anchor's footprint by, seen from its centre (0 when the ray
-  along its heading meets the footprint, or its centre stands inside it), by footprint, not centre to centre;
+- ``anchor_facing``: the share of its width that faces that anchor's footprint (straight ahead within
+  :data:`FACING_REACH` m of its front edge, or under it), by footprint, not centre to centre: 1 for a chair square
+  at a table's edge, 0 for one at the corner facing along the table;
 - ``member_gap``: m to the nearest other object of its type at the same anchor (a chair to the next chair);
 - ``isolation``: m to the nearest wall or other floor object (how far into open floor it stands);
 - ``door_distance``: m to the nearest passable doorway or open connection between rooms (the opening's line);
@@ -46,19 +47,28 @@ from scipy.sparse.csgraph import shortest_path
 
 from adaptenv.errors import ConfigError
 from adaptenv.scene.assets import AssetCatalog, load_catalog
-from adaptenv.scene.geometry import Footprint, SceneGeometry, heading
+from adaptenv.scene.geometry import (
+    Footprint,
+    SceneGeometry,
+    footprint_corners,
+    heading,
+    pose_outline,
+    yaw_axes,
+)
 from adaptenv.scene.house import House
 
 FEATURES = ("wall_distance", "wall_angle", "anchor_distance", "anchor_facing", "member_gap", "isolation",
             "door_distance", "route_distance")
 #: Which side of the reference's central 98% a person finds wrong.
 TAILS: dict[str, Literal["low", "high"]] = {
-    "wall_distance": "high", "wall_angle": "high", "anchor_distance": "high", "anchor_facing": "high",
+    "wall_distance": "high", "wall_angle": "high", "anchor_distance": "high", "anchor_facing": "low",
     "member_gap": "low", "isolation": "high", "door_distance": "low", "route_distance": "low"}
 #: Units of each feature, for messages.
-UNITS = {f: ("degrees" if f in ("wall_angle", "anchor_facing") else "m") for f in FEATURES}
-#: How far past the reference's percentile (and past where it stood) a value must lie to count (m or degrees).
-TOLERANCE = {f: (10.0 if UNITS[f] == "degrees" else 0.05) for f in FEATURES}
+UNITS = {f: {"wall_angle": "degrees", "anchor_facing": "of its width"}.get(f, "m") for f in FEATURES}
+#: How far past the reference's percentile (and past where it stood) a value must lie to count (m, degrees, share).
+TOLERANCE = {f: {"wall_angle": 10.0, "anchor_facing": 0.1}.get(f, 0.05) for f in FEATURES}
+#: How far ahead of its front edge (m) an object faces its anchor.
+FACING_REACH = 1.0
 #: Percentiles bounding the central 98%.
 LOW_Q, HIGH_Q = 0.01, 0.99
 #: A type with fewer values of a feature than this falls back to its placement class, then to all objects.
@@ -151,7 +161,7 @@ def walking_routes(room: shapely.Polygon, doorways: list[shapely.LineString]) ->
     free = room.buffer(-ROUTE_CLEARANCE, join_style="mitre")
     if len(doorways) < 2 or free.is_empty:
         return shapely.GeometryCollection()
-    ends = [shapely.ops.nearest_points(free, d)[0] for d in doorways]
+    ends = [shapely.ops.nearest_points(free, d.interpolate(0.5, normalized=True))[0] for d in doorways]
     corners = [shapely.Point(c) for part in getattr(free, "geoms", [free]) for c in part.exterior.coords[:-1]]
     nodes = ends + corners
     pts = np.array([[p.x, p.y] for p in nodes])
@@ -198,19 +208,19 @@ def _wall_angle(layout: HouseLayout, fp: Footprint, nearest: float) -> float:
     return best
 
 
-def facing_miss(fp: Footprint, target: Footprint) -> float:
-    """Degrees by which the ray from ``fp``'s centre along its heading misses ``target``'s footprint (its convex
-    hull); 0 when it meets it or the centre stands inside it."""
-    c = np.asarray(fp.center, dtype=float)
-    hull = target.polygon.convex_hull
-    if hull.covers(shapely.Point(c)):
+def facing_share(fp: Footprint, target: Footprint) -> float:
+    """The share (0-1) of ``fp``'s width whose straight line ahead meets ``target``'s footprint within FACING_REACH m
+    of its front edge (or under it): 1 for a chair square at a table's edge, 0 for one beside it facing along it."""
+    w, d = fp.size
+    ahead = footprint_corners(0.0, FACING_REACH / 2.0, w, d + FACING_REACH, 0.0)  # local, heading +z
+    strip = shapely.Polygon(pose_outline(ahead, fp.center[0], fp.center[1], fp.yaw))
+    meet = strip.intersection(target.polygon)
+    if meet.is_empty or w <= 0.0:
         return 0.0
-    h = heading(fp.yaw)
-    v = np.asarray(hull.exterior.coords[:-1], dtype=float) - c
-    ang = np.degrees(np.arctan2(h[0] * v[:, 1] - h[1] * v[:, 0], v @ h))
-    if ang.max() - ang.min() < 180.0 and ang.min() <= 0.0 <= ang.max():
-        return 0.0
-    return float(np.abs(ang).min())
+    ux, _ = yaw_axes(fp.yaw)
+    pts = shapely.get_coordinates(meet) - np.asarray(fp.center, dtype=float)
+    side = np.clip(pts @ ux, -w / 2.0, w / 2.0)
+    return float((side.max() - side.min()) / w)
 
 
 def object_features(layout: HouseLayout, fp: Footprint, others: Mapping[str, Footprint]) -> dict[str, float]:
@@ -235,7 +245,7 @@ def object_features(layout: HouseLayout, fp: Footprint, others: Mapping[str, Foo
             k = int(np.argmin(dist))
             anchor = anchors[k]
             out["anchor_distance"] = dist[k]
-            out["anchor_facing"] = facing_miss(fp, anchor)
+            out["anchor_facing"] = facing_share(fp, anchor)
             mates = [o for o in rest if o.object_type == fp.object_type and layout.room_of(o) == room
                      and _nearest(o, anchors) is anchor]
             if mates:
