@@ -5,7 +5,8 @@ A person judges a moved object by a few things they read at a glance. Per floor 
 - ``wall_distance``: m from its footprint to the nearest blocking wall (walls minus passable doorways and open
   connections);
 - ``wall_angle``: degrees between its heading and the normal of that wall pointing into the room (0: back to the
-  wall, facing the room; 90: side to it; 180: facing it), the smallest over the walls within 0.05 m of the nearest;
+  wall, facing the room; 90: side to it; 180: facing it), the smallest over the walls within 0.15 m of the nearest;
+  not read for a small, nearly square object (:func:`looks_symmetric`: a bin or a plant looks the same turned);
 - ``anchor_distance``: m between its footprint and the nearest footprint of its group's anchor type in its room
   (:func:`anchors`: chairs to a dining table or desk, nightstands to a bed, ...);
 - ``anchor_facing``: the share of its width that faces that anchor's footprint (straight ahead within
@@ -55,6 +56,7 @@ from adaptenv.scene.geometry import (
     pose_outline,
     yaw_axes,
 )
+from adaptenv.scene.graph import AGAINST_WALL_DISTANCE
 from adaptenv.scene.house import House
 
 FEATURES = ("wall_distance", "wall_angle", "anchor_distance", "anchor_facing", "member_gap", "isolation",
@@ -65,8 +67,11 @@ TAILS: dict[str, Literal["low", "high"]] = {
     "member_gap": "low", "isolation": "high", "door_distance": "low", "route_distance": "low"}
 #: Units of each feature, for messages.
 UNITS = {f: {"wall_angle": "degrees", "anchor_facing": "of its width"}.get(f, "m") for f in FEATURES}
-#: How far past the reference's percentile (and past where it stood) a value must lie to count (m, degrees, share).
-TOLERANCE = {f: {"wall_angle": 10.0, "anchor_facing": 0.1}.get(f, 0.05) for f in FEATURES}
+#: How far past the reference's percentile (and past where it stood) a value must lie to count (m, degrees, share):
+#: 0.15 m for the distances to the walls and to the nearest object (the scene graph's ``against_wall`` distance: a
+#: person sees an object that close to a wall as standing against it), 0.05 m for the other distances.
+TOLERANCE = {f: {"wall_angle": 10.0, "anchor_facing": 0.1, "wall_distance": AGAINST_WALL_DISTANCE,
+                 "isolation": AGAINST_WALL_DISTANCE}.get(f, 0.05) for f in FEATURES}
 #: How far ahead of its front edge (m) an object faces its anchor.
 FACING_REACH = 1.0
 #: Percentiles bounding the central 98%.
@@ -76,7 +81,10 @@ MIN_SAMPLES = 30
 #: The walking routes keep this far (m) from the walls (an agent's radius plus a margin).
 ROUTE_CLEARANCE = 0.3
 #: Walls within this much (m) of the nearest one also count for ``wall_angle`` (an object in a corner).
-WALL_TIE = 0.05
+WALL_TIE = AGAINST_WALL_DISTANCE
+#: ``wall_angle`` is not read for an object this small (m^2 footprint) and this nearly square (longer side over
+#: shorter): a bin, a plant, a lamp or a box looks the same turned.
+SYMMETRIC_AREA, SYMMETRIC_RATIO = 0.35, 1.25
 #: Anchors beyond ProcTHOR's floor asset groups: nightstands to their bed.
 EXTRA_ANCHORS: dict[str, tuple[str, ...]] = {"SideTable": ("Bed",)}
 #: Where the shipped reference lives (package data).
@@ -208,6 +216,12 @@ def _wall_angle(layout: HouseLayout, fp: Footprint, nearest: float) -> float:
     return best
 
 
+def looks_symmetric(fp: Footprint) -> bool:
+    """Whether the footprint is small and nearly square (its heading is not read; SYMMETRIC_AREA, SYMMETRIC_RATIO)."""
+    w, d = fp.size
+    return w * d <= SYMMETRIC_AREA and max(w, d) <= SYMMETRIC_RATIO * max(min(w, d), 1e-9)
+
+
 def facing_share(fp: Footprint, target: Footprint) -> float:
     """The share (0-1) of ``fp``'s width whose straight line ahead meets ``target``'s footprint within FACING_REACH m
     of its front edge (or under it): 1 for a chair square at a table's edge, 0 for one beside it facing along it."""
@@ -230,7 +244,7 @@ def object_features(layout: HouseLayout, fp: Footprint, others: Mapping[str, Foo
     wall = _distance(fp, layout.wall_union)
     out = dict.fromkeys(FEATURES, math.nan)
     out["wall_distance"] = wall
-    out["wall_angle"] = _wall_angle(layout, fp, wall) if math.isfinite(wall) else math.nan
+    out["wall_angle"] = _wall_angle(layout, fp, wall) if math.isfinite(wall) and not looks_symmetric(fp) else math.nan
     rest = [o for o in others.values() if o.object_id != fp.object_id and o.role == "floor"]
     near = min((float(shapely.distance(fp.polygon, o.polygon)) for o in rest
                 if not _apart(fp.bounds, o.bounds, wall if math.isfinite(wall) else math.inf)), default=math.inf)

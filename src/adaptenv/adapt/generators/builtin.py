@@ -280,7 +280,7 @@ class BuiltinGenerator:
         ep = context.episode
         route = RouteSpec.from_episode(ep.target_type, ep.start, context.trajectory)
         v = EditValidator(house, episode_targets=[ep.target_type], start=ep.start[:2], move_targets=self.move_targets,
-                          world=context.world)
+                          world=context.world, placement_model=context.placement_model)
         world = context.world if world_fits(context.world, v.geometry) else compile_world(v.house, "candidate")
         values = measure(world, route)
         result = GenerationResult(house=v.house, steps=[], edit_log=v.log, generator=self.name,
