@@ -17,6 +17,7 @@ import contextlib
 import gzip
 import io
 import json
+import os
 import sys
 import tempfile
 import warnings
@@ -29,6 +30,7 @@ import torch
 import typer.main
 
 from adaptenv.cli import app, main
+from adaptenv.files import MANIFEST, FolderLock
 
 HOUSE = Path(__file__).parent / "data" / "procthor-10k-train-1.json"
 CONFIG = Path(__file__).parents[1] / "configs" / "experiment-small.json"
@@ -63,7 +65,11 @@ class Case:
     ``users_code`` marks a case where the user's own Python code raises: its traceback is theirs and is shown
     whole, so the case is counted but is not one line (README, "Errors"). ``output`` names the case's output
     folder where a command that streams its input may already have written (and recorded as its own) the part
-    before the damage; nothing outside it may change.
+    before the damage; nothing outside it may change. ``setup`` is the user's own files made in the case's folder
+    before the run, (path, text), where a text ``-> TARGET`` makes a symbolic link to TARGET: after the run each is
+    byte-identical (a link the same link). ``held`` names a folder of the case that another run is writing (holds
+    locked) while this one runs; ``{pid}`` in ``words`` is that run's process id. ``works`` marks a case that must
+    get past its checks and do its work for real (no stand-ins): exit 0, no error line, the user's files kept.
     """
 
     id: str
@@ -73,6 +79,9 @@ class Case:
     report: bool = False
     users_code: bool = False
     output: str = ""
+    setup: tuple[tuple[str, str], ...] = ()
+    held: str = ""
+    works: bool = False
 
 
 @dataclass(frozen=True)
@@ -84,6 +93,10 @@ class Outcome:
     touched: tuple[str, ...]
     escaped: str = ""
     out: tuple[str, ...] = ()
+    changed: tuple[str, ...] = ()
+    """The user's files of the case's ``setup`` that are not byte-identical after the run (or no longer the link)."""
+    work: str = ""
+    """The case's own folder (``{out}``)."""
 
     def line(self, case: Case) -> str | None:
         """The one line the case must end in, or None when there is not exactly one."""
@@ -100,7 +113,7 @@ class Outcome:
         """Whether the run is what the case demands: its exit code, one line with every word, no file changed."""
         line = self.line(case)
         return (not self.escaped and self.code == case.code and line is not None and "Traceback" not in line
-                and all(w in line for w in words) and not self.outside(case))
+                and all(w in line for w in words) and not self.outside(case) and not self.changed)
 
 
 def fill(line: str, **values: str) -> str:
@@ -395,6 +408,83 @@ OUTPUT_CASES = [
          " -o {in}/log-obj.jsonl --force", "{in}/log-obj.jsonl"),
 ]
 
+
+def made(id: str, args: str, *words: str, setup: dict[str, str], output: str = "", works: bool = False) -> Case:
+    """A case run among the user's own files and links ``setup`` (path -> text, or "-> TARGET" for a link)."""
+    return Case(id, tuple(args.split()), words, 0 if works else 1, output=output, setup=tuple(setup.items()),
+                works=works)
+
+
+USER = {"user.json": "my own notes, outside the output", "mine.png": "my own picture"}
+"""The user's files beside an output folder, that a link inside it points to."""
+USERS_RUN_DIR = {"D/state.pt": "my state", "D/config.json": '{"mine": true}', "D/notes.txt": "my notes",
+                 "D/tb/mine.txt": "my log"}
+"""A folder of the user's that happens to hold train's names (an older rule took any folder with a state.pt for
+train's own)."""
+LOOP_OWN = json.dumps({"folder": "loop", "files": {}})
+LINK_CASES = [
+    made("generate --force through a link", "houses generate --n 1 --rooms 2 -o {out}/out --force",
+         "-o {out}/out", "house_0000.json", "symbolic link", setup={**USER, "out/house_0000.json": "-> ../user.json"}),
+    made("rollout --force through links", "rollout " + H + " -o {out}/t.json --render {out}/t.png --force",
+         "-o {out}/t.json", "symbolic link", setup={**USER, "t.json": "-> user.json", "t.png": "-> mine.png"}),
+    made("rollout --force render through a link", "rollout " + H + " -o {out}/t.json --render {out}/t.png --force",
+         "--render {out}/t.png", "symbolic link", setup={**USER, "t.png": "-> mine.png"}),
+    made("train --force run-dir through a link", "train --houses preset:tiny " + TINY_TRAIN +
+         " -o {out}/p.pt --run-dir {out}/D --force", "--run-dir {out}/D", "config.json", "symbolic link",
+         setup={**USER, "D/config.json": "-> ../user.json"}),
+    made("report --force through a link", "report {in}/run-bad -o {out}/rep --force", "-o {out}/rep", "index.html",
+         "symbolic link", setup={**USER, "rep/index.html": "-> ../user.json"}),
+    made("train run-dir of the user's with a state.pt", "train --houses preset:tiny " + TINY_TRAIN +
+         " -o {out}/p.pt --run-dir {out}/D", "--run-dir {out}/D", "not written by adaptenv train", "--force",
+         setup=USERS_RUN_DIR),
+    made("demo into a folder with the old demo marker", "demo -o {out}/D", "-o {out}/D",
+         "not written by adaptenv demo", setup={"D/.adaptenv-demo": "", "D/houses/train/myhouse.json":
+                                                 HOUSE.read_text(encoding="utf-8")}),
+    made("loop resume of a level outside its run", "loop --houses preset:tiny --heldout tiny=preset:tiny -o {out}/D "
+         "--resume", "state.json", "'../../victim'",
+         setup={f"D/{MANIFEST}": LOOP_OWN, "victim.json": HOUSE.read_text(encoding="utf-8"),
+                "D/state.json": json.dumps({"config": {}, "state": {"iteration": 0, "pool": ["../../victim"]}})}),
+    made("loop resume of a buffer level outside its run", "loop --houses preset:tiny --heldout tiny=preset:tiny "
+         "-o {out}/D --resume", "state.json", "state.buffer", "'/tmp/victim'",
+         setup={f"D/{MANIFEST}": LOOP_OWN, "D/state.json": json.dumps(
+             {"config": {}, "state": {"iteration": 0, "buffer": {"level_ids": ["/tmp/victim"], "scores": [0.5],
+                                                                  "last_seen": [0], "parent_ids": [None],
+                                                                  "n_inserted": 1}}})}),
+    made("loop resume of a gallery scene outside its run", "loop --houses preset:tiny --heldout tiny=preset:tiny "
+         "-o {out}/D --resume", "iterations.jsonl", "'../x'",
+         setup={f"D/{MANIFEST}": LOOP_OWN, "D/state.json": json.dumps({"config": {}, "state": {"iteration": 0}}),
+                "D/iterations.jsonl": json.dumps({"iteration": 0, "env_steps": 0, "grad_updates": 0, "edits": 0,
+                                                  "gallery": [{"scene": "../x"}]}) + "\n"}),
+]
+"""Outputs where a link or the user's own files stand: a link is never written through, even with --force; a folder
+is adaptenv's only by its manifest; a resumed run reads only its own levels."""
+
+WRITERS = {"houses generate": "houses generate --n 1 -o {out}/busy", "evaluate":
+           "evaluate --houses preset:tiny -n 1 -o {out}/busy",
+           "train": "train --houses preset:tiny " + TINY_TRAIN + " -o {out}/p.pt --run-dir {out}/busy",
+           "loop": "loop --houses preset:tiny --heldout tiny=preset:tiny -o {out}/busy",
+           "experiment": f"experiment --config {CONFIG} -o {{out}}/busy", "report": "report {in}/run-bad -o {out}/busy",
+           "demo": "demo -o {out}/busy", "adapt": "adapt " + H + " -o {out}/busy"}
+BUSY_CASES = [Case(f"{name} into a folder another run writes", tuple(line.split()),
+                   ("{out}/busy", "another adaptenv run", "process id {pid}"), held="busy")
+              for name, line in WRITERS.items()]
+"""A second run into an output folder while a first one writes it: refused, naming the first's process id."""
+
+KEPT_CASES = [
+    made("train --force keeps the user's other files", "train --houses preset:tiny " + TINY_TRAIN +
+         " -o {out}/D/p.pt --run-dir {out}/D --force", setup={k: v for k, v in USERS_RUN_DIR.items()
+                                                                           if k in ("D/notes.txt", "D/tb/mine.txt")},
+         output="D", works=True),
+    made("report --force keeps the user's picture", "report {out}/run -o {out}/rep --force",
+         setup={"run/run.json": json.dumps({"method": "dr", "seed": 0}), "run/iterations.jsonl": json.dumps(
+             {"iteration": 0, "env_steps": 0, "grad_updates": 0, "edits": 0,
+              "heldout": {"tiny": {"success": 0.5, "spl": 0.4, "episodes": 2}}}) + "\n",
+                "rep/img/mine.png": "my own picture", "rep/notes.txt": "my notes"}, output="rep", works=True),
+    made("generate --force keeps the user's other files", "houses generate --n 1 --rooms 2 -o {out}/out --force",
+         setup={"out/notes.txt": "my notes", "out/sub/house_0000.json": "my house"}, output="out", works=True),
+]
+"""--force as promised: the command runs, replaces only files of the names it writes, and deletes nothing else."""
+
 USAGE_CASES = [
     case("unknown command", "frobnicate", "frobnicate", code=2),
     case("unknown subcommand", "houses frobnicate", "frobnicate", "adaptenv houses --help", code=2),
@@ -488,8 +578,8 @@ CHOICES = [
 """Names and words a command takes from a fixed set, and combinations of flags that cannot go together."""
 
 FILES = (HOUSE_CASES + SET_CASES + POLICY_CASES + TRAJ_CASES + CONFIG_CASES + LLM_CASES + ASSET_CASES + LOG_CASES
-         + ANNOTATION_CASES + REPORT_CASES + VALIDATE_CASES + OUTPUT_CASES + USAGE_CASES + ODD_TEXT + EXPORT_CASES
-         + CHOICES)
+         + ANNOTATION_CASES + REPORT_CASES + VALIDATE_CASES + OUTPUT_CASES + LINK_CASES + BUSY_CASES + USAGE_CASES
+         + ODD_TEXT + EXPORT_CASES + CHOICES)
 USERS_CODE = [Case(f"{command[0]} policy of the user's raising", (*command, "--policy", "{in}/my_policy.py:policy"),
                    ("RuntimeError: my policy's own bug",), users_code=True)
               for command in (("rollout", H, "-o", "{out}/t.json"), ("evaluate", "--houses", "preset:tiny", "-n", "1"),
@@ -533,13 +623,15 @@ def run_case(c: Case, inputs: Path, root: Path) -> Outcome:
     """Run one case through the console entry point, in a fresh folder under ``root``."""
     work = Path(tempfile.mkdtemp(prefix="case-", dir=root))
     args = [a.replace("{in}", str(inputs)).replace("{out}", str(work)) for a in c.args]
+    made = make_users_files(work, c.setup)
+    held = FolderLock(work / c.held).acquire("the other run") if c.held else None
     before = snapshot(inputs, work)
     err, out, code, escaped = io.StringIO(), io.StringIO(), None, ""
     with pytest.MonkeyPatch.context() as m:
         m.setattr(sys, "argv", ["adaptenv", *args])
         m.chdir(work)
         m.setattr(typer.main, "get_command", _get_command)
-        for target in WORK:
+        for target in WORK if not c.works else ():
             m.setattr(target, refuse_work, raising=False)
         with contextlib.redirect_stderr(err), contextlib.redirect_stdout(out), warnings.catch_warnings(record=True) as shown:
             _console_warning_filters()
@@ -552,8 +644,30 @@ def run_case(c: Case, inputs: Path, root: Path) -> Outcome:
                 escaped = f"{type(exc).__name__}: {exc}"
     err.write("".join(f"{w.category.__name__}: {w.message}\n" for w in shown))  # a console prints them on stderr
     after = snapshot(inputs, work)
+    if held is not None:
+        held.release()
     touched = tuple(sorted(k for k in before.keys() | after.keys() if before.get(k) != after.get(k)))
-    return Outcome(code, tuple(err.getvalue().splitlines()), touched, escaped, tuple(out.getvalue().splitlines()))
+    return Outcome(code, tuple(err.getvalue().splitlines()), touched, escaped, tuple(out.getvalue().splitlines()),
+                   changed=tuple(k for k, v in made.items() if users_file(work / k) != v), work=str(work))
+
+
+def users_file(path: Path) -> tuple[str, bytes | str] | None:
+    """What a file of the user's is: ("link", its target) or ("file", its bytes); None when it is gone."""
+    if path.is_symlink():
+        return "link", os.readlink(path)
+    return ("file", path.read_bytes()) if path.is_file() else None
+
+
+def make_users_files(folder: Path, setup: tuple[tuple[str, str], ...]) -> dict[str, tuple[str, bytes | str] | None]:
+    """Make a case's own files of the user's in ``folder`` (see :class:`Case`); returns what each one is."""
+    for rel, text in setup:
+        path = folder / rel
+        path.parent.mkdir(parents=True, exist_ok=True)
+        if text.startswith("-> "):
+            path.symlink_to(text[3:])
+        else:
+            path.write_text(text, encoding="utf-8")
+    return {rel: users_file(folder / rel) for rel, _ in setup}
 
 
 @pytest.fixture(scope="module")
@@ -573,7 +687,9 @@ def outcome(c: Case, dirs: tuple[Path, Path]) -> Outcome:
 
 
 def words_of(c: Case, dirs: tuple[Path, Path]) -> tuple[str, ...]:
-    return tuple(w.replace("{in}", str(dirs[0])) for w in c.words)
+    work = outcome(c, dirs).work
+    return tuple(w.replace("{in}", str(dirs[0])).replace("{out}", work).replace("{pid}", str(os.getpid()))
+                 for w in c.words)
 
 
 def check(c: Case, dirs: tuple[Path, Path]) -> None:
@@ -588,6 +704,7 @@ def check(c: Case, dirs: tuple[Path, Path]) -> None:
     assert line is not None, (result.lines, result.out)
     assert "Traceback" not in line and all(w in line for w in words), (words, line)
     assert not result.outside(c), result.touched
+    assert not result.changed, result.changed
 
 
 @pytest.mark.parametrize("c", NUMBERS, ids=[c.id for c in NUMBERS])
@@ -598,6 +715,15 @@ def test_a_number_is_refused_in_one_line_naming_its_flag(c, corpus_dirs):
 @pytest.mark.parametrize("c", FILES, ids=[c.id for c in FILES])
 def test_a_file_or_output_is_refused_in_one_line_naming_it(c, corpus_dirs):
     check(c, corpus_dirs)
+
+
+@pytest.mark.parametrize("c", KEPT_CASES, ids=[c.id for c in KEPT_CASES])
+def test_force_replaces_only_its_own_names_and_deletes_nothing(c, corpus_dirs):
+    result = outcome(c, corpus_dirs)
+    assert not result.escaped and result.code == 0, (result.escaped, result.code, result.lines)
+    assert not any(line.startswith("error") for line in result.lines), result.lines
+    assert not result.outside(c), result.touched
+    assert not result.changed, result.changed
 
 
 @pytest.mark.parametrize("c", USERS_CODE, ids=[c.id for c in USERS_CODE])
@@ -618,3 +744,191 @@ def test_the_corpus_is_counted_and_every_case_is_one_line(corpus_dirs, record_pr
     assert {k for k, v in ok.items() if not v} == {c.id for c in USERS_CODE}
     readme = (Path(__file__).parents[1] / "README.md").read_text(encoding="utf-8")
     assert f"{len(USERS_CODE)} cases of the hostile-input corpus" in readme  # where the docs say so
+
+
+# -- evidence, bounds, waiting and contracts ----------------------------------------------------------------
+# A trajectory is evidence, not a verdict: its metrics are recomputed from its poses and its house, and a pose that
+# does not follow the one before by one action is refused. Only regular files are read, each kind up to its size
+# limit, JSON up to JSON_DEPTH_MAX deep. A silent LLM server is said, attempt by attempt. A user's policy that breaks
+# the contract (an action that is none, a wrong number of actions) is one line naming the policy, episode and value.
+
+_CORPUS_USER_FILES = user_files
+
+
+def _traj_doc(folder: Path) -> dict:
+    return json.loads((folder / "t.json").read_text(encoding="utf-8"))
+
+
+def _cut(doc: dict, n: int, **metrics) -> dict:
+    """The first ``n`` steps of the recorded episode, its stored metrics (those of the whole run) changed."""
+    return {**doc, "steps": doc["steps"][:n], "final_pose": doc["steps"][n]["pose"],
+            "metrics": {**doc["metrics"], **metrics}}
+
+
+def _silent_server() -> str:
+    """The base URL of a socket on 127.0.0.1 that accepts connections (the kernel's backlog) and never answers."""
+    import atexit
+    import socket
+
+    silent = socket.socket()
+    silent.bind(("127.0.0.1", 0))
+    silent.listen(64)
+    atexit.register(silent.close)
+    return f"http://127.0.0.1:{silent.getsockname()[1]}/v1"
+
+
+def evidence_files(folder: Path) -> None:
+    """Forged trajectories, special files, files over their size limit, a silent LLM server's config and policies
+    that break the contract, in the user's folder."""
+    import os
+
+    from adaptenv import limits
+
+    doc = _traj_doc(folder)
+    n = len(doc["steps"])
+    turned = json.loads(json.dumps(doc))
+    turned["steps"][3]["pose"]["yaw"] = (turned["steps"][2]["pose"]["yaw"] + 90) % 360
+    blocked = json.loads(json.dumps(doc))
+    move = next(i for i, s in enumerate(blocked["steps"][:-1]) if s["action"] == "m" and s["moved"])
+    blocked["steps"][move]["moved"] = False
+    docs = {
+        "t-cut-spl.json": _cut(doc, 5, spl=5.0),
+        "t-repeated.json": {**doc, "steps": doc["steps"] * (104_000 // n),
+                            "metrics": {**doc["metrics"], "episode_length": n * (104_000 // n)}},
+        "t-sight-past-end.json": _cut(doc, 5, first_sight_step=n - 10, success=False, spl=0.0, sel=0.0),
+        "t-turned.json": turned, "t-blocked-moved.json": blocked,
+    }
+    for name, d in docs.items():
+        (folder / name).write_text(json.dumps(d), encoding="utf-8")
+    url = _silent_server()
+    for name, retries in (("llm-silent.json", 0), ("llm-silent-retry.json", 1)):
+        (folder / name).write_text(json.dumps({"provider": "openai-compatible", "base_url": url, "timeout_s": 0.2,
+                                               "max_retries": retries, "backoff_base_s": 0.0}), encoding="utf-8")
+    for name, size in (("huge.json", limits.HOUSE_BYTES), ("huge-assets.json", limits.ASSET_TABLE_BYTES),
+                       ("huge-config.json", limits.CONFIG_BYTES), ("huge-t.json", limits.TRAJECTORY_BYTES)):
+        with open(folder / name, "wb") as f:  # sparse: its size is all a reader may look at
+            f.truncate(size + 1)
+    with open(folder / "huge-line.jsonl", "wb") as f:
+        f.truncate(limits.DATASET_LINE_BYTES + 1)
+    (folder / "bad_policy.py").write_text(
+        "import numpy as np\n\n\nclass Fixed:\n    def __init__(self, action, extra=0):\n"
+        "        self.action, self.extra = action, extra\n\n    def initial_state(self, batch):\n        return None\n\n"
+        "    def act(self, obs, state, done):\n        return np.full(len(done) + self.extra, self.action), state\n\n\n"
+        "action_12345 = Fixed(12345)\nfive_actions = Fixed(0, extra=3)\nhalf_action = Fixed(2.5)\n", encoding="utf-8")
+    os.mkfifo(folder / "fifo.json")
+
+
+def user_files(folder: Path) -> Path:  # noqa: F811  (the corpus's files, plus those of the cases below)
+    """The corpus's user files and :func:`evidence_files`."""
+    _CORPUS_USER_FILES(folder)
+    evidence_files(folder)
+    return folder
+
+
+FORGED = [("repeated", "t-repeated.json", ("steps[", "jumps", "farther than one move (0.2 m)")),
+          ("turned", "t-turned.json", ("steps[3].pose", "turns 90 degrees", "more than one turn (30 degrees)")),
+          ("blocked-but-moved", "t-blocked-moved.json", (".moved", "marked blocked")),
+          ("fifo", "fifo.json", ("FIFO", "not a regular file")),
+          ("over-limit", "huge-t.json", ("over the 64.0 MiB limit of the trajectory",))]
+EVIDENCE_CASES = [Case(f"{reader} trajectory {fid}", tuple(fill(line, t=f"{{in}}/{name}").split()), words)
+                  for reader, line in TRAJ_READERS.items() for fid, name, words in FORGED]
+"""Trajectories whose poses cannot be an episode, and files that are no trajectory to read: refused in one line."""
+
+H_ = "{in}/house.json"
+BOUNDED_CASES = [
+    case("validate a FIFO", "validate {in}/fifo.json", "fifo.json", "FIFO", report=True),
+    case("validate /dev/zero", "validate /dev/zero", "/dev/zero", "character device", report=True),
+    case("validate a house over its limit", "validate {in}/huge.json", "huge.json", "over the 32.0 MiB limit",
+         report=True),
+    case("validate a dataset line over its limit", "validate {in}/huge-line.jsonl", "huge-line.jsonl line 1",
+         "over the 32.0 MiB limit"),
+    case("render a FIFO house", "render {in}/fifo.json -o {out}/m.png", "fifo.json"),
+    case("--assets /dev/zero", "--assets /dev/zero validate " + H_, "--assets /dev/zero", "character device"),
+    case("--assets a FIFO", "validate " + H_ + " --assets {in}/fifo.json", "fifo.json", "FIFO"),
+    case("--assets over its limit", "--assets {in}/huge-assets.json validate " + H_, "huge-assets.json",
+         "over the 64.0 MiB limit"),
+    case("experiment --config a FIFO", "experiment --config {in}/fifo.json -o {out}/x", "fifo.json", "FIFO"),
+    case("experiment --config over its limit", "experiment --config {in}/huge-config.json -o {out}/x",
+         "huge-config.json", "over the 1.0 MiB limit"),
+    case("experiment --config deep", "experiment --config {in}/deep.json -o {out}/x", "deep.json", "64 deep"),
+    case("--assets deep", "--assets {in}/deep.json validate " + H_, "deep.json", "64 deep"),
+    case("analyze --llm-config deep", "analyze " + H_ + " {in}/t.json --llm-config {in}/deep.json", "deep.json",
+         "64 deep"),
+    case("adapt --llm-config deep", "adapt " + H_ + " -o {out}/a --llm-config {in}/deep.json", "deep.json",
+         "64 deep"),
+    case("from-objathor deep", "assets from-objathor {in}/deep.json -o {out}/table.json", "deep.json", "64 deep"),
+    case("from-objathor a FIFO", "assets from-objathor {in}/fifo.json -o {out}/table.json", "fifo.json", "FIFO"),
+    case("from-ai2thor a FIFO", "trajectory from-ai2thor {in}/fifo.json --house " + H_ + " -o {out}/t.json",
+         "fifo.json", "FIFO"),
+    case("from-ai2thor /dev/zero", "trajectory from-ai2thor /dev/zero --house " + H_ + " -o {out}/t.json",
+         "/dev/zero", "character device"),
+    case("analyze --llm a silent server", "analyze " + H_ + " {in}/t.json --llm --llm-config {in}/llm-silent.json",
+         "127.0.0.1", "after 1 attempt", "timed out after 0.2 s"),
+]
+"""Special files, files over their size limit, JSON nested too deeply, a server that never answers: one line each."""
+
+CORPUS.extend(EVIDENCE_CASES + BOUNDED_CASES)
+
+
+@pytest.mark.parametrize("c", EVIDENCE_CASES + BOUNDED_CASES, ids=[c.id for c in EVIDENCE_CASES + BOUNDED_CASES])
+def test_a_forged_trajectory_or_an_unbounded_read_is_refused_in_one_line(c, corpus_dirs):
+    check(c, corpus_dirs)
+
+
+RECOMPUTED = [
+    ("analyze cut with spl 5", ("analyze", H_, "{in}/t-cut-spl.json"), "",
+     ("t-cut-spl.json", "stored spl 5.00 differs from recomputed 0.00", "stored episode_length",
+      "the recomputed figures are used"), "Outcome: failure"),
+    ("analyze sight past the end", ("analyze", H_, "{in}/t-sight-past-end.json"), "",
+     ("t-sight-past-end.json", "stored first_sight_step", "differs from recomputed"), "within 5 steps"),
+    ("render cut with spl 5", ("render", H_, "-t", "{in}/t-cut-spl.json", "-o", "{out}/r/map.png"), "r",
+     ("stored spl 5.00 differs from recomputed 0.00",), "wrote"),
+]
+"""(id, args, output folder, the words of the one stderr line, what stdout holds): a trajectory whose stored
+metrics its poses contradict is analyzed and drawn with the recomputed ones, and the difference said in one line."""
+
+
+@pytest.mark.parametrize("id_, args, output, words, said", RECOMPUTED, ids=[r[0] for r in RECOMPUTED])
+def test_stored_metrics_are_recomputed_and_the_difference_said_in_one_line(id_, args, output, words, said,
+                                                                          corpus_dirs):
+    c = Case(id_, args, words, code=0, output=output)
+    result = run_case(c, *corpus_dirs)
+    assert not result.escaped and result.code == 0, (result.escaped, result.lines)
+    assert len(result.lines) == 1 and all(w in result.lines[0] for w in words), result.lines
+    assert any(said in line for line in result.out), result.out
+    assert not result.outside(c), result.touched
+    if id_.startswith("analyze cut"):
+        assert not any("SPL 5" in line for line in result.out)
+
+
+def test_a_silent_llm_server_is_said_at_each_retry_then_in_one_error(corpus_dirs):
+    c = Case("analyze --llm a silent server, one retry",
+             ("analyze", H_, "{in}/t.json", "--llm", "--llm-config", "{in}/llm-silent-retry.json"), ())
+    result = run_case(c, *corpus_dirs)
+    assert not result.escaped and result.code == 1, (result.escaped, result.lines)
+    assert len(result.lines) == 2, result.lines
+    notice, error = result.lines
+    assert notice.startswith("LLM: attempt 1 of 2 at http://127.0.0.1:") and "timed out after 0.2 s" in notice
+    assert error.startswith("error: ") and "after 2 attempt" in error
+    assert not result.touched
+
+
+CONTRACT = [
+    ("rollout action 12345", ("rollout", H_, "--policy", "{in}/bad_policy.py:action_12345", "-o", "{out}/t.json"),
+     "", ("--policy {in}/bad_policy.py:action_12345", "action 12345", "episode 0", "from 0 to 6")),
+    ("rollout half an action", ("rollout", H_, "--policy", "{in}/bad_policy.py:half_action", "-o", "{out}/t.json"),
+     "", ("bad_policy.py:half_action", "action 2.5", "episode 0")),
+    ("evaluate five actions for two episodes", ("evaluate", "--houses", H_, "-n", "2", "--policy",
+                                                "{in}/bad_policy.py:five_actions", "-o", "{out}/ev"), "ev",
+     ("--policy {in}/bad_policy.py:five_actions", "5 actions for 2 episodes")),
+    ("adapt action 12345", ("adapt", H_, "--policy", "{in}/bad_policy.py:action_12345", "-o", "{out}/a"), "a",
+     ("bad_policy.py:action_12345", "action 12345")),
+]
+"""(id, args, output folder, words): a user's policy whose answers break the contract, run for real."""
+
+
+@pytest.mark.parametrize("id_, args, output, words", CONTRACT, ids=[r[0] for r in CONTRACT])
+def test_a_policy_that_breaks_the_contract_is_one_line_naming_it(id_, args, output, words, corpus_dirs, monkeypatch):
+    monkeypatch.setattr(sys.modules[__name__], "WORK", [])  # the policy must really be asked
+    c = Case(id_, args, words, output=output)
+    check(c, corpus_dirs)

@@ -199,12 +199,13 @@ def recorded(tmp_path_factory) -> dict:
 
 
 def _poses_shifted(doc):
-    for s in doc["steps"]:
-        s["pose"]["x"] += 500.0
+    """Every pose 500 m to the east: an episode that follows itself, off the house's floor."""
+    for pose in [doc["start"], doc["final_pose"], *(s["pose"] for s in doc["steps"])]:
+        pose["x"] += 500.0
 
 
 TRAJECTORIES = [
-    ("500-m-outside", _poses_shifted, "step 0 stands at", "off the house's floor"),
+    ("500-m-outside", _poses_shifted, "start stands at", "off the house's floor"),
     ("no-steps", lambda d: d.update(steps=[]), "at steps: the episode has no steps", ""),
     ("nan-step", lambda d: d["steps"][2]["pose"].update(x=float("nan")), "at steps[2].pose.x: nan is not a finite", ""),
     ("unknown-action", lambda d: d["steps"][1].update(action="fly"), "at steps[1].action: unknown action 'fly'", ""),
@@ -324,6 +325,7 @@ def loop_run(tmp_path_factory) -> tuple[Path, Path]:
     from adaptenv.agents.network import NavNet, NetConfig
     from adaptenv.curriculum.loop import LoopConfig, run_loop
     from adaptenv.curriculum.records import STATE
+    from adaptenv.files import MANIFEST
 
     root = tmp_path_factory.mktemp("loop")
     torch.manual_seed(0)
@@ -335,6 +337,7 @@ def loop_run(tmp_path_factory) -> tuple[Path, Path]:
     state = json.loads((root / "run" / STATE).read_text())
     state["config"] = asdict(LoopConfig(**small, iterations=2))  # as the command line below says
     (root / "run" / STATE).write_text(json.dumps(state))
+    (root / "run" / MANIFEST).write_text(json.dumps({"folder": "loop", "files": {}}))  # as adaptenv loop leaves it
     return policy, root / "run"
 
 

@@ -241,14 +241,53 @@ def test_report_and_experiment_keep_to_their_own_folders(tmp_path, monkeypatch, 
     assert json.loads((tmp_path / "exp" / MANIFEST).read_text())["folder"] == "experiment"
     refused(monkeypatch, capsys, tmp_path, "report", tmp_path / "exp", "-o", tmp_path / "exp",
             words=(f"-o {tmp_path / 'exp'}", "input"))
-    os.remove(tmp_path / "exp" / MANIFEST)  # a folder from before manifests: its experiment.json says whose
-    ok("experiment", "--config", CONFIG, "-o", tmp_path / "exp")
+    os.remove(tmp_path / "exp" / MANIFEST)  # without its manifest the folder is the user's, whatever it holds
+    refused(monkeypatch, capsys, tmp_path, "experiment", "--config", CONFIG, "-o", tmp_path / "exp",
+            words=(f"-o {tmp_path / 'exp'}", "not written by adaptenv experiment"))
 
 
 def test_loop_resumes_its_own_folder(tmp_path, monkeypatch):
     import adaptenv.curriculum.loop as loop_module
 
     monkeypatch.setattr(loop_module, "run_loop", refuse_work)
-    mine(tmp_path / "run" / "run.json", "{}")  # a run cut short (written before manifests)
+    mine(tmp_path / "run" / "run.json", "{}")  # a run cut short, but no manifest: the folder is the user's
+    res = CliRunner().invoke(app, [*LOOP, "-o", str(tmp_path / "run"), "--resume"])
+    assert "not written by adaptenv loop" in str(res.exception), res.output
+    mine(tmp_path / "run" / MANIFEST, json.dumps({"folder": "loop", "files": {}}))  # the loop's own
     res = CliRunner().invoke(app, [*LOOP, "-o", str(tmp_path / "run"), "--resume"])
     assert isinstance(res.exception, WorkStarted), res.output
+
+
+def test_a_second_run_into_a_folder_another_run_writes_is_refused(tmp_path, monkeypatch, capsys):
+    """Two runs at once: the second is refused, naming the first's process id; once the first ends, it runs."""
+    import subprocess
+
+    out = tmp_path / "houses"
+    first = subprocess.Popen([sys.executable, "-c", "import sys\nfrom adaptenv.files import FolderLock\n"
+                              "lock = FolderLock(sys.argv[1]).acquire('-o')\nprint('writing', flush=True)\n"
+                              "sys.stdin.read()\nlock.release()\n", str(out)],
+                             stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True,
+                             env={**os.environ, "PYTHONPATH": str(Path(__file__).parents[1] / "src")})
+    try:
+        assert first.stdout.readline().strip() == "writing"
+        for command in (["houses", "generate", "--n", "1", "--rooms", "1", "-o", out],
+                        ["evaluate", "--houses", "preset:tiny", "-n", "1", "--policy", "expert", "-o", out]):
+            refused(monkeypatch, capsys, tmp_path, *command, words=(f"-o {out}", f"process id {first.pid}"))
+    finally:
+        first.communicate("")
+    ok("houses", "generate", "--n", "1", "--rooms", "1", "-o", out)
+    assert sorted(p.name for p in out.iterdir()) == [MANIFEST, "house_0000.json"]  # the lock file is gone
+
+
+def test_force_never_writes_through_a_link_nor_deletes_a_file_of_yours(tmp_path, monkeypatch, capsys):
+    user = mine(tmp_path / "user.json", "the user's own file")
+    out = tmp_path / "t.json"
+    out.symlink_to(user)
+    refused(monkeypatch, capsys, tmp_path, "rollout", HOUSE, "--policy", "expert", "-o", out, "--force",
+            words=(f"-o {out}", "symbolic link"))
+    out.unlink()
+    ok("rollout", HOUSE, "--policy", "expert", "-o", out)
+    ok("houses", "generate", "--n", "1", "--rooms", "1", "-o", tmp_path / "h")
+    notes = mine(tmp_path / "h" / "sub" / "notes.txt")
+    ok("houses", "generate", "--n", "1", "--rooms", "2", "-o", tmp_path / "h", "--force")
+    assert notes.read_text() == "the user's own file"

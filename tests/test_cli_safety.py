@@ -207,7 +207,7 @@ def test_experiment_shows_the_finished_runs_then_names_the_failed_ones(tmp_path,
     from adaptenv.errors import RunsFailed
 
     def one_run_failed(cfg, out, **kwargs):
-        out.mkdir(parents=True)
+        out.mkdir(parents=True, exist_ok=True)  # the command made (and locked) it before any work
         (out / "summary.md").write_text("| method | success:tiny |\n| none | 0.5 |\n")
         raise RunsFailed("1 of 4 runs failed (dr seed 0: boom); the others are in OUT")
 

@@ -19,6 +19,8 @@ from typing import Any, TypeVar
 from pydantic import BaseModel, ConfigDict, TypeAdapter, ValidationError
 
 from adaptenv.errors import ConfigError
+from adaptenv.files import FileRefused, JSONTooDeep, loads_json, read_bytes
+from adaptenv.limits import CONFIG_BYTES
 
 T = TypeVar("T")
 
@@ -37,20 +39,28 @@ _SHOULD = {
 }
 
 
-def read_json(path: str | Path, what: str, source: str | None = None) -> Any:
+def read_json(path: str | Path, what: str, source: str | None = None, limit: int = CONFIG_BYTES) -> Any:
     """The JSON document in ``path``; ConfigError (``source``, default the path, and ``what`` the file should be)
-    when it is missing, unreadable or not JSON."""
+    when it is missing, unreadable, not a regular file, larger than ``limit`` bytes, not JSON or nested deeper
+    than :data:`~adaptenv.limits.JSON_DEPTH_MAX`."""
     p = Path(path)
     source = source or str(p)
     try:
-        return json.loads(p.read_text(encoding="utf-8"))
+        return loads_json(read_bytes(p, limit, what.split(" (")[0]).decode("utf-8"))
     except FileNotFoundError:
         raise ConfigError(f"{source}: no such file; pass the path of a JSON {what}") from None
+    except FileRefused as exc:
+        raise ConfigError(f"{source}: {exc.reason}") from None
     except (OSError, UnicodeDecodeError) as exc:
         raise ConfigError(f"{source}: cannot read the {what} ({exc}); check the path") from None
     except json.JSONDecodeError as exc:
         raise ConfigError(f"{source}: the {what} is not valid JSON (line {exc.lineno}, column {exc.colno}: "
                           f"{exc.msg}); fix the syntax") from None
+    except JSONTooDeep as exc:
+        raise ConfigError(f"{source}: the {what} is refused: {exc}; write it flatter") from None
+    except ValueError as exc:  # an integer of more than 4300 digits
+        raise ConfigError(f"{source}: the {what} is not valid JSON ({str(exc).split(';')[0]}); fix the number") \
+            from None
 
 
 def parse_config(kind: type[T], data: Any, source: str, *, prefix: str = "", fix: str = "fix that value") -> T:

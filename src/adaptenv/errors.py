@@ -43,3 +43,8 @@ class RunsFailed(AdaptenvError):
 
 class TrainingDiverged(AdaptenvError):
     """Training made the network's weights NaN or infinite; the last finite checkpoint is kept."""
+
+
+class PolicyError(AdaptenvError):
+    """A user's policy (``--policy module:attribute``) broke the policy contract: an action that is none, or not one
+    action per episode. The user's own exceptions are not these: they keep their traceback."""

@@ -26,6 +26,28 @@ EPISODE_BYTES = 64 * 1024
 """Memory one evaluated episode may take at most (its result and a 600-step recording): the bound of
 :func:`check_episodes`."""
 
+# -- the files a user hands over: the largest of each kind adaptenv reads (README, "Limits") ------------------
+
+MiB = 2**20
+HOUSE_BYTES = 32 * MiB
+"""The largest house JSON file (ProcTHOR-10K's largest house is under 1 MiB)."""
+DATASET_LINE_BYTES = 32 * MiB
+"""The longest line of a house dataset (one house), after decompression."""
+CONFIG_BYTES = 1 * MiB
+"""The largest experiment or LLM config file."""
+STATE_BYTES = 64 * MiB
+"""The largest run state a command resumes from (a loop's ``state.json``)."""
+ASSET_TABLE_BYTES = 64 * MiB
+"""The largest ``--assets`` table."""
+TRAJECTORY_BYTES = 64 * MiB
+"""The largest trajectory JSON file (a 600-step episode takes about 150 KiB)."""
+AI2THOR_LOG_BYTES = 256 * MiB
+"""The largest AI2-THOR episode log, after decompression."""
+ANNOTATIONS_BYTES = 1024 * MiB
+"""The largest objathor annotation file, after decompression."""
+JSON_DEPTH_MAX = 64
+"""The deepest nesting of arrays and objects a JSON file may have (a house nests 6 deep)."""
+
 
 def check_int(value: Any, flag: str, lo: int = 0, hi: int = COUNT_MAX) -> int:
     """``value`` if it is a whole number in ``lo .. hi``, else a ConfigError naming ``flag``."""
@@ -78,7 +100,7 @@ SEEDS = ("seed",)
 POSITIVE_COUNTS = ("frames", "num_envs", "rollout_steps", "chunk_len", "batch_chunks", "updates_per_iter",
                    "buffer_frames", "max_episode_steps", "eval_episodes", "save_every", "num_minibatches",
                    "update_epochs")
-COUNTS = ("eval_every", "final_eval_episodes", "calibrate_episodes", "value_warmup_iters")
+COUNTS = ("eval_every", "final_eval_episodes", "calibrate_episodes", "value_warmup_iters", "snapshots")
 WIDTHS = ("hidden", "feature_dim", "conv_channels", "map_dim")
 PROBABILITIES = ("beta_start", "beta_end", "beta_decay_fraction", "beta", "end_threshold", "teacher_mix", "gamma",
                  "gae_lambda")

@@ -53,6 +53,22 @@ def test_adapt_writes_a_house_that_validates(adapted):
     fresh = json.loads((out / "summary.json").read_text())["fresh"]
     assert fresh == {"draws": 8, "success_before": 1.0, "success_after": 1.0}
     assert "on 8 fresh action draws of the episode (no G rolled them out): success 1.00 -> 1.00" in text
+    # one line on what G made; the expert solved the episode F analysed, which the line says
+    line = json.loads((out / "summary.json").read_text())["edits_line"]
+    assert line.startswith("G made ") and "F found no failure in 1 episode" in line
+    assert line.split(";")[0] in text
+
+
+def test_adapt_adapts_to_the_shipped_agent_unless_told_otherwise(house_file, tmp_path):
+    from adaptenv.agents.policy import policy_name
+    from adaptenv.agents.registry import resolve_policy
+
+    result = runner.invoke(app, ["adapt", str(house_file), "--steps", "1", "--seed", "1", "--json",
+                                 "-o", str(tmp_path / "out")])
+    assert result.exit_code in (0, 1), result.output
+    summary = json.loads((tmp_path / "out" / "summary.json").read_text())
+    assert summary["policy"] == policy_name(resolve_policy("pretrained")) != "expert"
+    assert summary["edits_line"].startswith("G made ") and summary["edits_line"].count(" of 1 edit") == 1
 
 
 def test_analyze_text_and_json(house_file, adapted):

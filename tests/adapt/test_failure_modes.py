@@ -182,3 +182,22 @@ def test_adapt_scene_with_episodes_diagnoses_before_and_after(scene):
     assert [e.target_type for e in res.diagnosis_after.episodes] == [e.target_type for e in eps]
     [step] = res.generation.steps
     assert step.failure_mode == "premature_end" and step.status == "applied" and step.produced_failure
+
+
+def test_a_family_that_cannot_get_harder_falls_back_to_the_builtin_objectives(scene, monkeypatch):
+    """F found no failure (the expert solved every episode) and nothing moves the family's objective: G still makes
+    the house harder, by the built-in G's objectives, and says so in the step's reason."""
+    from adaptenv.adapt.generators import failure_modes
+    from adaptenv.adapt.objectives import OBJECTIVE_KINDS
+
+    monkeypatch.setattr(failure_modes, "mode_value", lambda *a, **k: 0.0)  # no candidate makes any family harder
+    house, world, ep, traj, analysis = scene
+    ctx = GenerationContext(episode=ep, trajectory=traj, policy=ExpertPolicy(), render=False, diagnosis=_diagnosis())
+    res = FailureModeGenerator(max_candidates=10).generate(house, analysis, steps=2, context=ctx,
+                                                           rng=np.random.default_rng(0))
+    applied = [s for s in res.steps if s.status == "applied"]
+    assert applied, "a strong agent's scene still gets an edit"
+    for s in applied:
+        assert s.suggestion_kind in OBJECTIVE_KINDS and "the built-in G's" in s.reason and s.gain > 0
+        assert s.edit.intent.startswith("search: built-in") or s.edit.intent.startswith("premature_end: built-in")
+    _valid_and_solvable(scene, res, compile_world(res.house, "after"))

@@ -611,3 +611,47 @@ def test_openai_key_is_not_sent_to_a_compatible_server(monkeypatch):
     assert resolve_api_key(cfg) == "not-needed"
     monkeypatch.setenv("ADAPTENV_LLM_API_KEY", "local-key")
     assert resolve_api_key(cfg) == "local-key"
+
+
+# ----- waiting out loud: a line per failed attempt, the silent server ------------------------------
+
+
+def test_each_failed_attempt_says_so_before_the_next(capsys):
+    sleeps: list[float] = []
+    mock = Mock(httpx2.ReadTimeout, httpx2.ReadTimeout, (200, srv.chat_tool_reply("propose_move_instruction", MOVE)))
+    backend = _chat(mock, sleeps, max_retries=2, timeout_s=5)
+    assert backend.call_tool("s", [Message.user("go")], None, move_tool(IDS)).arguments == MOVE
+    lines = capsys.readouterr().err.splitlines()
+    assert len(lines) == 2 == len(sleeps)
+    assert lines[0].startswith("LLM: attempt 1 of 3 at http://127.0.0.1:9/v1 failed (timed out after 5 s); attempt 2 in")
+    assert lines[1].startswith("LLM: attempt 2 of 3 at http://127.0.0.1:9/v1 failed (timed out after 5 s); attempt 3 in")
+
+
+def test_the_default_wait_is_documented_with_its_worst_case():
+    from pathlib import Path
+
+    cfg = LLMConfig(api_key=KEY)
+    worst = cfg.timeout_s * (cfg.max_retries + 1) + sum(
+        min(cfg.backoff_base_s * 2 ** k * 1.25, cfg.backoff_max_s) for k in range(cfg.max_retries))
+    doc = (Path(__file__).parents[2] / "docs" / "llm.md").read_text(encoding="utf-8")
+    assert f"{cfg.max_retries + 1} attempts of {cfg.timeout_s:g} s" in doc
+    assert f"{worst:g} s" in doc
+
+
+def test_a_server_that_never_answers_is_reported_attempt_by_attempt(no_proxy):
+    """The real SDK against a socket on 127.0.0.1 that accepts connections (the kernel's backlog) and never
+    answers: each timed-out attempt says so, then one error names the server and the fix."""
+    import socket
+
+    said: list[str] = []
+    with socket.socket() as silent:
+        silent.bind(("127.0.0.1", 0))
+        silent.listen(8)
+        url = f"http://127.0.0.1:{silent.getsockname()[1]}/v1"
+        config = LLMConfig(provider="openai-compatible", base_url=url, timeout_s=0.2, max_retries=1,
+                           backoff_base_s=0.0)
+        with ChatCompletionsBackend(config, notify=said.append) as backend, \
+                pytest.raises(LLMUnavailableError, match="timed out after 0.2 s") as info:
+            backend.call_tool("s", [Message.user("go")], None, move_tool(IDS))
+    assert said == [f"LLM: attempt 1 of 2 at {url} failed (timed out after 0.2 s); attempt 2 in 0.0 s"]
+    assert url in str(info.value) and "2 attempt" in str(info.value)

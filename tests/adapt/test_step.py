@@ -176,3 +176,25 @@ def test_the_world_generation_hands_back_is_the_edited_house_compiled(house, gen
     handed = validate_scene(res.house, episode_targets=[ep.target_type], start=ep.start[:2], original=house,
                             world=world, original_world=res.world)  # both the wrong way round: neither is used
     assert [str(p) for p in handed] == [str(p) for p in plain] == res.problems
+
+
+def test_the_edits_line_says_what_g_made_and_why_fewer():
+    from collections import Counter
+
+    from adaptenv.adapt.step import edits_line, missed_edit_reasons
+
+    log = {"steps": [{"status": "applied", "reason": "search objective 0.1 -> 0.2"},
+                     {"status": "skipped", "reason": "no candidate move passed placement and validation"},
+                     {"status": "skipped", "reason": "no candidate move passed placement and validation"}]}
+    reasons = missed_edit_reasons(log)
+    assert reasons == Counter({"no candidate move passed placement and validation": 2})
+    assert edits_line(3, 1, reasons) == ("G made 1 of 3 edits; fewer because: no candidate move passed placement "
+                                         "and validation (2 steps)")
+    assert edits_line(2, 2, Counter()) == "G made 2 of 2 edits"
+    line = edits_line(4, 0, Counter(), scenes=2, refused=2, no_failure=(2, 6))
+    assert line.startswith("G made 0 of 4 edits in 2 scenes; fewer because: the final validation refused")
+    assert "F found no failure in 6 episodes of 2 scenes" in line
+    assert edits_line(2, 1, Counter(), stopped=["the LLM budget is used up", ""]) == (
+        "G made 1 of 2 edits; fewer because: G stopped early: the LLM budget is used up")
+    random_log = {"edits": [{"accepted": False, "problems": ["overlaps Sofa|1"]}, {"accepted": True, "changed": True}]}
+    assert missed_edit_reasons(random_log) == Counter({"overlaps Sofa|1": 1})

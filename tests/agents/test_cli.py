@@ -100,3 +100,24 @@ def test_init_names_a_network_or_says_which_names_do():
     for spec in ("expert", "explorer", "random", "random:3", "examples/my_policy.py:policy"):
         with pytest.raises(ConfigError, match=f"--init '{spec}': no network to start from; use pretrained"):
             init_checkpoint(spec)
+
+
+def test_cli_evaluate_breaks_success_down_by_the_number_of_rooms(tmp_path):
+    from adaptenv.scene.house import save_house
+    from adaptenv.scene.procedural import GenerationConfig, generate_house
+
+    folder = tmp_path / "houses"
+    for seed, rooms in ((1, 2), (2, 2), (3, 3)):
+        save_house(generate_house(seed, GenerationConfig(n_rooms=rooms)), folder / f"h{seed}.json")
+    out = tmp_path / "eval"
+    res = CliRunner().invoke(app, ["evaluate", "--policy", "expert", "--houses", str(folder), "--episodes", "6",
+                                   "-o", str(out)])
+    assert res.exit_code == 0, res.output
+    rows = json.loads((out / "summary.json").read_text())["by_rooms"]
+    assert [(r["rooms"], r["houses"]) for r in rows] == [(2, 2), (3, 1)]
+    assert sum(r["episodes"] for r in rows) == 6 and all(r["success"] == 1.0 for r in rows)  # the expert
+    header, *lines = (out / "rooms.csv").read_text().splitlines()
+    assert header.startswith("rooms,houses,episodes,success,") and len(lines) == 2
+    printed = " ".join(res.output.split())
+    assert (f"success by rooms: 2: 1.00 ({rows[0]['episodes']} ep), 3: 1.00 ({rows[1]['episodes']} ep)"
+            in printed)

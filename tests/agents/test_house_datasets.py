@@ -69,16 +69,16 @@ def test_bad_lines_are_named_by_line_number_and_reading_stops_at_the_slice_end(t
     path = tmp_path / "d.jsonl"
     path.write_text("\n".join([good, good, "{not json", "[1, 2]"]) + "\n", encoding="utf-8")
     assert len(load_house_set(f"{path}:0:2").names) == 2  # line 3 is never read
-    with pytest.raises(ConfigError, match=r"^\S*d.jsonl line 3: not valid JSON .*one house JSON object per line$"):
+    with pytest.raises(ConfigError, match=r"^\S*d.jsonl line 3 \(index 2\): not valid JSON .*one house JSON object per line$"):
         load_house_set(path)
-    with pytest.raises(ConfigError, match=r"d.jsonl line 4: a JSON list, not a house object"):
+    with pytest.raises(ConfigError, match=r"d.jsonl line 4 \(index 3\): a JSON list, not a house object"):
         load_house_set(f"{path}:3:")
     # a JSON object that is not a house: skipped like an invalid house file, its line named; an error with strict
     path.write_text("\n".join([good, json.dumps({"rooms": "none"})]) + "\n", encoding="utf-8")
     with caplog.at_level(logging.WARNING, logger="adaptenv.agents.houses"):
         hs = load_house_set(path)
-    assert hs.names == ["house-000000"] and "d.jsonl line 2: at " in hs.skipped[0].reason
-    with pytest.raises(ConfigError, match=r"house-000001 cannot be used: \S*d.jsonl line 2: "):
+    assert hs.names == ["house-000000"] and "d.jsonl line 2 (index 1): at " in hs.skipped[0].reason
+    with pytest.raises(ConfigError, match=r"house-000001 cannot be used: \S*d.jsonl line 2 \(index 1\): "):
         load_house_set(path, strict=True)
 
 
@@ -126,6 +126,9 @@ def test_validate_checks_every_line_and_names_the_bad_one(tmp_path):
     path.write_text("\n".join([_lines()[0], json.dumps(doc)]) + "\n", encoding="utf-8")
     res = CliRunner().invoke(app, ["validate", str(path)])
     assert res.exit_code == 1
-    assert res.output.splitlines()[0].startswith(f"{path} line 2: at doors[0].wall0, ")
+    assert res.output.splitlines()[0].startswith(f"{path} line 2 (index 1): at doors[0].wall0, ")
     assert res.output.splitlines()[-1] == "1 problem in 1 of 2 houses"
     assert CliRunner().invoke(app, ["validate", f"{path}:0:1"]).output.strip() == "1 house valid"
+    # a slice names its lines as a whole file does: line 2 is index 2 - 1 = 1 whatever the slice's START
+    sliced = CliRunner().invoke(app, ["validate", f"{path}:1:2"])
+    assert sliced.output.splitlines()[0].startswith(f"{path} line 2 (index 1): at doors[0].wall0, ")

@@ -240,3 +240,56 @@ def test_the_default_policy_is_the_strongest_shipped_agent_and_runs_record_its_w
     assert record == {"name": "pretrained", "file": "pretrained-ppo.pt", "sha256": digest}
     assert weights_record("pretrained-scan")["sha256"] != digest
     assert weights_record("expert") is None and weights_record("no/such.pt") is None
+
+
+def test_a_users_policy_is_held_to_the_contract_naming_the_episode(tmp_path):
+    from adaptenv.agents.registry import CheckedPolicy
+    from adaptenv.errors import PolicyError
+
+    file = tmp_path / "rogue.py"
+    file.write_text(
+        "import numpy as np\n"
+        "class Rogue:\n"
+        "    name = 'rogue'\n"
+        "    def __init__(self):\n        self.answers = []\n"
+        "    def initial_state(self, batch):\n        return None\n"
+        "    def act(self, obs, state, done):\n"
+        "        return np.asarray(self.answers.pop(0)), state\n"
+        "policy = Rogue()\n")
+    policy = resolve_policy(f"{file}:policy")
+    assert isinstance(policy, CheckedPolicy) and policy.name == "rogue"  # its own attributes show through
+    policy.policy.answers = [[0, 6], [1.0, 2], [3, 7], [1, 2, 3], [[1, 2]], [float("nan"), 1], [True, False]]
+    state = policy.initial_state(2)
+    first, _ = policy.act(fake_obs(2), state, np.ones(2, dtype=bool))
+    assert first.dtype == np.int64 and first.tolist() == [0, 6]
+    assert policy.act(fake_obs(2), state, np.zeros(2, dtype=bool))[0].tolist() == [1, 2]  # whole floats pass
+    with pytest.raises(PolicyError, match=r"rogue.py:policy returned action 7 in episode 2; an action is a whole "
+                                          r"number from 0 to 6 \(m, b, l, r, ls, rs, end\)"):
+        policy.act(fake_obs(2), state, np.array([False, True]))  # slot 1 began the third episode
+    for shape in ("3 actions for 2 episodes", "2 actions for 2 episodes"):  # a list of 3; a (1, 2) array
+        with pytest.raises(PolicyError, match=shape if shape.startswith("3") else "one action per episode"):
+            policy.act(fake_obs(2), state, np.zeros(2, dtype=bool))
+    for bad in ("nan", "True"):
+        with pytest.raises(PolicyError, match=f"returned action {bad} in episode 0"):
+            policy.act(fake_obs(2), state, np.zeros(2, dtype=bool))
+
+
+def test_adaptenvs_own_policies_are_not_wrapped():
+    from adaptenv.agents.registry import CheckedPolicy
+
+    assert not isinstance(resolve_policy("adaptenv.agents.policy:RandomPolicy"), CheckedPolicy)
+
+
+def test_scratch_specs_build_fresh_map_reading_networks_drawn_from_the_seed():
+    from adaptenv.agents.registry import init_checkpoint
+
+    state = torch.get_rng_state()
+    a, b, c = (resolve_policy(spec, seed=s) for spec, s in (("scratch-shape", 1), ("scratch-shape", 1), ("scratch", 2)))
+    assert torch.equal(torch.get_rng_state(), state), "torch's global generator is left as it was"
+    assert isinstance(a, NeuralPolicy) and a.net.config.perception == "shape" and a.net.config.map_channels
+    assert c.net.config.perception == "labels" and c.net.config.map_channels
+    assert all(torch.equal(x, y) for x, y in zip(a.net.state_dict().values(), b.net.state_dict().values(), strict=True))
+    other = resolve_policy("scratch-shape", seed=2).net.state_dict()
+    assert any(not torch.equal(x, other[k]) for k, x in a.net.state_dict().items())
+    with pytest.raises(ConfigError, match="no network to start from"):
+        init_checkpoint("scratch")

@@ -55,7 +55,7 @@ def test_config_checks_name_the_flag(tmp_path):
         check_ppo_config(tiny_ppo(tmp_path, kl_coef=-1.0))
     with pytest.raises(ConfigError, match="--explore-bonus"):
         check_ppo_config(tiny_ppo(tmp_path, explore_bonus=-0.1))
-    with pytest.raises(ConfigError, match="--precision must be one of fp32, bf16"):
+    with pytest.raises(ConfigError, match="--precision must be one of auto, fp32, bf16"):
         check_ppo_config(tiny_ppo(tmp_path, precision="fp16"))
 
 

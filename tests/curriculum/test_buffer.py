@@ -17,6 +17,7 @@ from adaptenv.curriculum.buffer import (
     empty_state,
     insert,
     insert_children,
+    level_id_problem,
     rank_weights,
     regret_score,
     replay_distribution,
@@ -302,3 +303,23 @@ def test_regret_scores_on_hand_worked_episodes():
         regret_score(0.0, 0.0, 1.0, "bogus")  # type: ignore[arg-type]
     with pytest.raises(ValueError, match="episodes"):
         success_regret([1, 0], [1])
+
+
+# --------------------------------------------------------------------------- level ids name only the run's own levels
+
+@pytest.mark.parametrize("level_id", ["../../victim", "/tmp/victim", "a/b", "a\\b", "..", ".", "", "x\0y", "x" * 201])
+def test_a_level_id_that_is_not_a_plain_name_is_refused_naming_it(level_id):
+    assert level_id_problem(level_id) is not None
+    data = {"level_ids": ["L0", level_id], "scores": [0.1, 0.2], "last_seen": [0, 1], "parent_ids": [None, None],
+            "n_inserted": 2}
+    with pytest.raises(ConfigError, match=r"^run/state.json: state.buffer: level id ") as err:
+        LevelBufferState.from_dict(data, "run/state.json: state.buffer")
+    assert repr(level_id) in str(err.value)
+    parent = {**data, "level_ids": ["L0", "L1"], "parent_ids": [None, level_id]}  # a parent names a level too
+    with pytest.raises(ConfigError, match="level id "):
+        LevelBufferState.from_dict(parent)
+
+
+def test_the_names_the_loop_gives_its_levels_are_plain():
+    for name in ("house_00", "house_00~t01a00", "or0003", "dr0012", "procthor-10k-train-1~ra0001", "..x"):
+        assert level_id_problem(name) is None, name

@@ -129,7 +129,7 @@ def test_loop_config_refuses_ppo_settings_that_do_not_apply():
         LoopConfig(finetune_freeze_encoder=True).check()
     with pytest.raises(ConfigError, match="finetune_bc_coef apply to ppo only"):
         LoopConfig(finetune_bc_coef=0.1).check()
-    with pytest.raises(ConfigError, match="finetune_precision must be one of fp32, bf16"):
+    with pytest.raises(ConfigError, match="finetune_precision must be one of auto, fp32, bf16"):
         LoopConfig(finetune_algo="ppo", finetune_precision="fp16").check()
     with pytest.raises(ConfigError, match="level_score"):
         LoopConfig(level_score="novelty").check()
@@ -372,3 +372,32 @@ def test_evaluation_jobs_refill_their_slots_and_change_no_episode():
              for r in run_episodes(worlds, eps[a:a + EVAL_BATCH], policy, batch=EVAL_BATCH)[0]]
     assert [(r.success, r.steps, r.spl, r.collisions) for r in results] == \
         [(r.success, r.steps, r.spl, r.collisions) for r in alone]
+
+
+def test_run_json_records_the_precision_used_and_an_fp32_run_resumes_under_auto(tiny_policy, tmp_path, monkeypatch):
+    from adaptenv.agents import network
+
+    monkeypatch.setattr(network, "auto_precision", lambda: "fp32")  # an AVX2-only CPU
+    cfg = tiny_config(tiny_policy, "none", iterations=1, finetune_precision="fp32")
+    first = run_loop(cfg, tmp_path / "r")
+    assert json.loads((tmp_path / "r" / "run.json").read_text())["finetune_precision"] == "fp32"
+    auto = tiny_config(tiny_policy, "none", iterations=1)  # the default, auto: the same steps on this CPU
+    assert auto.finetune_precision == "auto"
+    assert figures(run_loop(auto, tmp_path / "r", resume=True)) == figures(first)
+    with pytest.raises(ConfigError, match=r"finetune_precision \(was 'fp32', now 'bf16'\)"):
+        run_loop(tiny_config(tiny_policy, "none", iterations=1, finetune_precision="bf16"), tmp_path / "r", resume=True)
+
+
+def test_every_iteration_says_what_g_made_and_why_fewer(tiny_policy, tmp_path):
+    lines: list[str] = []
+    run_loop(tiny_config(tiny_policy, "ours", iterations=1, edit_steps=2), tmp_path / "r", progress=lines.append)
+    [made] = [x for x in lines if x.startswith("t=1: G made")]
+    scenes = json.loads((tmp_path / "r" / "iter_0001" / "scenes.json").read_text())
+    assert made.startswith(f"t=1: {scenes['generation']} (") and made.endswith(" s)")
+    assert scenes["edits_requested"] == 4 and f"G made {scenes['edits_this_iteration']} of 4 edits" in made
+    assert scenes["edits_this_iteration"] > 0, "the failure-mode G edits whether or not F finds a failure"
+    if scenes["edits_this_iteration"] < 4:
+        assert "fewer because: " in made
+    lines.clear()
+    run_loop(tiny_config(tiny_policy, "none", iterations=1), tmp_path / "n", progress=lines.append)
+    assert any(x.startswith("t=1: none makes no edits") for x in lines)

@@ -32,7 +32,8 @@ def _rollouts(successes: list[bool], experts: list[bool] | None = None, explorer
 
 
 def test_every_method_is_registered_by_its_name():
-    assert set(M.METHODS) == {"none", "random", "dr", "dr-matched", "sfl", "oracle", "rearrange", "plr", "accel", "ours",
+    assert set(M.METHODS) == {"none", "random", "dr", "dr-matched", "sfl", "oracle", "rearrange", "swap", "plr", "accel",
+                              "ours",
                               "ours-noselect",
                               "ours-randomscene", "ours-nof", "ours-dr", "ours-learned", "ours-llm"}
     assert all(cls.name == name for name, cls in M.METHODS.items())

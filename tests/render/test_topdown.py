@@ -222,7 +222,12 @@ def test_render_to_file_writes_png(house, tmp_path):
 # ---------------------------------------------------------------- CLI
 def test_cli_render_writes_png_with_trajectory(real_house_path, tmp_path):
     in_real_house = {"target_ids": ["Fridge|2|1"], "target_positions": [(15.403, 2.205)]}  # its real fridge
-    traj = kitchen_walk(collide_at=2).model_copy(update=in_real_house).save(tmp_path / "t.json")
+    xs = [10.0 + 0.2 * k for k in range(11)]  # the CLI reads an episode: one 0.2 m move a step, one blocked
+    steps = [Step(pose=Pose(x=x, z=2.5, yaw=90.0), action="m") for x in xs[:-1]]
+    steps.insert(3, Step(pose=Pose(x=xs[3], z=2.5, yaw=90.0), action="m", moved=False))
+    walk = kitchen_walk().model_copy(update={**in_real_house, "start": steps[0].pose, "steps": steps,
+                                             "final_pose": Pose(x=xs[-1], z=2.5, yaw=90.0)})
+    traj = walk.save(tmp_path / "t.json")
     out = tmp_path / "map.png"
     result = runner.invoke(app, ["render", str(real_house_path), "-o", str(out), "--trajectory", str(traj),
                                  "--grid", "--size", "600", "--highlight", "Sofa|3|3=red"])

@@ -103,7 +103,7 @@ def write_fake_run(run_dir: Path, renders: tuple[Path, Path] | None, *, method: 
     for t in range(1, iterations + 1):
         gallery = []
         for k in range(scenes):
-            scene = f"train-{k}{text}" if text else f"train-{k}"
+            scene = f"train-{k}{text.replace('/', '')}"  # a level is a plain name (no folder part), hostile all the same
             rel = gallery_dir(run_dir, t, f"scene{k}")
             folder = run_dir / rel
             if renders is not None:

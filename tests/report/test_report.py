@@ -168,15 +168,17 @@ def test_partial_records_become_warnings(tmp_path, make_run):
     assert_self_contained(index.parent)
 
 
-def test_rewriting_a_report_drops_stale_files(tmp_path, make_run):
+def test_rewriting_a_report_deletes_no_file_of_yours(tmp_path, make_run):
+    """build_report writes its files and deletes nothing; adaptenv report removes its own earlier files (by its
+    manifest, tests/test_cli_outputs.py), never one of yours."""
     run = make_run(tmp_path / "run", iterations=2, scenes=1)
     index = build_report(run)
-    stale = index.parent / "img" / "stale.png"
-    stale.write_bytes(b"x")
+    mine = index.parent / "img" / "mine.png"
+    mine.write_bytes(b"x")
     keep = index.parent / "notes.txt"
     keep.write_text("mine", encoding="utf-8")
     build_report(run)
-    assert not stale.exists() and keep.exists()
+    assert mine.read_bytes() == b"x" and keep.read_text(encoding="utf-8") == "mine"
     with pytest.raises(AdaptenvError, match="cannot be written into the folder it reads"):
         build_report(run, run)
 

@@ -83,3 +83,16 @@ def test_the_cli_flag_works_before_or_after_the_command(tmp_path):
         res = runner.invoke(app, args)
         assert res.exit_code == 0, res.output
         assert "1 file valid" in res.output
+        # what was left out is counted, as evaluate and the other --houses readers count it
+        assert res.output.splitlines()[-1] == ("left out 3 objects resting on others, of 2 unknown asset ids "
+                                               "(--skip-unknown-assets; the agent never collides with them, and "
+                                               "targets are floor objects)")
+    doc = json.loads(runner.invoke(app, ["validate", str(path), "--json", "--skip-unknown-assets"]).output)
+    assert doc["valid"] and doc["left_out"] == {"objects": 3, "houses": 1, "asset_ids": sorted(set(CHILD_IDS[:2]))}
+    dataset = tmp_path / "objaverse.jsonl"
+    dataset.write_text(json.dumps(objaverse_house(floor=False)) + "\n" + json.dumps(objaverse_house(floor=False))
+                       + "\n", encoding="utf-8")
+    res = runner.invoke(app, ["validate", f"{dataset}:1:2", str(dataset), "--skip-unknown-assets"])
+    assert res.exit_code == 0 and res.output.splitlines()[-2:] == [
+        "3 houses valid", "left out 9 objects resting on others in 3 of 3 houses, of 2 unknown asset ids "
+        "(--skip-unknown-assets; the agent never collides with them, and targets are floor objects)"]

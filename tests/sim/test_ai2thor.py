@@ -89,7 +89,7 @@ def test_cli_convert_analyze_render_adapt(expert_run, tmp_path):
     res = runner.invoke(app, ["render", str(REAL_HOUSE), "-o", str(tmp_path / "ep.png"), "-t", str(traj_path)])
     assert res.exit_code == 0 and (tmp_path / "ep.png").stat().st_size > 10_000, res.output
     res = runner.invoke(app, ["adapt", str(REAL_HOUSE), "-o", str(tmp_path / "out"), "--trajectory", str(traj_path),
-                              "--steps", "1", "--json"])
+                              "--policy", "expert", "--steps", "1", "--json"])
     assert res.exit_code == 0, res.output
     summary = json.loads(res.output)
     assert summary["episode"]["target_type"] == "Sofa" and summary["episode"]["start"] == list(EPISODE.start)

@@ -103,7 +103,8 @@ def test_render_rgb_array(small_house):
 
 
 def test_the_simulator_does_not_import_the_renderer(small_house):
-    """Rendering sits above the simulator: a NavEnv renders through the renderer it is given."""
+    """Rendering sits above the simulator: a NavEnv renders through the renderer it is given. (The file helpers and
+    the limits on what is read belong to no layer: every layer may use them.)"""
     with pytest.raises(ConfigError, match="needs a renderer"):
         NavEnv(houses=[small_house], render_mode="rgb_array")
     import subprocess
@@ -112,7 +113,7 @@ def test_the_simulator_does_not_import_the_renderer(small_house):
     code = ("import sys, adaptenv.sim.env, adaptenv.sim.vector, adaptenv.sim.rollout; "
             "print(sorted(m for m in sys.modules if m.startswith('adaptenv.') and not m.startswith(('adaptenv.sim', "
             "'adaptenv.scene', 'adaptenv.errors', 'adaptenv.vocabulary', 'adaptenv._gym', 'adaptenv._numba_cache', "
-            "'adaptenv.configfile'))))")
+            "'adaptenv.configfile', 'adaptenv.files', 'adaptenv.limits'))))")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
     assert out.strip() == "[]", f"the simulator imported upper layers: {out}"
 

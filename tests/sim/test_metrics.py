@@ -57,3 +57,39 @@ def test_failure_and_timeout():
     # No end action at all (a timeout).
     m = episode_metrics(w, traj([(5.5, 2.0, 90.0)], ["r"], [True], final=(5.5, 2.0, 120.0)))
     assert not m.success
+
+
+def _walk():
+    """Eleven moves east from (3, 2) in the two-room house, then ``end``."""
+    poses = [(3.0 + 0.2 * k, 2.0, 90.0) for k in range(12)]
+    return traj(poses, ["m"] * 11 + ["end"], [True] * 12)
+
+
+def test_stored_metrics_are_recomputed_and_each_difference_named():
+    from adaptenv.sim.metrics import recompute_metrics
+
+    w = compile_world(H.two_rooms(1.0, objects=[H.Obj(H.LOW_TARGET, 7.0, 2.0)]))
+    t = _walk()
+    t.metrics = episode_metrics(w, t)
+    fresh, differs = recompute_metrics(w, t)
+    assert differs == [] and fresh == t.metrics  # a genuine record agrees with itself
+    t.metrics = t.metrics.model_copy(update={"spl": 5.0, "collisions": 3})
+    fresh, differs = recompute_metrics(w, t)
+    assert fresh.spl == episode_metrics(w, t).spl and fresh.collisions == 0
+    assert differs == [f"stored spl 5.00 differs from recomputed {fresh.spl:.2f}",
+                       "stored collisions 3 differs from recomputed 0"]
+
+
+def test_a_pose_that_does_not_follow_by_one_action_is_named():
+    from adaptenv.sim.trajectory import pose_jumps
+
+    t = _walk()
+    assert pose_jumps(t) is None
+    t.steps[5].pose = Pose(x=t.steps[5].pose.x + 1.0, z=2.0, yaw=90.0)
+    assert pose_jumps(t).startswith("steps[5].pose: the agent jumps 1.20 m from the pose before")
+    t = _walk()
+    t.steps[5].pose = Pose(x=t.steps[5].pose.x, z=2.0, yaw=150.0)
+    assert pose_jumps(t).startswith("steps[5].pose: the agent turns 60 degrees")
+    t = _walk()
+    t.steps[4].moved = False
+    assert pose_jumps(t) == "steps[4].moved: the move is marked blocked (false) but the agent moved 0.20 m"

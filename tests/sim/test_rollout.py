@@ -52,6 +52,20 @@ def test_cli_rollout_round_trips(tmp_path):
     t = Trajectory.load(out)
     assert t.metrics.success and t.target_type == "GarbageCan"
     assert Trajectory.model_validate(json.loads(out.read_text())) == t
+    # the expert solved it: its episode length is a number of steps, with no "n/a" beside it
+    [row] = [line for line in res.output.splitlines() if "expert_episode_length" in line]
+    assert str(t.metrics.expert_episode_length) in row and "steps" in row
+    assert "n/a" not in row and "fails" not in row
+
+
+def test_cli_rollout_says_na_only_where_the_expert_fails(tmp_path, monkeypatch):
+    monkeypatch.setattr("adaptenv.sim.rollout.expert_episode_length", lambda *a, **k: None)
+    house = save_house(H.corridor_house(), tmp_path / "house.json")
+    res = CliRunner().invoke(app, ["rollout", str(house), "--policy", "random", "--max-steps", "3",
+                                   "-o", str(tmp_path / "t.json")])
+    assert res.exit_code == 0, res.output
+    [row] = [line for line in res.output.splitlines() if "expert_episode_length" in line]
+    assert "n/a" in row and "the expert fails" in row
 
 
 def test_cli_rollout_errors(tmp_path):

@@ -312,7 +312,7 @@ def analyze_trajectory(traj: Trajectory, world: NavWorld) -> Analysis:
     if m is not None and n:
         if m.first_sight_step is None:
             add("late_sight", 1.0, "the agent never had the target in sight", [], list(traj.target_ids))
-        elif m.first_sight_step > 0.5 * n and m.first_sight_step > 20:
+        elif n > m.first_sight_step > 0.5 * n and m.first_sight_step > 20:  # a step of this episode
             add("late_sight", m.first_sight_step / n, f"the target was first seen at step {m.first_sight_step} of {n}",
                 [m.first_sight_step], list(traj.target_ids))
         if not m.success and traj.steps[-1].action == "end":

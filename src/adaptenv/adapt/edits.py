@@ -10,6 +10,12 @@ A door edit (``openness`` set) opens or shuts one interior door instead: ``objec
 id, ``openness_before`` and ``openness`` its openness before and after (0 shut, 1 open), and the move
 fields stay 0.
 
+An asset swap (``asset_id`` set) replaces one object's asset by another of the same type and asset split,
+keeping its place and heading (``y_after``: the new asset's centre height, so it stands where the old one
+stood); a material edit (``material`` set) gives a room's floor or walls (``surface``) another catalog
+material, ``object_id`` then being the room's id. Both keep the move fields at 0
+(:mod:`adaptenv.adapt.appearance` makes and validates them).
+
 An :class:`EditLog` round-trips through JSON, and :func:`apply_edit` / :func:`replay` rebuild an
 edited scene from its parent by replaying the *achieved* moves (never re-running placement).
 
@@ -27,6 +33,7 @@ from typing import Literal
 from pydantic import BaseModel, ConfigDict, Field
 
 from adaptenv.errors import AdaptenvError
+from adaptenv.files import atomic_write_text
 from adaptenv.scene.house import House, move_object, set_door_openness
 
 StopReason = Literal["reached", "blocked_by_object", "blocked_by_wall", "left_room", "rotation_blocked",
@@ -75,11 +82,33 @@ class Edit(BaseModel):
     """A door edit's requested openness (0 shut, 1 open); None for an object edit."""
     openness_before: float | None = None
     """A door edit's openness before it."""
+    asset_id: str | None = None
+    """An asset swap's new asset id (same type and split as ``asset_before``); None for any other edit."""
+    asset_before: str | None = None
+    """An asset swap's old asset id."""
+    y_after: float | None = None
+    """An asset swap's new centre height (m): the new asset rests where the old one did."""
+    material: str | None = None
+    """A material edit's new material (a catalog name); ``object_id`` is then a room id. None for any other edit."""
+    material_before: str | None = None
+    """A material edit's material before it."""
+    surface: Literal["floor", "wall"] | None = None
+    """A material edit's surface: the room's floor or its walls."""
 
     @property
     def is_door(self) -> bool:
         """Whether this edit opens or shuts a door (``object_id`` is the door's id)."""
         return self.openness is not None
+
+    @property
+    def is_swap(self) -> bool:
+        """Whether this edit swaps an object's asset (``object_id`` keeps its place)."""
+        return self.asset_id is not None
+
+    @property
+    def is_material(self) -> bool:
+        """Whether this edit changes a room's floor or wall material (``object_id`` is the room's id)."""
+        return self.material is not None
 
     @property
     def changed(self) -> bool:
@@ -88,6 +117,10 @@ class Edit(BaseModel):
             return False
         if self.is_door:
             return self.openness != self.openness_before
+        if self.is_swap:
+            return self.asset_id != self.asset_before
+        if self.is_material:
+            return self.material != self.material_before
         return self.achieved_dx != 0.0 or self.achieved_dz != 0.0 or _yaw_delta(self) != 0.0
 
 
@@ -123,8 +156,7 @@ class EditLog(BaseModel):
 
     def save(self, path: str | Path) -> Path:
         p = Path(path)
-        p.parent.mkdir(parents=True, exist_ok=True)
-        p.write_text(self.to_json(), encoding="utf-8")
+        atomic_write_text(p, self.to_json())
         return p
 
     @classmethod
@@ -154,7 +186,14 @@ def apply_edit(house: House, edit: Edit, *, in_place: bool = False) -> House:
             raise AdaptenvError(f"edit of door {edit.object_id!r}: the house has no door with this id; replay the "
                                 "edit on the house it was made on") from None
         return out
+    if edit.is_material:
+        return _apply_material(out, edit)
     for obj in out.objects:
+        if obj.id == edit.object_id and edit.is_swap:
+            obj.assetId = edit.asset_id
+            if edit.y_after is not None:
+                obj.position = obj.position.model_copy(update={"y": edit.y_after})
+            return out
         if obj.id == edit.object_id:
             dyaw = _yaw_delta(edit)
             if math.isfinite(dyaw):
@@ -162,6 +201,21 @@ def apply_edit(house: House, edit: Edit, *, in_place: bool = False) -> House:
             return out
     raise AdaptenvError(f"edit of {edit.object_id!r}: the house has no top-level object with this id; "
                         "replay the edit on the house it was made on")
+
+
+def _apply_material(house: House, edit: Edit) -> House:
+    """``house`` (changed in place) with a room's floor or walls given the edit's material."""
+    room = next((r for r in house.rooms if r.id == edit.object_id), None)
+    if room is None:
+        raise AdaptenvError(f"material edit of room {edit.object_id!r}: the house has no room with this id; replay "
+                            "the edit on the house it was made on")
+    if edit.surface == "floor":
+        room.floorMaterial = {"name": edit.material}
+    else:
+        for wall in house.walls:
+            if wall.roomId == room.id:
+                wall.material = {"name": edit.material}
+    return house
 
 
 def replay(house: House, log: EditLog | list[Edit]) -> House:
@@ -178,8 +232,12 @@ NET_TURN = 1.0
 
 
 def net_change(original: House, edited: House, object_id: str) -> tuple[float, float, bool]:
-    """(distance m, turn degrees, door toggled) from an object's (or door's) place in ``original`` to
-    ``edited``: what its edits add up to, so an object moved back where it stood has (0, 0, False)."""
+    """(distance m, turn degrees, door toggled, asset or material changed) from an object's (or door's, or
+    room's) state in ``original`` to ``edited``: what its edits add up to, so an object moved back where it
+    stood has (0, 0, False)."""
+    rooms = {r.id: r for r in original.rooms}
+    if object_id in rooms:
+        return 0.0, 0.0, _surfaces(original, object_id) != _surfaces(edited, object_id)
     doors = {d.id: d for d in original.doors}
     if object_id in doors:
         after = next((d for d in edited.doors if d.id == object_id), doors[object_id])
@@ -192,12 +250,27 @@ def net_change(original: House, edited: House, object_id: str) -> tuple[float, f
     except KeyError:
         return 0.0, 0.0, False
     turn = (b.yaw - a.yaw) % 360.0
-    return math.hypot(b.position.x - a.position.x, b.position.z - a.position.z), min(turn, 360.0 - turn), False
+    return (math.hypot(b.position.x - a.position.x, b.position.z - a.position.z), min(turn, 360.0 - turn),
+            a.assetId != b.assetId)
+
+
+def _surfaces(house: House, room_id: str) -> tuple[str, ...]:
+    """A room's floor material and its walls' materials (names), for comparing two versions of a house."""
+    room = next((r for r in house.rooms if r.id == room_id), None)
+    return (material_name(room, "floorMaterial"),
+            *sorted(material_name(w, "material") for w in house.walls if w.roomId == room_id))
+
+
+def material_name(part: object, key: str) -> str:
+    """The material name a room (``floorMaterial``) or wall (``material``) carries, '' when it has none."""
+    value = getattr(part, key, None) if part is not None else None
+    return str(value.get("name", "")) if isinstance(value, dict) else ""
 
 
 def edit_counts(edits: list[Edit], original: House, edited: House) -> dict:
     """How a person counts a run's edits: applied edits, distinct objects edited, objects changed on net
-    (moved at least NET_MOVE, turned at least NET_TURN, or a door opened or shut) and the net displacement
+    (moved at least NET_MOVE, turned at least NET_TURN, a door opened or shut, an asset swapped or a room's material
+    changed) and the net displacement
     (m, summed over the objects); ``objects`` gives each edited object's edits and net move, in edit order."""
     per: dict[str, int] = {}
     for e in edits:

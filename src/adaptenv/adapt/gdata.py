@@ -48,7 +48,7 @@ from adaptenv.adapt.validation import EditValidator
 from adaptenv.agents.policy import Policy, as_policy
 from adaptenv.agents.rollout import checking_episodes, draw_episode, rollout, run_in_worlds
 from adaptenv.errors import ConfigError
-from adaptenv.files import atomic_write_text
+from adaptenv.files import atomic_path, atomic_write_text, open_append
 from adaptenv.scene.house import House
 from adaptenv.sim.rollout import expert_policy, run_episode
 from adaptenv.sim.world import compile_world
@@ -231,21 +231,19 @@ class Dataset:
                 clean = False
         if clean and not flag:
             return
-        tmp = self.rows_path.with_name(f".{ROWS}.tmp-{os.getpid()}")
-        with gzip.open(tmp, "wt", encoding="utf-8") as f:
+        with atomic_path(self.rows_path) as tmp, gzip.open(tmp, "wt", encoding="utf-8") as f:
             f.writelines(json.dumps(r) + "\n" for r in rows)
-        os.replace(tmp, self.rows_path)
 
     def append(self, key: str, rows: list[dict[str, Any]], seconds: float) -> None:
         """Add one finished house: its rows as one gzip member, then its line in ``houses.jsonl``."""
         data = gzip.compress("".join(json.dumps(r) + "\n" for r in rows).encode("utf-8"), mtime=0)
-        with open(self.rows_path, "ab") as f:
+        with open_append(self.rows_path, binary=True) as f:
             f.write(data)
             f.flush()
             os.fsync(f.fileno())
         line = {"key": key, "rows": len(rows), "accepted": sum(r["accepted"] for r in rows),
                 "measured": sum(r["effect"] is not None for r in rows), "seconds": round(seconds, 2)}
-        with open(self.folder / HOUSES, "a", encoding="utf-8") as f:
+        with open_append(self.folder / HOUSES) as f:
             f.write(json.dumps(line) + "\n")
 
 

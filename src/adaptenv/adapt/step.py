@@ -18,6 +18,8 @@ from __future__ import annotations
 
 import json
 import math
+from collections import Counter
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
@@ -40,6 +42,7 @@ from adaptenv.adapt.plausibility import audit
 from adaptenv.adapt.validation import validate_scene, world_fits
 from adaptenv.agents.policy import ExpertPolicy, Policy, as_policy
 from adaptenv.agents.rollout import rollout
+from adaptenv.files import atomic_write_text
 from adaptenv.render.compare import render_before_after
 from adaptenv.render.topdown import save_render
 from adaptenv.scene.geometry import SceneGeometry
@@ -170,6 +173,51 @@ def summarize(result: AdaptResult, *, analyzer: Analyzer, seed: int | None = Non
     }
 
 
+def missed_edit_reasons(log: Mapping[str, Any]) -> Counter[str]:
+    """Why steps of a generation log (``edits.json``: a generator's ``steps``, or random edits' ``edits``) made no
+    edit, counted by reason (a step without one by its status)."""
+    if "steps" in log:
+        return Counter(s.get("reason") or s.get("status", "skipped") for s in log["steps"] if s.get("status") != "applied")
+    return Counter("; ".join(e.get("problems") or []) or "the move changed nothing" for e in log.get("edits", [])
+                   if not (e.get("accepted") and e.get("changed", True)))
+
+
+def edits_line(requested: int, applied: int, reasons: Mapping[str, int], *, scenes: int = 1, refused: int = 0,
+               no_failure: tuple[int, int] = (0, 0), stopped: Sequence[str] = ()) -> str:
+    """One line on what G made: ``applied`` of ``requested`` edits (in ``scenes`` scenes), and where fewer, why: the
+    steps' reasons with their counts, the scenes whose edited house the final validation ``refused``; and
+    ``no_failure`` = (scenes, episodes) in which F found no failure (G then made the house harder without one); why G
+    ``stopped`` early (LLM unavailable, budget used up), where it did."""
+    where = f" in {scenes} scene{'s' * (scenes != 1)}" if scenes != 1 else ""
+    line = f"G made {applied} of {requested} edit{'s' * (requested != 1)}{where}"
+    why = [f"{r} ({n} step{'s' * (n != 1)})" for r, n in sorted(reasons.items(), key=lambda kv: -kv[1])]
+    why += [f"G stopped early: {x}" for x in dict.fromkeys(x for x in stopped if x)]
+    if refused:
+        why.append(f"the final validation refused the edited house ({refused} scene{'s' * (refused != 1)}; its edits "
+                   "were dropped)")
+    if applied < requested and why:
+        line += "; fewer because: " + "; ".join(why)
+    elif applied < requested:
+        line += "; fewer because G stopped early"
+    n_scenes, n_episodes = no_failure
+    if n_scenes:
+        of = f" of {n_scenes} scene{'s' * (n_scenes != 1)}" if scenes != 1 else ""
+        line += (f"; F found no failure in {n_episodes} episode{'s' * (n_episodes != 1)}{of} (the agent succeeded: "
+                 "G made the house harder without a failure to aim at)")
+    return line
+
+
+def result_edits_line(result: AdaptResult, requested: int) -> str:
+    """:func:`edits_line` of one adaptation step asked for ``requested`` edits."""
+    log = {"steps": [st.model_dump(mode="json") for st in result.generation.steps]}
+    if result.diagnosis is not None:
+        no_failure = (1, len(result.diagnosis.episodes)) if not result.diagnosis.failures else (0, 0)
+    else:
+        no_failure = (1, 1) if result.before.metrics.success else (0, 0)
+    return edits_line(requested, result.edits_applied if result.valid else 0, missed_edit_reasons(log),
+                      refused=int(not result.valid), no_failure=no_failure, stopped=[result.generation.stopped])
+
+
 def house_types(*houses: House) -> dict[str, str | None]:
     """Object id -> object type over the objects, children and doors of ``houses``."""
     out: dict[str, str | None] = {}
@@ -238,7 +286,7 @@ def write_outputs(result: AdaptResult, summary: dict[str, Any], out: Path) -> di
 
 
 def _write_json(path: Path, doc: Any) -> Path:
-    path.write_text(json.dumps(doc, indent=1, default=_json_default), encoding="utf-8")
+    atomic_write_text(path, json.dumps(doc, indent=1, default=_json_default))
     return path
 
 

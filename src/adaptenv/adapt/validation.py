@@ -500,8 +500,9 @@ def validate_scene(house: House, *, episode_targets: list[str] | None = None, st
     orig_geometry = None
     if original is not None:
         orig_geometry = SceneGeometry.from_house(original, catalog)
-        before = {f.object_id: (f.center, f.yaw) for f in orig_geometry.floor_objects}
-        moved = {f.object_id for f in geometry.floor_objects if before.get(f.object_id) != (f.center, f.yaw)}
+        before = {f.object_id: (f.center, f.yaw, f.asset_id) for f in orig_geometry.floor_objects}
+        moved = {f.object_id for f in geometry.floor_objects
+                 if before.get(f.object_id) != (f.center, f.yaw, f.asset_id)}  # an asset swap counts as a move
     problems += _containment_problems(geometry, moved)
     if orig_geometry is not None:
         problems += _approach_problems(geometry, orig_geometry)
@@ -965,6 +966,11 @@ class EditValidator:
         self.log, self.plausible = log, plausible
         self.approach_before = {**self.approach_before, **{k: w for k, w in approach_before.items()
                                                            if k in self.approach_before}}
+
+    def adopt(self, house: House) -> None:
+        """Continue on ``house``, changed outside placement (an asset swap, :mod:`adaptenv.adapt.appearance`), keeping
+        the log and the reference scene's rules."""
+        self._rebuild(house)
 
     def _apply(self, i: int, proposal: Proposal) -> None:
         """Move object i to the proposal's pose in every cache (footprints, regions, context, raster, house)."""

@@ -22,6 +22,7 @@ from adaptenv.configfile import printable
 from adaptenv.errors import ConfigError, TrainingDiverged
 from adaptenv.limits import WIDTH_MAX
 from adaptenv.sim.egomap import CROP, MAP_CHANNELS
+from adaptenv.sim.perception import N_SHAPE
 from adaptenv.sim.spec import N_ACTIONS, N_RAYS, OBSERVATION_VERSION, n_classes, object_classes
 
 FORMAT = "adaptenv-policy/1"
@@ -143,7 +144,9 @@ def checked_net_config(raw: Any, path: Path) -> NetConfig:
                               f"{expected[name]}; {fix}")
         if name == "map_channels" and value not in (0, MAP_CHANNELS):
             raise ConfigError(f"{path}: net_config.map_channels is {value}, expected 0 or {MAP_CHANNELS}; {fix}")
-        if name not in expected and name != "map_channels" and not 1 <= value <= WIDTH_MAX:
+        if name == "shape_features" and value not in (0, N_SHAPE):
+            raise ConfigError(f"{path}: net_config.shape_features is {value}, expected 0 or {N_SHAPE}; {fix}")
+        if name not in expected and name not in ("map_channels", "shape_features") and not 1 <= value <= WIDTH_MAX:
             raise ConfigError(f"{path}: net_config.{name} is {value}, outside 1 .. {WIDTH_MAX}; {fix}")
     return NetConfig(**raw)
 

@@ -8,8 +8,9 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any
 
-PRECISIONS = ("fp32", "bf16")
-"""Arithmetics of DAgger's gradient steps: fp32 or bfloat16 autocast (forward in bf16, loss and weights in fp32)."""
+PRECISIONS = ("auto", "fp32", "bf16")
+"""Arithmetics of the gradient steps: fp32, bfloat16 autocast (forward in bf16, loss and weights in fp32), or auto
+(bf16 where the CPU computes it natively, fp32 elsewhere: agents.network.auto_precision)."""
 
 
 @dataclass
@@ -97,8 +98,15 @@ class TrainConfig:
     """With --teacher mix: share of episodes the explorer labels."""
     min_start_distance: float = 0.0
     """Episodes start this geodesic distance (m) or more from the target (0: any)."""
-    precision: str = "fp32"
-    """Arithmetic of the gradient steps: fp32, or bf16 (autocast; about 2.4x faster on CPUs with AVX512_BF16)."""
+    precision: str = "auto"
+    """Arithmetic of the gradient steps: auto (bf16 where the CPU computes it natively, else fp32), fp32, or bf16
+    (autocast; about 2.4x faster on CPUs with AVX512_BF16, about 8x slower on AVX2-only ones)."""
+    snapshots: int = 0
+    """Also keep the policy after each 1/snapshots of the budget as OUTPUT stem + -f<frames>.pt (learning curves on
+    validation houses; 0: none)."""
+    perception: str = "labels"
+    """What a fresh network perceives of the objects its rays hit: labels (their class) or shape (height and
+    footprint only, the recognising mode; docs/agent.md). An --init checkpoint keeps its own."""
 
 
 @dataclass
@@ -158,8 +166,9 @@ class PPOConfig:
     freeze_encoder: bool = False
     """Keep the observation encoder (scan, map, embeddings) at the warm start's weights and train the memory and heads:
     its features are computed once while collecting and the updates skip it (faster: docs/BENCHMARKS.md)."""
-    precision: str = "fp32"
-    """Arithmetic of the update's minibatch passes: fp32, or bf16 autocast (faster on CPUs with AVX512_BF16;
+    precision: str = "auto"
+    """Arithmetic of the update's minibatch passes: auto (bf16 where the CPU computes it natively, else fp32), fp32,
+    or bf16 autocast (faster on CPUs with AVX512_BF16, slower on others;
     collection and pi_0's anchor logits stay fp32; docs/BENCHMARKS.md)."""
     stop_rule: str = "threshold"
     """How end is chosen while collecting: 'threshold' (as the saved policy acts; RL trains the motions) or 'sample' (from the full softmax)."""
@@ -225,8 +234,8 @@ class FinetuneConfig:
     """Episodes of the final evaluation on the training houses (0: one per house)."""
     min_start_distance: float = 0.0
     """Training episodes start at least this geodesic distance (m) from the target where the house allows (0: uniform)."""
-    precision: str = "fp32"
-    """Arithmetic of the gradient steps, fp32 or bf16 (TrainConfig.precision, PPOConfig.precision)."""
+    precision: str = "auto"
+    """Arithmetic of the gradient steps, auto, fp32 or bf16 (TrainConfig.precision, PPOConfig.precision)."""
     max_episode_steps: int = 300
     """Episode cap while collecting (the evaluation's is 600)."""
     kl_coef: float = 0.0

@@ -36,6 +36,7 @@ from adaptenv.agents.policy import ExpertPolicy, Policy, policy_name
 from adaptenv.agents.registry import resolve_policy, weights_record
 from adaptenv.agents.runner import EpisodeResult, Recorded, run_episodes
 from adaptenv.agents.suites import EpisodeFloor, sample_floored
+from adaptenv.files import atomic_path, atomic_write_text
 from adaptenv.sim import task
 from adaptenv.sim.spec import ACTIONS, MAX_STEPS
 from adaptenv.sim.trajectory import Pose, Step, Trajectory
@@ -119,6 +120,24 @@ def per_house(results: Sequence[EpisodeResult]) -> list[dict[str, Any]]:
         rows.append({"house": house, "episodes": len(rs), **{k: s[k] for k in
                                                               ("success", "spl", "sel", "collisions", "steps")}})
     return rows
+
+
+def by_rooms(results: Sequence[EpisodeResult], rooms: Sequence[int]) -> list[dict[str, Any]]:
+    """Success and SPL by the number of rooms of the episode's house (``rooms[env]``), fewest rooms first: one row
+    per room count with its houses, episodes, success (Wilson 95% interval) and SPL."""
+    rows = []
+    for n in sorted({rooms[r.env] for r in results}):
+        rs = [r for r in results if rooms[r.env] == n]
+        s = summarize(rs)
+        rows.append({"rooms": n, "houses": len({r.env for r in rs}), "episodes": len(rs), "success": s["success"],
+                     "success_ci_low": s["success_ci95"][0], "success_ci_high": s["success_ci95"][1],
+                     "spl": s["spl"]})
+    return rows
+
+
+def by_rooms_line(rows: Sequence[dict[str, Any]]) -> str:
+    """The by-rooms breakdown in one line: ``success by rooms: 2: 0.97 (30 ep), 8: 0.75 (40 ep)``."""
+    return "success by rooms: " + ", ".join(f"{r['rooms']}: {r['success']:.2f} ({r['episodes']} ep)" for r in rows)
 
 
 def paired_difference(results: Sequence[EpisodeResult], base: Sequence[EpisodeResult],
@@ -220,7 +239,13 @@ def evaluate(policy: Policy | str, house_set: HouseSet, *, episodes: int = 200, 
     if with_expert:
         summary["expert_success"] = summarize(expert)["success"]
     summary["skipped_houses"] = {h.name: h.reason for h in getattr(house_set, "skipped", [])}
+    summary["by_rooms"] = by_rooms(results, room_counts(house_set))
     return EvalReport(name, house_set.spec, seed, summary, results, recordings)
+
+
+def room_counts(house_set: HouseSet) -> list[int]:
+    """The number of rooms of each house of a set, in its worlds' order."""
+    return [len(h.rooms) for h in house_set.houses]
 
 
 def floor_left_out(eps: Sequence[tuple[int, task.Episode]], n_houses: int) -> list[int]:
@@ -268,20 +293,24 @@ def failure_grid(report: EvalReport, house_set: HouseSet, *, render: Callable[..
 
 def write_report(report: EvalReport, house_set: HouseSet, out: Path, *, command: str = "",
                  render: Callable[..., Image.Image] | None = None) -> dict[str, Path]:
-    """Write summary.json, episodes.csv, houses.csv, failed trajectories and, given ``render`` (see
+    """Write summary.json, episodes.csv, houses.csv, rooms.csv (success by the number of rooms), failed trajectories and, given ``render`` (see
     :func:`failure_grid`; the CLI and the loop pass ``render_house``), failures.png to ``out``."""
     out.mkdir(parents=True, exist_ok=True)
-    paths = {"summary": out / "summary.json", "episodes": out / "episodes.csv", "houses": out / "houses.csv"}
+    paths = {"summary": out / "summary.json", "episodes": out / "episodes.csv", "houses": out / "houses.csv",
+             "rooms": out / "rooms.csv"}
+    rooms = report.summary.get("by_rooms") or by_rooms(report.results, room_counts(house_set))
     doc = {"policy": report.policy, "weights": weights_record(report.policy), "houses": report.houses,
-           "seed": report.seed, "command": command, **report.summary}
-    paths["summary"].write_text(json.dumps(doc, indent=1, default=float) + "\n", encoding="utf-8")
+           "seed": report.seed, "command": command, **report.summary, "by_rooms": rooms}
+    atomic_write_text(paths["summary"], json.dumps(doc, indent=1, default=float) + "\n")
     rows = [asdict(r) for r in report.results]
     _write_csv(paths["episodes"], rows)
     _write_csv(paths["houses"], per_house(report.results))
+    _write_csv(paths["rooms"], rooms)
     grid = failure_grid(report, house_set, render=render) if render is not None else None
     if grid is not None:
         paths["failures"] = out / "failures.png"
-        grid.save(paths["failures"])
+        with atomic_path(paths["failures"]) as tmp:
+            grid.save(tmp)
     tdir = out / "failed"
     for r in report.results:
         if not r.success and r.index in report.recordings:
@@ -292,9 +321,9 @@ def write_report(report: EvalReport, house_set: HouseSet, out: Path, *, command:
 
 def _write_csv(path: Path, rows: list[dict[str, Any]]) -> None:
     if not rows:
-        path.write_text("", encoding="utf-8")
+        atomic_write_text(path, "")
         return
-    with path.open("w", newline="", encoding="utf-8") as f:
+    with atomic_path(path) as tmp, tmp.open("w", newline="", encoding="utf-8") as f:
         w = csv.DictWriter(f, fieldnames=list(rows[0]))
         w.writeheader()
         w.writerows(rows)

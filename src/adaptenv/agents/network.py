@@ -18,6 +18,7 @@ import ctypes
 import functools
 import os
 import platform
+import sys
 from collections.abc import Iterator
 from contextlib import contextmanager
 from dataclasses import asdict, dataclass
@@ -27,6 +28,7 @@ import torch
 from torch import nn
 
 from adaptenv.sim.egomap import CROP, MAP_CHANNELS, EgoMap
+from adaptenv.sim.perception import CLASS_OBJECT, MAP_TARGET_MASK, N_SHAPE
 from adaptenv.sim.spec import END, N_ACTIONS, N_RAYS, n_classes
 
 
@@ -50,6 +52,14 @@ class NetConfig:
     """Pixels on a side of the map observation's windows."""
     map_dim: int = 128
     """Size of the map encoder's output."""
+    shape_features: int = 0
+    """Per-ray shape features read in place of object classes: 0 (``labels`` perception: told each object's class)
+    or ``perception.N_SHAPE`` (``shape``: the recognising mode, where every object reads as one class)."""
+
+    @property
+    def perception(self) -> str:
+        """``labels`` or ``shape`` (``adaptenv.sim.perception``)."""
+        return "shape" if self.shape_features else "labels"
 
     def resolved(self) -> NetConfig:
         """This config with ``n_classes`` filled in from the simulator spec."""
@@ -64,7 +74,8 @@ class NetConfig:
         return cls(hidden=settings.hidden, feature_dim=settings.feature_dim,  # type: ignore[attr-defined]
                    conv_channels=settings.conv_channels,  # type: ignore[attr-defined]
                    map_channels=MAP_CHANNELS if getattr(settings, "map", False) else 0,
-                   map_dim=settings.map_dim)  # type: ignore[attr-defined]
+                   map_dim=settings.map_dim,  # type: ignore[attr-defined]
+                   shape_features=N_SHAPE if getattr(settings, "perception", "labels") == "shape" else 0)
 
 
 def obs_to_tensors(obs: dict[str, np.ndarray], device: torch.device | str = "cpu") -> dict[str, torch.Tensor]:
@@ -78,6 +89,8 @@ def obs_to_tensors(obs: dict[str, np.ndarray], device: torch.device | str = "cpu
     }
     if "map" in obs:
         out["map"] = torch.as_tensor(np.asarray(obs["map"], dtype=np.uint8), device=device)
+    if "shape" in obs:
+        out["shape"] = torch.as_tensor(np.asarray(obs["shape"], dtype=np.float32), device=device)
     return out
 
 
@@ -110,8 +123,17 @@ def unpack_map(packed: torch.Tensor, channels: int, dtype: torch.dtype = torch.f
     return torch.nn.functional.embedding(packed.int(), table).permute(0, 3, 1, 2)
 
 
+RAY_TARGET_DIM = 8
+"""Size of the target embedding every ray reads in the recognising mode (``NetConfig.shape_features`` > 0)."""
+
+
 class NavNet(nn.Module):
     """Recurrent ObjectNav policy network over the ``adaptenv.sim.spec`` observation."""
+
+    @staticmethod
+    def _shape_channels(cfg: NetConfig) -> int:
+        """Extra input channels of each ray in the recognising mode: its shape and the target's embedding."""
+        return cfg.shape_features + RAY_TARGET_DIM if cfg.shape_features else 0
 
     def __init__(self, config: NetConfig | None = None):
         super().__init__()
@@ -119,8 +141,11 @@ class NavNet(nn.Module):
         self.config = cfg
         c = cfg.conv_channels
         self.class_embed = nn.Embedding(cfg.n_classes, cfg.class_dim)
+        # the recognising mode: every ray also reads the target type, so the first convolution can match each
+        # ray's shape against the type asked for (the labelled mode gets that match as the is-target flag)
+        self.ray_target_embed = nn.Embedding(cfg.n_classes, RAY_TARGET_DIM) if cfg.shape_features else None
         self.conv = nn.Sequential(
-            nn.Conv1d(cfg.class_dim + 2, c, kernel_size=5, padding=2), nn.ReLU(),
+            nn.Conv1d(cfg.class_dim + 2 + self._shape_channels(cfg), c, kernel_size=5, padding=2), nn.ReLU(),
             nn.Conv1d(c, c, kernel_size=5, stride=2, padding=2), nn.ReLU(),
         )
         conv_out = c * ((cfg.n_rays + 1) // 2)
@@ -150,8 +175,18 @@ class NavNet(nn.Module):
         depth = depth.reshape(-1, depth.shape[-1])
         sem = sem.reshape(-1, sem.shape[-1])
         target = obs["target"].reshape(-1)
-        is_target = (sem == target[:, None]).float()
-        rays = torch.cat([self.class_embed(sem), depth[..., None], is_target[..., None]], dim=-1)
+        if self.config.shape_features:  # the recognising mode: no class reaches the network, only shapes
+            if "shape" not in obs:
+                raise ValueError("this network perceives shapes: pass observations with the 'shape' key (BatchSim("
+                                 "shapes=True), or the Gym env's perception='shape')")
+            sem = sem.clamp(max=CLASS_OBJECT)
+            is_target = torch.zeros_like(depth)
+            extra = [obs["shape"].reshape(-1, depth.shape[-1], self.config.shape_features).float(),
+                     self.ray_target_embed(target)[:, None, :].expand(-1, depth.shape[-1], -1)]
+        else:
+            is_target = (sem == target[:, None]).float()
+            extra = []
+        rays = torch.cat([self.class_embed(sem), depth[..., None], is_target[..., None], *extra], dim=-1)
         scan = self.conv(rays.transpose(1, 2)).flatten(1)
         parts = [scan, self.target_embed(target), self.action_embed(obs["prev_action"].reshape(-1)),
                  self.collided_embed(obs["collided"].reshape(-1).clamp(0, 1))]
@@ -159,8 +194,19 @@ class NavNet(nn.Module):
             if "map" not in obs:
                 raise ValueError("this network reads the map memory: pass observations through MapObserver "
                                  "(adaptenv.agents.network) or run it as a NeuralPolicy")
-            parts.append(self.map_encoder(self._map_input(obs["map"], len(lead))))
+            parts.append(self.map_encoder(self._map_input(self._sensed_map(obs["map"], len(lead)), len(lead))))
         return self.features(torch.cat(parts, dim=-1)).reshape(*lead, -1)
+
+    def _sensed_map(self, m: torch.Tensor, lead_dims: int) -> torch.Tensor:
+        """The map as this network may read it: in the recognising mode without the target channels (packed crops
+        masked, the Gym env's unpacked channels zeroed)."""
+        if not self.config.shape_features:
+            return m
+        if m.dim() == lead_dims + 2:
+            return m & MAP_TARGET_MASK
+        keep = torch.ones(m.shape[-3], dtype=m.dtype, device=m.device)
+        keep[[2, 6]] = 0
+        return m * keep[:, None, None]
 
     def _map_input(self, m: torch.Tensor, lead_dims: int) -> torch.Tensor:
         """Encoder input (N, C, S, S) from packed crops (lead..., S, S) or the Gym env's unpacked (lead..., C, S, S)."""
@@ -173,7 +219,7 @@ class NavNet(nn.Module):
 
     def encoder_modules(self) -> list[nn.Module]:
         """The modules :meth:`encode` runs (scan, map and embeddings): the observation encoder, without the memory and head."""
-        return [m for m in (self.class_embed, self.conv, self.target_embed, self.action_embed, self.collided_embed,
+        return [m for m in (self.class_embed, self.ray_target_embed, self.conv, self.target_embed, self.action_embed, self.collided_embed,
                             self.map_encoder, self.features) if m is not None]
 
     def initial_state(self, batch: int) -> torch.Tensor:
@@ -302,6 +348,11 @@ class NeuralPolicy:
             self._slots[i] = np.random.default_rng([self.seed, int(self._context.seeds[i])])
         return np.array([g.random() for g in self._slots])
 
+    @property
+    def perception(self) -> str:
+        """What the network perceives (``labels`` or ``shape``): runners give a ``shape`` policy that observation."""
+        return self.net.config.perception
+
     @torch.no_grad()
     def act(self, obs: dict[str, np.ndarray], state: torch.Tensor, done: np.ndarray
             ) -> tuple[np.ndarray, torch.Tensor]:
@@ -334,6 +385,66 @@ def configure_torch(threads: int | None = None) -> int:
     torch.set_num_threads(n)
     keep_freed_memory()
     return n
+
+
+BF16_FLAGS = {"x86_64": frozenset({"avx512_bf16", "amx_bf16"}), "aarch64": frozenset({"bf16"})}
+"""Per machine (``platform.machine()``, lower case; amd64 and arm64 count as x86_64 and aarch64), the
+/proc/cpuinfo flags of which any one means the CPU computes bfloat16 natively."""
+BF16_SLOWDOWN = "about 8 times slower per gradient step than fp32 on an AVX2-only CPU"
+"""What bf16 autocast costs without native bf16 (measured: 95-118 against 780-980 DAgger frames/s of the
+map recipe on a 2-core AVX2 EPYC)."""
+
+
+def native_bf16(cpuinfo: str | None = None, machine: str | None = None) -> bool:
+    """Whether the CPU computes bf16 natively, from the flags (x86) or Features (aarch64) lines of ``cpuinfo``
+    (default: this machine's /proc/cpuinfo; none readable, or another architecture: False)."""
+    arch = (machine or platform.machine()).lower()
+    arch = {"amd64": "x86_64", "arm64": "aarch64"}.get(arch, arch)
+    if cpuinfo is None:
+        try:
+            with open("/proc/cpuinfo", encoding="utf-8", errors="replace") as f:
+                cpuinfo = f.read()
+        except OSError:
+            return False
+    words = {w for line in cpuinfo.splitlines() if line.split(":", 1)[0].strip().lower() in ("flags", "features")
+             for w in line.split(":", 1)[-1].split()}
+    return bool(BF16_FLAGS.get(arch, frozenset()) & words)
+
+
+@functools.cache
+def auto_precision() -> str:
+    """What precision ``auto`` means on this machine: bf16 where the CPU computes it natively, else fp32."""
+    return "bf16" if native_bf16() else "fp32"
+
+
+_warned_slow_bf16: list[str] = []
+"""Where the bf16 warning was given in this process (it is given once, whichever option asked for bf16)."""
+
+
+def _warn_slow_bf16(where: str) -> None:
+    if _warned_slow_bf16:
+        return
+    _warned_slow_bf16.append(where)
+    print(f"adaptenv: warning: {where} bf16 on a CPU without native bf16 (no avx512_bf16 or amx_bf16 flag): "
+          f"{BF16_SLOWDOWN}; pass {where} auto or fp32", file=sys.stderr, flush=True)
+
+
+def same_arithmetic(a: object, b: object) -> bool:
+    """Whether two precision settings compute alike on this machine (``auto`` as :func:`auto_precision`): a run
+    saved with fp32 resumes under ``auto`` where auto means fp32."""
+    def used(p: object) -> object:
+        return auto_precision() if p == "auto" else p
+    return used(a) == used(b)
+
+
+def resolve_precision(precision: str, where: str = "--precision") -> str:
+    """The arithmetic a run uses for ``precision``: ``auto`` is :func:`auto_precision`; an explicit bf16 on a CPU
+    without native bf16 stays bf16, with one warning line on stderr (once per process) naming the cost."""
+    if precision == "auto":
+        return auto_precision()
+    if precision == "bf16" and auto_precision() != "bf16":
+        _warn_slow_bf16(where)
+    return precision
 
 
 _M_TRIM_THRESHOLD, _M_TOP_PAD, _M_MMAP_THRESHOLD = -1, -2, -3

@@ -73,6 +73,7 @@ from adaptenv.agents.network import (
     count_parameters,
     obs_to_tensors,
     observe,
+    resolve_precision,
     torch_threads,
 )
 from adaptenv.agents.registry import init_checkpoint
@@ -87,6 +88,7 @@ from adaptenv.agents.stop import calibrate_end_threshold
 from adaptenv.agents.suites import EpisodeFloor
 from adaptenv.agents.teachers import TEACHERS, make_teacher
 from adaptenv.errors import ConfigError, TrainingDiverged
+from adaptenv.files import atomic_write_text
 from adaptenv.limits import check_numbers
 from adaptenv.progress import ProgressBar
 from adaptenv.sim.egomap import EgoMap
@@ -298,9 +300,10 @@ def train_ppo(cfg: PPOConfig, *, worlds: Sequence[Any] | None = None, init_net: 
 def _train_ppo(cfg: PPOConfig, worlds: Sequence[Any] | None, init_net: NavNet | None,
                learner: dict[str, Any] | None, command: str, threads: int) -> TrainResult:
     run_dir = default_ppo_run_dir(cfg)
+    precision = resolve_precision(cfg.precision)  # what "auto" means on this CPU; the card records it
     if run_dir:
         run_dir.mkdir(parents=True, exist_ok=True)
-        (run_dir / "config.json").write_text(json.dumps(asdict(cfg), indent=1) + "\n", encoding="utf-8")
+        atomic_write_text(run_dir / "config.json", json.dumps(asdict(cfg), indent=1) + "\n")
     torch.manual_seed(cfg.seed)
     rng = np.random.default_rng(cfg.seed)
     worlds = list(worlds) if worlds is not None else load_house_set(cfg.houses).worlds
@@ -322,6 +325,8 @@ def _train_ppo(cfg: PPOConfig, worlds: Sequence[Any] | None, init_net: NavNet | 
     observer = MapObserver.of(net, B)
     if observer is not None:
         obs_buf["map"] = np.zeros((T, B, net.config.map_crop, net.config.map_crop), np.uint8)
+    if net.config.shape_features:
+        obs_buf["shape"] = np.zeros((T, B, net.config.n_rays, net.config.shape_features), np.float32)
     first_buf = np.zeros((T, B), np.bool_)
     actions_buf = np.zeros((T, B), np.int64)
     logprobs_buf = np.zeros((T, B), np.float32)
@@ -332,7 +337,7 @@ def _train_ppo(cfg: PPOConfig, worlds: Sequence[Any] | None, init_net: NavNet | 
     feats_buf = torch.zeros(T, B, net.config.feature_dim) if freeze else None
 
     sampler = EpisodeSampler(worlds, min_distance=cfg.min_start_distance)
-    sim = BatchSim(worlds, max_steps=cfg.max_episode_steps)
+    sim = BatchSim(worlds, max_steps=cfg.max_episode_steps, shapes=bool(net.config.shape_features))
     teacher = (make_teacher(cfg.bc_teacher, sim, seed=cfg.seed, emap=observer.emap if observer else None)
                if cfg.bc_coef > 0 else None)
     obs, _ = sim.reset(*sampler.draw(rng, B))
@@ -444,7 +449,7 @@ def _train_ppo(cfg: PPOConfig, worlds: Sequence[Any] | None, init_net: NavNet | 
                 chunk, env = mb // B, mb % B
                 tt = chunk[None, :] * L + np.arange(L)[:, None]  # (L, mb)
                 idx = (torch.from_numpy(tt), torch.from_numpy(env)[None, :])
-                with torch.autocast("cpu", dtype=torch.bfloat16, enabled=cfg.precision == "bf16"):
+                with torch.autocast("cpu", dtype=torch.bfloat16, enabled=precision == "bf16"):
                     if feats_buf is None:
                         logits, new_value, _ = agent({k: v[idx] for k, v in b_obs.items()}, b_first[idx],
                                                      h0_buf[chunk, env], detach_value=warmup)
@@ -536,7 +541,7 @@ def _train_ppo(cfg: PPOConfig, worlds: Sequence[Any] | None, init_net: NavNet | 
         "updates": updates, "wall_time_s": round(wall, 1), "seed": cfg.seed, "init": cfg.init,
         "parameters": count_parameters(net), "final_train_success": final["success"],
         "final_train_success_ci95": final["success_ci95"], "final_train_spl": final["spl"],
-        "final_eval_episodes": final["episodes"], "end_threshold": end_threshold,
+        "final_eval_episodes": final["episodes"], "end_threshold": end_threshold, "precision": precision,
         "end_threshold_calibration": calibration.card() if calibration else None,
         "torch_threads": threads, "cpus": os.cpu_count(), "config": card_config(cfg, net),
         "net_config": asdict(net.config)}
@@ -545,6 +550,6 @@ def _train_ppo(cfg: PPOConfig, worlds: Sequence[Any] | None, init_net: NavNet | 
     logger.close()
     if cfg.output:
         save_checkpoint(cfg.output, net, {k: v for k, v in card.items() if k != "config"})
-        Path(cfg.output).with_suffix(".json").write_text(json.dumps(card, indent=1) + "\n", encoding="utf-8")
+        atomic_write_text(Path(cfg.output).with_suffix(".json"), json.dumps(card, indent=1) + "\n")
     return TrainResult(net, card, logger.rows,
                        learner=copy.deepcopy({"value": agent.value.state_dict(), "optimizer": optimizer.state_dict()}))

@@ -6,6 +6,7 @@ The precision check, the metrics logger and the result record; ``train`` re-expo
 from __future__ import annotations
 
 import csv
+import io
 from collections.abc import Sequence
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
@@ -15,10 +16,11 @@ from adaptenv.agents.checkpoint import non_finite_weight
 from adaptenv.agents.config import PRECISIONS, PPOConfig, TrainConfig
 from adaptenv.agents.network import END_THRESHOLD, NavNet, NeuralPolicy
 from adaptenv.errors import ConfigError, TrainingDiverged
+from adaptenv.files import atomic_write_text, open_append
 
 
 def check_precision(precision: str, where: str) -> None:
-    """Raise a ConfigError unless ``precision`` names an arithmetic of the gradient steps (fp32 or bf16)."""
+    """Raise a ConfigError unless ``precision`` names an arithmetic of the gradient steps (auto, fp32 or bf16)."""
     if precision not in PRECISIONS:
         raise ConfigError(f"{where} must be one of {', '.join(PRECISIONS)}, got {precision!r}")
 
@@ -51,8 +53,10 @@ LOG_KEYS = ("iteration", "frames", "updates", "wall_time", "charts/beta", "chart
 class RunLogger:
     """Metrics to ``metrics.csv`` always and to TensorBoard when it is importable."""
 
-    def __init__(self, run_dir: Path | None, tensorboard: bool, keys: Sequence[str] = LOG_KEYS):
+    def __init__(self, run_dir: Path | None, tensorboard: bool, keys: Sequence[str] = LOG_KEYS, fresh: bool = True):
         self.keys = tuple(keys)
+        self.fresh = fresh
+        """A new run: its first row replaces any metrics.csv there (a resumed run appends to its own)."""
         self.rows: list[dict[str, Any]] = []
         self.csv_path = run_dir / "metrics.csv" if run_dir else None
         self.writer = None
@@ -68,12 +72,21 @@ class RunLogger:
     def log(self, row: dict[str, Any]) -> None:
         self.rows.append(row)
         if self.csv_path is not None:
-            new = not self.csv_path.exists()
-            with self.csv_path.open("a", newline="", encoding="utf-8") as f:
-                w = csv.DictWriter(f, fieldnames=list(self.keys), extrasaction="ignore")
-                if new:
-                    w.writeheader()
-                w.writerow({k: row.get(k, "") for k in self.keys})
+            values = {k: row.get(k, "") for k in self.keys}
+            if self.fresh:  # the first row of a new run: a file of its own, never another's extended
+                text = io.StringIO(newline="")
+                w = csv.DictWriter(text, fieldnames=list(self.keys), extrasaction="ignore")
+                w.writeheader()
+                w.writerow(values)
+                atomic_write_text(self.csv_path, text.getvalue())
+                self.fresh = False
+            else:
+                new = not self.csv_path.exists()
+                with open_append(self.csv_path) as f:
+                    w = csv.DictWriter(f, fieldnames=list(self.keys), extrasaction="ignore")
+                    if new:
+                        w.writeheader()
+                    w.writerow(values)
         if self.writer is not None:
             for k, v in row.items():
                 if "/" in k and v is not None and v != "":

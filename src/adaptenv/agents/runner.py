@@ -71,7 +71,7 @@ def run_episodes(worlds: Sequence[NavWorld], episodes: Sequence[tuple[int, task.
     if n == 0:
         return [], {}
     b = min(batch, n)
-    sim = BatchSim(worlds, max_steps=max_steps)
+    sim = BatchSim(worlds, max_steps=max_steps, shapes=getattr(policy, "perception", "labels") == "shape")
     first = [episodes[i] for i in range(b)]
     obs, _ = sim.reset([ep for _, ep in first], [e for e, _ in first])
     ctx = PolicyContext.empty(sim.worlds, b)

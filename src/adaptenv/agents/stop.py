@@ -56,7 +56,7 @@ def stop_outcomes(net: Any, worlds: Sequence[Any], episodes: Sequence[tuple[int,
     net.eval()
     for lo in range(0, len(episodes), batch):
         chunk = list(episodes[lo: lo + batch])
-        sim = BatchSim(worlds, max_steps=max_steps)
+        sim = BatchSim(worlds, max_steps=max_steps, shapes=bool(net.config.shape_features))
         obs, _ = sim.reset([ep for _, ep in chunk], [e for e, _ in chunk])
         n = len(chunk)
         h = net.initial_state(n)

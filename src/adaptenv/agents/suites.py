@@ -93,6 +93,10 @@ SUITES: dict[str, SuiteSpec] = {
                        "5-8 room houses joined only by doors (a tree of rooms), starts >= 6 m"),
     "closed": SuiteSpec("preset:suite-closed", EpisodeFloor(min_geodesic=8.0), "1",
                         "6-9 room houses with 40% of interior doors shut, starts >= 8 m from the target"),
+    "unseen-assets": SuiteSpec("preset:suite-unseen-assets", LONG, "1",
+                               "2-6 room houses furnished with test-split assets (shapes never trained on), starts >= 6 m"),
+    "tail": SuiteSpec("preset:suite-tail", EpisodeFloor(), "1",
+                      "200 unseen houses of the training distribution, any start (for the hardest-10% tail)"),
     # Validation twins of long-unseen, rearranged, far, clutter and closed: settings are chosen here, never on the suites above.
     "val-long": SuiteSpec("preset:validation", LONG, "1", "validation twin of long-unseen: new houses, starts >= 6 m"),
     "val-rearranged": SuiteSpec("preset:validation-rearranged", LONG, "1",
@@ -101,6 +105,8 @@ SUITES: dict[str, SuiteSpec] = {
                          "validation twin of far: 7-10 room houses, starts >= 10 m"),
     "val-clutter": SuiteSpec("preset:validation-clutter", EpisodeFloor(min_geodesic=4.0), "1",
                              "validation twin of clutter: cluttered 3-6 room houses, starts >= 4 m"),
+    "val-unseen-assets": SuiteSpec("preset:validation-unseen-assets", LONG, "1",
+                                   "validation twin of unseen-assets: val-split assets, starts >= 6 m"),
     "val-closed": SuiteSpec("preset:validation-closed", EpisodeFloor(min_geodesic=8.0), "1",
                             "validation twin of closed: 6-9 room houses with shut doors, starts >= 8 m"),
 }

@@ -159,7 +159,7 @@ def label_agreement(net: Any, worlds: list, beta: float, *, teacher: str = "expe
 
     rng = np.random.default_rng(seed)
     sampler = EpisodeSampler(worlds)
-    sim = BatchSim(worlds, max_steps=300)
+    sim = BatchSim(worlds, max_steps=300, shapes=bool(net.config.shape_features))
     observer = MapObserver.of(net, envs)
     labeller = make_teacher(teacher, sim, seed=seed, emap=observer.emap if observer else None)
     obs, _ = sim.reset(*sampler.draw(rng, envs))

@@ -78,6 +78,8 @@ from adaptenv.agents.network import (
     count_parameters,
     obs_to_tensors,
     observe,
+    resolve_precision,
+    same_arithmetic,
     torch_threads,
 )
 from adaptenv.agents.ppo import train_ppo
@@ -93,14 +95,22 @@ from adaptenv.agents.runlog import (
 from adaptenv.agents.stop import calibrate_end_threshold
 from adaptenv.agents.teachers import make_teacher
 from adaptenv.errors import ConfigError, TrainingDiverged
+from adaptenv.files import atomic_write_text
 from adaptenv.limits import check_numbers
 from adaptenv.progress import ProgressBar
 from adaptenv.scene.house import House
+from adaptenv.sim.perception import check_perception
 from adaptenv.sim.spec import END, N_RAYS
 from adaptenv.sim.vector import BatchSim, EpisodeSampler
 from adaptenv.sim.world import NavWorld
 
 __all__ = ["TrainConfig", "FinetuneConfig", "field_docs", "train", "finetune", "finetune_policy"]
+
+
+def snapshot_path(output: str | Path, frames: int) -> Path:
+    """Where ``--snapshots`` keeps the policy after ``frames`` frames: ``OUTPUT`` stem + ``-f<frames>.pt``."""
+    p = Path(output)
+    return p.with_name(f"{p.stem}-f{frames:09d}.pt")
 
 
 def check_config(cfg: TrainConfig) -> None:
@@ -113,6 +123,7 @@ def check_config(cfg: TrainConfig) -> None:
         raise ConfigError(f"--buffer-frames ({cfg.buffer_frames}) must hold at least one block of "
                           f"rollout_steps * num_envs = {cfg.rollout_steps * cfg.num_envs} frames")
     check_precision(cfg.precision, "--precision")
+    check_perception(cfg.perception)
 
 
 def sequence_logits(net: NavNet, obs: dict[str, torch.Tensor], first: torch.Tensor, h0: torch.Tensor,
@@ -136,7 +147,7 @@ class SequenceBuffer:
     """FIFO ring of collected blocks, each (T, B) steps, sampled as (chunk_len, N) sequences."""
 
     def __init__(self, capacity_blocks: int, steps: int, envs: int, chunk_len: int, hidden: int, n_rays: int,
-                 map_crop: int = 0):
+                 map_crop: int = 0, shape_features: int = 0):
         k, t, b = capacity_blocks, steps, envs
         self.capacity, self.steps, self.envs, self.chunk_len = k, t, b, chunk_len
         self.depth = np.zeros((k, t, b, n_rays), np.float16)
@@ -151,6 +162,9 @@ class SequenceBuffer:
         if map_crop:  # packed map crops (1 byte a pixel) for a map-reading network
             self.map = np.zeros((k, t, b, map_crop, map_crop), np.uint8)
             self.names += ("map",)
+        if shape_features:  # the recognising mode's per-ray shapes (metres, half precision)
+            self.shape = np.zeros((k, t, b, n_rays, shape_features), np.float16)
+            self.names += ("shape",)
         self.size = 0
         self.cursor = 0
 
@@ -175,6 +189,8 @@ class SequenceBuffer:
         t = chk[None, :] * self.chunk_len + np.arange(self.chunk_len)[:, None]
         idx = (blk[None, :], t, env[None, :])
         extra = {"map": torch.from_numpy(self.map[idx])} if "map" in self.names else {}
+        if "shape" in self.names:
+            extra["shape"] = torch.from_numpy(self.shape[idx].astype(np.float32))
         return {**extra,
             "depth": torch.from_numpy(self.depth[idx].astype(np.float32)),
             "semantic": torch.from_numpy(self.semantic[idx].astype(np.int64)),
@@ -226,7 +242,10 @@ def load_resume_state(cfg: TrainConfig, state_path: Path | None) -> dict[str, An
     if not isinstance(saved, dict) or not set(STATE_KEYS) <= set(saved) or not isinstance(saved["config"], dict):
         raise ConfigError(f"{state_path}: not a resume state adaptenv train wrote (missing fields); start the run "
                           "again without --resume, in a new --run-dir")
-    changed = changed_settings({**asdict(TrainConfig()), **saved["config"]}, asdict(cfg), RESUME_MAY_CHANGE)
+    old = {**asdict(TrainConfig()), **saved["config"]}
+    if same_arithmetic(old["precision"], cfg.precision):  # fp32 saved, auto now: the same steps on this CPU
+        old["precision"] = cfg.precision
+    changed = changed_settings(old, asdict(cfg), RESUME_MAY_CHANGE)
     if changed:
         raise ConfigError(f"--resume: {state_path} was saved with other settings: {', '.join(changed)}; pass the "
                           "interrupted run's values (its config.json) or start a new --run-dir")
@@ -274,6 +293,7 @@ def _train(cfg: TrainConfig, worlds: Sequence[NavWorld] | None, init_net: NavNet
     run_dir = default_run_dir(cfg)
     state_path = run_dir / "state.pt" if run_dir else None
     saved = load_resume_state(cfg, state_path) if cfg.resume else None  # checked before anything is written
+    precision = resolve_precision(cfg.precision)  # what "auto" means on this CPU; the card records it
 
     # seeding: one root seed for torch, the data generator and the episode sampler
     torch.manual_seed(cfg.seed)
@@ -291,14 +311,14 @@ def _train(cfg: TrainConfig, worlds: Sequence[NavWorld] | None, init_net: NavNet
         net = NavNet(NetConfig.of(cfg))
     if run_dir:  # the houses and the --init checkpoint loaded: the run starts
         run_dir.mkdir(parents=True, exist_ok=True)
-        (run_dir / "config.json").write_text(json.dumps(asdict(cfg), indent=1) + "\n", encoding="utf-8")
+        atomic_write_text(run_dir / "config.json", json.dumps(asdict(cfg), indent=1) + "\n")
     hidden = net.config.hidden
     optimizer = torch.optim.Adam(net.parameters(), lr=cfg.learning_rate, eps=1e-5)
     class_weight = torch.ones(net.config.n_actions)
     class_weight[END] = cfg.end_weight
     n_blocks = max(1, cfg.buffer_frames // (cfg.rollout_steps * cfg.num_envs))
     buffer = SequenceBuffer(n_blocks, cfg.rollout_steps, cfg.num_envs, cfg.chunk_len, hidden, N_RAYS,
-                            net.config.map_crop if net.config.map_channels else 0)
+                            net.config.map_crop if net.config.map_channels else 0, net.config.shape_features)
     frames, updates, iteration, wall_before = 0, 0, 0, 0.0
     learn_rng = np.random.default_rng([cfg.seed, 1])  # minibatches (its own stream: the learner may run in a thread)
     if saved is not None:
@@ -343,6 +363,8 @@ def _train(cfg: TrainConfig, worlds: Sequence[NavWorld] | None, init_net: NavNet
                  "label": np.empty((T, B), np.uint8), "h0": np.empty((T // L, B, hidden), np.float16)}
         if observer is not None:
             block["map"] = np.empty((T, B, *buffer.map.shape[-2:]), np.uint8)
+        if net.config.shape_features:
+            block["shape"] = np.empty((T, B, *buffer.shape.shape[-2:]), np.float16)
         ep_success, ep_length = [], []
         for t in range(T):
             if t % L == 0:
@@ -378,7 +400,7 @@ def _train(cfg: TrainConfig, worlds: Sequence[NavWorld] | None, init_net: NavNet
             group["lr"] = lr
         for _ in range(cfg.updates_per_iter):
             batch = buffer.sample(cfg.batch_chunks, learn_rng)
-            logits = sequence_logits(net, batch, batch["first"], batch["h0"], cfg.precision)
+            logits = sequence_logits(net, batch, batch["first"], batch["h0"], precision)
             loss = F.cross_entropy(logits.reshape(-1, logits.shape[-1]), batch["label"].reshape(-1),
                                    weight=class_weight)
             optimizer.zero_grad()
@@ -394,7 +416,8 @@ def _train(cfg: TrainConfig, worlds: Sequence[NavWorld] | None, init_net: NavNet
 
     sampler = EpisodeSampler(worlds, min_distance=cfg.min_start_distance)
     # with overlap the learner thread takes the second core, so the simulator kernel runs serially
-    sim = BatchSim(worlds, max_steps=cfg.max_episode_steps, threads=1 if cfg.overlap else None)
+    sim = BatchSim(worlds, max_steps=cfg.max_episode_steps, threads=1 if cfg.overlap else None,
+                   shapes=bool(net.config.shape_features))
     B, T, L = cfg.num_envs, cfg.rollout_steps, cfg.chunk_len
     eps, envs = new_episodes(B)
     obs, _ = sim.reset(eps, envs)
@@ -406,7 +429,7 @@ def _train(cfg: TrainConfig, worlds: Sequence[NavWorld] | None, init_net: NavNet
     teacher = make_teacher(cfg.teacher, sim, mix=cfg.teacher_mix, seed=cfg.seed,  # agents/teachers.py
                            emap=observer.emap if observer else None)
     first = np.ones(B, dtype=bool)
-    logger = RunLogger(run_dir, cfg.tensorboard)
+    logger = RunLogger(run_dir, cfg.tensorboard, fresh=not cfg.resume)
     progress = ProgressBar("DAgger" if cfg.progress else None, cfg.frames, transient=False).start()
     progress.update(frames)
     pool = ThreadPoolExecutor(max_workers=1) if cfg.overlap else None
@@ -441,6 +464,12 @@ def _train(cfg: TrainConfig, worlds: Sequence[NavWorld] | None, init_net: NavNet
         if updates - last_save >= cfg.save_every:
             save_state()
             last_save = updates
+        done_frames, step = row["frames"], T * B
+        if cfg.snapshots and cfg.output and (done_frames - step) * cfg.snapshots // cfg.frames < \
+                done_frames * cfg.snapshots // cfg.frames:
+            save_checkpoint(snapshot_path(cfg.output, done_frames), net,
+                            {"frames": done_frames, "updates": updates, "houses": cfg.houses, "seed": cfg.seed,
+                             "end_threshold": cfg.end_threshold})
 
     try:
         while frames < cfg.frames:
@@ -495,7 +524,7 @@ def _train(cfg: TrainConfig, worlds: Sequence[NavWorld] | None, init_net: NavNet
         "wall_time_s": round(wall, 1), "seed": cfg.seed, "parameters": count_parameters(net),
         "final_train_success": final["success"], "final_train_success_ci95": final["success_ci95"],
         "final_train_spl": final["spl"], "final_eval_episodes": final["episodes"],
-        "end_threshold": end_threshold, "end_weight": cfg.end_weight,
+        "end_threshold": end_threshold, "end_weight": cfg.end_weight, "precision": precision,
         "end_threshold_calibration": calibration.card() if calibration else None,
         "torch_threads": threads, "cpus": os.cpu_count(), "config": card_config(cfg, net),
         "net_config": asdict(net.config)}
@@ -505,7 +534,7 @@ def _train(cfg: TrainConfig, worlds: Sequence[NavWorld] | None, init_net: NavNet
     save_state()
     if cfg.output:
         save_checkpoint(cfg.output, net, {k: v for k, v in card.items() if k != "config"})
-        Path(cfg.output).with_suffix(".json").write_text(json.dumps(card, indent=1) + "\n", encoding="utf-8")
+        atomic_write_text(Path(cfg.output).with_suffix(".json"), json.dumps(card, indent=1) + "\n")
     net.eval()
     return TrainResult(net, card, logger.rows)
 

@@ -6,7 +6,7 @@ Figures (median of repeated timings, houses of the ``pretrain-train`` preset, wa
 - DAgger collection frames/s: the same plus the policy's own forward pass (what ``train`` collects at);
 - gradient frames/s: cross-entropy steps on (chunk_len, batch_chunks) sequences on one torch thread
   (target >= 10,000/s), in the recipe's precision; and in fp32 and bf16 autocast timed alternately, with
-  their ratio (``TrainConfig.precision``);
+  their ratio and the one ``auto`` picks on this CPU (``TrainConfig.precision``);
 - inference steps/s of the policy at batch 256, and its parameter count;
 - end to end (``train`` itself: collection with the policy in the loop plus the gradient steps, default
   TrainConfig, periodic evaluation off): frames/s of the default serial loop on every core over its
@@ -38,6 +38,8 @@ import numpy as np
 if TYPE_CHECKING:
     from adaptenv.agents.config import PPOConfig
 
+ARITHMETICS = ("fp32", "bf16")
+"""The precisions the gradient step is timed in (``auto`` is one of them on any CPU)."""
 LABEL_TARGET = 20_000
 GRAD_TARGET = 10_000
 END_TO_END_TARGET = 10_000
@@ -116,7 +118,7 @@ def fresh_and_resumed(worlds: list, iterations: int, recipe: dict | None = None)
             "dagger_resume_speed_ratio": resumed / fresh}
 
 
-MAP_RECIPE = {"map": True, "teacher": "map-explorer", "precision": "bf16", "max_episode_steps": 600}
+MAP_RECIPE = {"map": True, "teacher": "map-explorer", "precision": "auto", "max_episode_steps": 600}
 """The map-reading recipe's TrainConfig fields that differ from the defaults (docs/agent.md, "The map-reading pi_0")."""
 MAP_END_TO_END_TARGET = 8_000
 
@@ -153,13 +155,14 @@ def run_map(*, as_json: bool = False, iterations: int = 3, repeats: int = 3,
             houses: str = "preset:pretrain-train") -> dict:
     """The map-reading recipe beside today's: teacher labelling and end-to-end training frames/s, side by side."""
     from adaptenv.agents.houses import load_house_set
+    from adaptenv.agents.network import auto_precision
     from adaptenv.bench import emit
     from adaptenv.bench.teachers import bench_labelling
 
     worlds = load_house_set(houses).worlds
     load_before = os.getloadavg()[0]
     figures = {**bench_labelling(houses), **map_side_by_side(worlds, iterations, repeats),
-               "recipe": MAP_RECIPE, "load_average_1min_before": load_before,
+               "recipe": MAP_RECIPE, "auto_precision": auto_precision(), "load_average_1min_before": load_before,
                "load_average_1min_after": os.getloadavg()[0]}
     emit("map recipe beside today's", figures, as_json,
          notes=[f"targets: map-explorer labelling >= 5,000/s, map recipe end to end >= {MAP_END_TO_END_TARGET:,}/s "
@@ -172,7 +175,7 @@ LOOP_PPO = {"init": "pretrained-ppo", "kl_coef": 0.03, "explore_bonus": 0.002, "
 """The loop's PPO fine-tuning (configs/experiment-lever-ppo4.json's finetune_* settings) on the shipped map-reading agent."""
 
 
-PPO_VARIANTS = {"full": {}, "frozen_encoder": {"freeze_encoder": True}, "bf16": {"precision": "bf16"},
+PPO_VARIANTS = {"full": {"precision": "fp32"}, "frozen_encoder": {"freeze_encoder": True, "precision": "fp32"}, "bf16": {"precision": "bf16"},
                 "frozen_encoder_bf16": {"freeze_encoder": True, "precision": "bf16"}}
 """The PPO updates ``bench train --algo ppo`` times beside each other: fp32 whole network, encoder frozen, bf16, both."""
 
@@ -192,6 +195,7 @@ def run_ppo(*, as_json: bool = False, iterations: int = 3, repeats: int = 3,
     """PPO end to end as the loop fine-tunes (LOOP_PPO, evaluation off) with each of PPO_VARIANTS' updates, timed
     alternately (median of ``repeats`` each): frames/s and each variant's ratio to the full fp32 update."""
     from adaptenv.agents.houses import load_house_set
+    from adaptenv.agents.network import auto_precision
     from adaptenv.agents.ppo import train_ppo
     from adaptenv.bench import emit
 
@@ -217,12 +221,19 @@ def run_ppo(*, as_json: bool = False, iterations: int = 3, repeats: int = 3,
     for name, key in (("frozen_encoder", "frozen_over_full"), ("bf16", "bf16_over_full"),
                       ("frozen_encoder_bf16", "frozen_bf16_over_full")):
         figures[key] = statistics.median(v[0] / f[0] for f, v in zip(runs["full"], runs[name], strict=True))
-    figures.update({"ppo_frames_timed": loop_ppo_config(iterations).frames, "repeats": repeats, "houses": len(worlds),
+    figures.update({"auto_precision": auto_precision(), "ppo_frames_timed": loop_ppo_config(iterations).frames,
+                    "repeats": repeats, "houses": len(worlds),
                     "recipe": LOOP_PPO, "load_average_1min_before": load_before,
                     "load_average_1min_after": os.getloadavg()[0]})
     emit("PPO throughput, the loop's recipe", figures, as_json,
          notes=["collection + 4 epochs x 4 minibatches per 8,192-frame rollout; one torch thread, as the loop"])
     return figures
+
+
+def auto_note(auto: str, bf16_speedup: float) -> str:
+    """One line on what precision ``auto`` picks on this CPU, beside the measured bf16/fp32 speed ratio."""
+    why = "this CPU computes bf16 natively" if auto == "bf16" else "this CPU has no native bf16"
+    return f"precision auto picks {auto} here ({why}); bf16 gradient steps ran {bf16_speedup:.2f} times fp32's speed"
 
 
 def run(*, as_json: bool = False, envs: int = 256, steps: int = 200, houses: str = "preset:pretrain-train",
@@ -237,11 +248,12 @@ def run(*, as_json: bool = False, envs: int = 256, steps: int = 200, houses: str
     import torch
     import torch.nn.functional as F
 
-    from adaptenv.agents.config import PRECISIONS, TrainConfig
+    from adaptenv.agents.config import TrainConfig
     from adaptenv.agents.houses import load_house_set
     from adaptenv.agents.network import (
         NavNet,
         NetConfig,
+        auto_precision,
         configure_torch,
         count_parameters,
         obs_to_tensors,
@@ -308,10 +320,11 @@ def run(*, as_json: bool = False, envs: int = 256, steps: int = 200, houses: str
     # both precisions, alternately, so their ratio is measured side by side
     rounds: dict[str, list[tuple[float, float]]] = {}
     for _ in range(grad_rounds):
-        for p in PRECISIONS:
+        for p in ARITHMETICS:
             rounds.setdefault(p, []).append(wall_and_cpu(lambda p=p: grad_step(p), repeats=grad_repeats, warmup=2))
     grad = {p: (statistics.median(w for w, _ in r), statistics.median(c for _, c in r)) for p, r in rounds.items()}
-    t_grad, c_grad = grad[cfg.precision]
+    auto = auto_precision()
+    t_grad, c_grad = grad[auto if cfg.precision == "auto" else cfg.precision]
 
     bobs = {k: np.resize(v, (256, *v.shape[1:])) for k, v in sim.observe().items()}
     policy_h = net.initial_state(256)
@@ -329,8 +342,9 @@ def run(*, as_json: bool = False, envs: int = 256, steps: int = 200, houses: str
         "dagger_collect_frames_per_cpu_s": envs * steps / c_collect,
         "gradient_frames_per_s": L * N / t_grad,
         "gradient_frames_per_cpu_s": L * N / c_grad,
-        **{f"gradient_frames_per_s_{p}": L * N / grad[p][0] for p in PRECISIONS},
+        **{f"gradient_frames_per_s_{p}": L * N / grad[p][0] for p in ARITHMETICS},
         "gradient_bf16_speedup": grad["fp32"][0] / grad["bf16"][0],
+        "auto_precision": auto,
         "inference_steps_per_s_b256": 256 / t_inf,
         "inference_steps_per_cpu_s_b256": 256 / c_inf,
         "parameters": count_parameters(net),
@@ -346,5 +360,5 @@ def run(*, as_json: bool = False, envs: int = 256, steps: int = 200, houses: str
     figures["load_average_1min_after"] = os.getloadavg()[0]
     emit("imitation-learning throughput", figures, as_json,
          notes=[f"targets: labelled >= {LABEL_TARGET:,}/s, gradient >= {GRAD_TARGET:,}/s, "
-                f"end to end >= {END_TO_END_TARGET:,}/s (2 cores)"])
+                f"end to end >= {END_TO_END_TARGET:,}/s (2 cores)", auto_note(auto, figures["gradient_bf16_speedup"])])
     return figures

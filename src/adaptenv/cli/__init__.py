@@ -23,6 +23,7 @@ from rich.console import Console
 from rich.markup import escape
 from typer.core import TyperGroup
 
+from adaptenv.cli._outputs import release_folders
 from adaptenv.cli._usage import on_one_line, typed_command, usage_in_one_line
 from adaptenv.errors import AdaptenvError
 
@@ -84,8 +85,11 @@ class _Root(TyperGroup):
     def invoke(self, ctx):
         """Run the command; a usage error any command raises (parsing its options, or later) becomes one line."""
         words = [*getattr(ctx, "_protected_args", getattr(ctx, "protected_args", [])), *ctx.args]
-        with usage_in_one_line(typed_command(self, words)):
-            return super().invoke(ctx)
+        try:
+            with usage_in_one_line(typed_command(self, words)):
+                return super().invoke(ctx)
+        finally:  # the command has ended: its output folders are free for the next run
+            release_folders()
 
 
 app = typer.Typer(

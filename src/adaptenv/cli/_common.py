@@ -9,11 +9,18 @@ from typing import NoReturn
 import typer
 
 from adaptenv.errors import ConfigError
+from adaptenv.files import not_regular
 
 
 def existing_file(path: Path, what: str = "file") -> Path:
-    """Return the path or raise a one-sentence error naming it."""
+    """Return the path or raise a one-sentence error naming it (a FIFO, a device or a folder is no file)."""
     if not path.is_file():
+        try:
+            kind = not_regular(path.stat().st_mode)
+        except OSError:
+            kind = None
+        if kind is not None:
+            raise ConfigError(f"{path}: is {kind}, not a regular file; pass the {what} as a file")
         raise ConfigError(f"{path}: no such {what}; check the path")
     return path
 
@@ -80,6 +87,18 @@ def check_recorded_in(traj, world, trajectory: Path, house: Path) -> None:
     if (why := pose_outside(traj, world)) is not None:
         raise ConfigError(f"{trajectory}: {why} of {house}; pass the house the episode ran in, or record the "
                           "episode again")
+    believe_poses(traj, world, trajectory)
+
+
+def believe_poses(traj, world, trajectory: Path) -> None:
+    """Replace the stored metrics of ``traj`` by those its poses give in ``world``; a stored figure that differs is
+    said in one line on stderr (the trajectory is evidence, its stored verdict is not believed)."""
+    from adaptenv.cli._usage import on_one_line
+    from adaptenv.sim.metrics import recompute_metrics
+
+    traj.metrics, differs = recompute_metrics(world, traj)
+    if differs:
+        typer.echo(on_one_line(f"{trajectory}: {'; '.join(differs)}; the recomputed figures are used"), err=True)
 
 
 JSON_OPTION = typer.Option(False, "--json", help="Print the figures as one JSON object instead of a table.")

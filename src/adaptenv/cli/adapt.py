@@ -19,7 +19,8 @@ import typer
 from adaptenv.cli import _numbers as numbers
 from adaptenv.cli._common import HOUSE_HELP, JSON_OPTION, load_house_argument
 from adaptenv.cli._outputs import FORCE_OPTION, output_folder
-from adaptenv.errors import AdaptenvError, ConfigError
+from adaptenv.errors import AdaptenvError, ConfigError, PolicyError
+from adaptenv.files import atomic_write_text
 
 if TYPE_CHECKING:
     from adaptenv.sim.trajectory import Trajectory
@@ -160,9 +161,9 @@ def analyze(
 def adapt(
     house: Path = ADAPT_HOUSE_ARGUMENT,
     out: Path = OUT_OPTION,
-    policy: str = typer.Option("expert", "--policy", help="pretrained (the strongest shipped agent), "
-                               "pretrained-map, pretrained-scan, expert, explorer, map-explorer, random, a checkpoint "
-                               "(.pt), or module:attribute."),
+    policy: str = typer.Option("pretrained", "--policy", help="The agent G adapts the house to: pretrained (the "
+                               "strongest shipped agent), pretrained-map, pretrained-scan, expert (shortest path, by "
+                               "name only), explorer, map-explorer, random, a checkpoint (.pt), or module:attribute."),
     steps: int = typer.Option(5, "--steps", min=1, max=50, help="Single-object edits to make."),
     generator: str = typer.Option("builtin", "--generator", help="builtin (offline), failure-modes (offline, aims at "
                                   "F's failure families), learned (offline, a trained scorer ranks edits), llm, or random."),
@@ -309,7 +310,7 @@ def adapt(
                     s = _adapt_one(h, name, where, pol, f, gen, steps=steps, seed=seed, target=target,
                                    diagnose=diagnose, before=before)
             except AdaptenvError as exc:
-                if not many or strict:
+                if not many or strict or isinstance(exc, PolicyError):  # a broken policy breaks every house
                     raise
                 log.warning("skipping house %s: %s", name, exc)
                 skipped.append(SkippedHouse(name, str(exc)))
@@ -334,7 +335,7 @@ def _adapt_one(h, name: str, out: Path, policy, analyzer, generator, *, steps: i
     With ``before`` (an episode recorded in this house) F analyzes it instead of a rollout of ``policy``.
     """
     from adaptenv.adapt.diagnosis import hard_episodes
-    from adaptenv.adapt.step import adapt_scene, summarize, write_outputs
+    from adaptenv.adapt.step import adapt_scene, result_edits_line, summarize, write_outputs
     from adaptenv.adapt.target import EPISODE_FRESH_DRAWS, fresh_measurement
     from adaptenv.agents.rollout import draw_episode
     from adaptenv.progress import ProgressBar
@@ -352,6 +353,7 @@ def _adapt_one(h, name: str, out: Path, policy, analyzer, generator, *, steps: i
                              rng=np.random.default_rng(seed), name=name, render=True, render_dir=out / "steps",
                              episodes=episodes, before=before)
     s = summarize(result, analyzer=analyzer, seed=seed)
+    s["edits_line"] = result_edits_line(result, steps)
     if result.valid and result.world is not None:  # G's own rollouts include the episode's draw; these do not
         fresh = [fresh_measurement(w, [episode], policy, EPISODE_FRESH_DRAWS) for w in (world, result.world)]
         s["fresh"] = {"draws": EPISODE_FRESH_DRAWS, "success_before": fresh[0].success,
@@ -406,8 +408,8 @@ def _target_one(h, name: str, out: Path, policy, analyzer, generator, *, steps: 
     pair = render_before_after(h, res.house, res.trajectories_before[0], res.trajectories_after[0],
                                [o["id"] for o in counts["objects"] if o["changed"]])
     save_render(pair.side_by_side(), out / "before_after.png")
-    (out / "edits.json").write_text(json.dumps(res.generation_log(), indent=1, default=str), encoding="utf-8")
-    (out / "summary.json").write_text(json.dumps(summary, indent=1, default=str), encoding="utf-8")
+    atomic_write_text(out / "edits.json", json.dumps(res.generation_log(), indent=1, default=str))
+    atomic_write_text(out / "summary.json", json.dumps(summary, indent=1, default=str))
     return {**summary, "target_success": doc}
 
 
@@ -477,8 +479,7 @@ def _finish_folder(house: Path, out: Path, summaries: list[dict], skipped: list,
     valid = sum(bool(s["valid"]) for s in summaries)
     doc = {"houses": str(house), "adapted": len(summaries), "valid": valid, "skipped": len(skipped),
            "skipped_houses": {h.name: h.reason for h in skipped}}
-    out.mkdir(parents=True, exist_ok=True)
-    (out / "summary.json").write_text(json.dumps(doc, indent=1) + "\n", encoding="utf-8")
+    atomic_write_text(out / "summary.json", json.dumps(doc, indent=1) + "\n")
     if as_json:
         typer.echo(json.dumps({**doc, "summaries": summaries}, indent=1, default=str))
     else:
@@ -503,6 +504,7 @@ def _print_adapt_summary(console, s: dict, h, out: Path) -> None:
                   f"generator {s['generator']}")
     console.print(f"edits applied: {s['edits_applied']} of {s['steps_requested']} "
                   f"({s['edits_verified']} verified); moves are in grid units (0..100 across the house)")
+    console.print(s["edits_line"], highlight=False, soft_wrap=True)
     console.print(edit_counts_text(s["edit_counts"]), highlight=False)
     console.print("objectives along the episode's route (before -> after):")
     for k in ob:

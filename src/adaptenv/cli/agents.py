@@ -16,7 +16,15 @@ import typer
 
 from adaptenv.cli import _numbers as numbers
 from adaptenv.cli._common import JSON_OPTION, interrupted
-from adaptenv.cli._outputs import FORCE_OPTION, OutputFolder, output_file, output_folder, recording
+from adaptenv.cli._outputs import (
+    FORCE_OPTION,
+    OutputFolder,
+    continued_folder,
+    output_file,
+    output_folder,
+    recording,
+)
+from adaptenv.files import atomic_write_text
 
 if TYPE_CHECKING:
     from adaptenv.agents.config import PPOConfig, TrainConfig
@@ -97,9 +105,8 @@ def check_outputs(cfg: TrainConfig | PPOConfig, run_dir: Path | None, command: s
     if run_dir is None:
         return files, None
     if resume:  # the run's own folder, continued: train checks its state.pt before writing anything
-        return files, OutputFolder(run_dir, command, own=True, remove=[], keep=True)
-    return files, output_folder(run_dir, "--run-dir", command, force=force, inputs=inputs, owns=RUN_DIR_OWNS,
-                                legacy=lambda p: (p / "state.pt").is_file())
+        return files, continued_folder(run_dir, "--run-dir", command)
+    return files, output_folder(run_dir, "--run-dir", command, force=force, inputs=inputs, owns=RUN_DIR_OWNS)
 
 
 def _recorded_output(run_dir: Path) -> str | None:
@@ -208,7 +215,7 @@ def evaluate(
     from rich.console import Console
     from rich.table import Table
 
-    from adaptenv.agents.evaluate import drop, write_report
+    from adaptenv.agents.evaluate import by_rooms_line, drop, write_report
     from adaptenv.agents.evaluate import evaluate as run_eval
     from adaptenv.agents.houses import load_house_set
     from adaptenv.agents.network import configure_torch
@@ -276,6 +283,10 @@ def evaluate(
             if "floor_left_out" in s:
                 console.print(floor_line(spec, s), highlight=False)
         for spec, s, _ in summaries:
+            if len(s["by_rooms"]) > 1 or len(summaries) == 1:
+                console.print(f"{by_rooms_line(s['by_rooms'])}" + (f" on {spec}" if len(summaries) > 1 else ""),
+                              highlight=False, soft_wrap=True)
+        for spec, s, _ in summaries:
             if s["failure_modes"]:
                 console.print(f"failures on {spec} (built-in analysis F): "
                               + ", ".join(f"{mode} {n}" for mode, n in s["failure_modes"].items()))
@@ -288,11 +299,10 @@ def evaluate(
                 console.print(f"drop {base_spec} -> {spec}: success {d_s['drop']:+.3f} "
                               f"[{d_s['ci95'][0]:+.3f}, {d_s['ci95'][1]:+.3f}], SPL {d_p['drop']:+.3f} "
                               f"[{d_p['ci95'][0]:+.3f}, {d_p['ci95'][1]:+.3f}]")
-            out.mkdir(parents=True, exist_ok=True)
-            (out / "comparison.json").write_text(json.dumps(
+            atomic_write_text(out / "comparison.json", json.dumps(
                 {"policy": policy, "episodes": episodes, "seed": seed, "command": command,
                  "sets": {spec: s for spec, s, _ in summaries}, "drop_from": base_spec, "drops": drops},
-                indent=1, default=float) + "\n", encoding="utf-8")
+                indent=1, default=float) + "\n")
         console.print(f"wrote results to [bold]{out}[/]")
 
 
@@ -386,8 +396,9 @@ def bench_train(as_json: bool = JSON_OPTION,
                 updates_per_iter: int | None = typer.Option(None, "--updates-per-iter", min=1,
                                                             help="Gradient steps per collection, i.e. the replay ratio "
                                                                  "(default: TrainConfig's)."),
-                precision: str | None = typer.Option(None, "--precision", help="fp32 or bf16: the gradient steps of "
-                                                     "the recipe and of the end-to-end figure (default: TrainConfig's).")
+                precision: str | None = typer.Option(None, "--precision", help="auto, fp32 or bf16: the gradient steps "
+                                                     "of the recipe and of the end-to-end figure (default: "
+                                                     "TrainConfig's, auto; both are timed either way).")
                 ) -> None:
     """Training throughput: labelled, gradient and end-to-end frames/s, inference steps/s, parameter count."""
     from adaptenv.bench.train import run, run_map, run_ppo

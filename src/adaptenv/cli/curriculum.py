@@ -82,8 +82,10 @@ def check_start_policy(spec: str) -> None:
     """Refuse a ``--policy`` the loop cannot fine-tune (no network, no such file, a checkpoint that does not load)
     before any work; the loop loads it again when it starts."""
     from adaptenv.agents.checkpoint import load_checkpoint
-    from adaptenv.agents.registry import init_checkpoint
+    from adaptenv.agents.registry import SCRATCH, init_checkpoint
 
+    if spec.strip() in SCRATCH:
+        return  # fresh weights: nothing to load
     path = init_checkpoint(spec, flag="--policy")
     if not path.is_file():
         raise ConfigError(f"--policy {spec}: no such checkpoint file; pass pretrained or the path of a .pt checkpoint")
@@ -100,15 +102,18 @@ def check_resumable(out: Path) -> None:
     if not (out / STATE).is_file() and not (out / RUN_INFO).is_file():
         raise ConfigError(f"--resume: {out} holds no loop run (no {STATE}); pass the -o of the interrupted run, or "
                           "start without --resume in a new folder")
+    from adaptenv.curriculum.loop import check_run_files
+
+    check_run_files(out)
 
 
 def loop(
-    policy: str = typer.Option("pretrained", "--policy", help="Starting policy: pretrained (the strongest shipped agent), pretrained-map, pretrained-scan or a checkpoint path."),
+    policy: str = typer.Option("pretrained", "--policy", help="Starting policy: pretrained (the strongest shipped agent), pretrained-map, pretrained-scan, scratch or scratch-shape (a fresh map-reading network: labels or the recognising mode) or a checkpoint path."),
     houses: str = typer.Option("preset:pretrain-train", "--houses", help="Training scenes: a folder of house "
                                 "JSON files, a house file, a dataset FILE.jsonl[.gz][:START:STOP] or preset:NAME."),
     iterations: int = typer.Option(3, "--iterations", "-T", min=1, help="Loop iterations."),
-    method: str = typer.Option("ours", "--method", help="none, random, dr, dr-matched, sfl, plr, accel, ours, "
-                                "ours-noselect, ours-randomscene, ours-nof, ours-dr, ours-learned or ours-llm."),
+    method: str = typer.Option("ours", "--method", help="none, random, dr, dr-matched, sfl, oracle, rearrange, swap, plr, accel, "
+                                "ours, ours-noselect, ours-randomscene, ours-nof, ours-dr, ours-learned or ours-llm."),
     seed: int = typer.Option(0, "--seed", callback=numbers.seed, help="Root seed."),
     out: Path = typer.Option(Path("runs/loop"), "-o", "--out", help="Run folder."),
     resume: bool = typer.Option(False, "--resume", help="Continue the run in --out from its last iteration."),
@@ -146,8 +151,14 @@ def loop(
                                            "episodes (600 for the map-reading agent)."),
     finetune_min_start: float = typer.Option(0.0, "--finetune-min-start", min=0.0, callback=numbers.finite, help="Fine-tuning episodes start "
                                              "at least this geodesic distance (m) from the target (0: uniform)."),
-    finetune_precision: str = typer.Option("fp32", "--finetune-precision", help="Arithmetic of fine-tuning's "
-                                           "gradient steps: fp32, or bf16 (faster on CPUs with AVX512_BF16)."),
+    finetune_precision: str = typer.Option("auto", "--finetune-precision", help="Arithmetic of fine-tuning's "
+                                           "gradient steps: auto (bf16 where the CPU computes it natively, else "
+                                           "fp32), fp32, or bf16 (faster on CPUs with AVX512_BF16, about 8x slower "
+                                           "on AVX2-only ones)."),
+    grounded: bool = typer.Option(False, "--grounded", help="sfl, plr, accel and ours take their new levels from the "
+                                  "training homes and random edits of them instead of fresh procedural houses."),
+    appearance_edits: bool = typer.Option(False, "--appearance-edits", help="Random edits (random, accel, grounded "
+                                          "levels) may also swap an object's asset or change a room's material."),
     focus_training: bool = typer.Option(False, "--focus-training", help="Fine-tuning episodes in adapted scenes ask "
                                         "for the target type G's edits aimed at."),
     relocate_targets: bool = typer.Option(False, "--relocate-targets", help="The failure-mode G may move a target "
@@ -199,13 +210,12 @@ def loop(
 
     from adaptenv.curriculum.executor import ExecutorOptions
     from adaptenv.curriculum.loop import LoopConfig, run_loop
-    from adaptenv.curriculum.records import RUN_INFO, STATE
 
-    folder = output_folder(out, "-o", "loop", inputs=[houses, policy, match_run or None, learned_scorer], keep=True, force_flag=None,
-                           legacy=lambda p: (p / STATE).is_file() or (p / RUN_INFO).is_file())
-    if resume:
+    if resume and not out.is_dir():  # before the folder is locked (and so made)
         check_resumable(out)
-    else:
+    folder = output_folder(out, "-o", "loop", inputs=[houses, policy, match_run or None, learned_scorer], keep=True,
+                           force_flag=None, then=(lambda: check_resumable(out)) if resume else None)
+    if not resume:
         check_start_policy(policy)
     console = Console()
     llm = loop_llm_section(llm_config_file, model=model, base_url=base_url, api=api, api_key_env=api_key_env,
@@ -223,6 +233,7 @@ def loop(
                      finetune_min_start=finetune_min_start, finetune_precision=finetune_precision,
                      finetune_beta=finetune_beta, finetune_max_steps=finetune_max_steps,
                      relocate_targets=relocate_targets, door_edits=door_edits, focus_training=focus_training,
+                     grounded=grounded, appearance_edits=appearance_edits,
                      learned_scorer=str(learned_scorer) if learned_scorer else None,
                      heldout_episodes=heldout_episodes, llm=llm, target_success=target_success,
                      target_tolerance=target_tolerance, target_episodes=target_episodes,
@@ -277,8 +288,7 @@ def experiment(
     cfg = ExperimentConfig.load(config)
     check_executor(executor, workers, address)
     out = out or Path("runs") / config.stem
-    folder = output_folder(out, "-o", "experiment", inputs=[config], keep=True, force_flag=None,
-                           legacy=lambda p: (p / "experiment.json").is_file())
+    folder = output_folder(out, "-o", "experiment", inputs=[config], keep=True, force_flag=None)
     ref = cfg.loop_config(cfg.reference, cfg.seeds[0])
     check_house_sets([ref.houses, *ref.heldout.values()], strict, console.print)
     # one run per task: runs are long, and in order a stopped experiment leaves whole seeds

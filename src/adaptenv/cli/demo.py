@@ -22,8 +22,6 @@ interval."""
 
 MARKER = MANIFEST
 """The manifest the demo leaves in its output folder (adaptenv.cli._outputs): a later demo replaces only its own."""
-LEGACY_MARKER = ".adaptenv-demo"
-"""The marker of demo folders written before manifests."""
 OWNED = ("houses", "run")
 """The demo's sub-folders, replaced when the demo runs again into its own folder (nothing else there is touched)."""
 
@@ -31,8 +29,7 @@ OWNED = ("houses", "run")
 def prepare_out(out: Path) -> OutputFolder:
     """Check ``out`` for the demo: new, empty or an earlier demo's (whose outputs go on ``with``); refuse anything
     else, before any work."""
-    return output_folder(out, "-o", "demo", owns=OWNED, legacy=lambda p: (p / LEGACY_MARKER).is_file(),
-                         force_flag=None)
+    return output_folder(out, "-o", "demo", owns=OWNED, force_flag=None)
 
 
 def demo(

@@ -13,6 +13,7 @@ import typer
 from adaptenv.cli import _numbers as numbers
 from adaptenv.cli._outputs import command_line, output_folder
 from adaptenv.errors import ConfigError
+from adaptenv.files import atomic_write_text
 
 gdata_app = typer.Typer(help="Data for a learned G: collect candidate edits with their effect on an agent, train "
                              "the learned G on them.", no_args_is_help=True, rich_markup_mode=None)
@@ -67,8 +68,7 @@ def collect(
     if bad := next((h for h in houses if not training_houses(h)), None):
         raise ConfigError(f"--houses {bad}: the houses of a held-out or validation suite are not training data; "
                           "pass training houses such as preset:pretrain-train")
-    folder = output_folder(out, "-o", "gdata collect", inputs=[*houses, policy], keep=True, force_flag=None,
-                           legacy=lambda p: (p / "meta.json").is_file())
+    folder = output_folder(out, "-o", "gdata collect", inputs=[*houses, policy], keep=True, force_flag=None)
     configure_torch()
     pol = resolve_policy(policy, seed=seed)
     pairs = []
@@ -129,7 +129,7 @@ def train(
                       layers=layers, lr=lr, heldin=heldin, target=target)
     with recording([out, card_path], None, "gdata train"), ProgressBar("training the scorer", epochs) as bar:
         card = run_train(cfg, progress=lambda epoch: bar.update(epoch), command=command_line())
-        card_path.write_text(json.dumps(card, indent=1) + "\n", encoding="utf-8")
+        atomic_write_text(card_path, json.dumps(card, indent=1) + "\n")
     sel = card["selection"]
     what = "drop" if target == "agent" else "objective gain"
     Console().print(f"{card['data']['rows']} rows from {card['data']['houses']} houses; epoch {sel['epoch']} chosen on "

@@ -14,6 +14,7 @@ import typer
 
 from adaptenv.cli import _numbers as numbers
 from adaptenv.cli._outputs import FORCE_OPTION
+from adaptenv.files import atomic_write_text
 
 
 def memory_check(
@@ -60,8 +61,7 @@ def memory_check(
     console = Console()
     console.print(memory_table(result))
     if out is not None:
-        out.mkdir(parents=True, exist_ok=True)
-        (out / "memory_check.json").write_text(json.dumps(result, indent=1, default=float) + "\n", encoding="utf-8")
+        atomic_write_text(out / "memory_check.json", json.dumps(result, indent=1, default=float) + "\n")
         record_file(out / "memory_check.json", "memory-check")
         console.print(f"wrote [bold]{out / 'memory_check.json'}[/]")
 

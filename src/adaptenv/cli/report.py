@@ -22,11 +22,13 @@ OUT_OPTION = typer.Option(None, "-o", "--out", metavar="OUT_DIR",
 def report(folder: Path = FOLDER_ARGUMENT, out: Path | None = OUT_OPTION, force: bool = FORCE_OPTION) -> None:
     """Write an HTML report (curves, results table, before/after gallery) and print index.html's path."""
     from adaptenv.report import build_report
-    from adaptenv.report.html import OWNS, is_report_folder
+    from adaptenv.report.data import detect
+    from adaptenv.report.html import OWNS
 
+    if not folder.is_dir():  # named before its default report folder, folder/report, is made (and locked)
+        detect(folder)
     target = out if out is not None else folder / "report"
-    with output_folder(target, "-o", "report", force=force, inputs=[folder], owns=OWNS,
-                       legacy=is_report_folder):
+    with output_folder(target, "-o", "report", force=force, inputs=[folder], owns=OWNS):
         index = build_report(folder, out)
     print(index)
 

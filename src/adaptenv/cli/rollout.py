@@ -19,8 +19,10 @@ _HOUSE = typer.Argument(..., metavar="HOUSE", help=HOUSE_HELP, show_default=Fals
 _OUT = typer.Option(Path("traj.json"), "-o", "--out", help="Where to write the trajectory JSON.")
 UNITS = {"spl": "0..1", "sel": "0..1", "episode_length": "steps", "path_length": "m", "final_geodesic": "m",
          "collisions": "blocked moves", "min_clearance": "m", "rooms_visited": "rooms", "first_sight_step": "step",
-         "optimal_path_length": "m", "expert_episode_length": "steps (n/a: the expert fails)"}
+         "optimal_path_length": "m", "expert_episode_length": "steps"}
 """Units of the metrics ``rollout`` prints."""
+NOT_AVAILABLE = {"expert_episode_length": "the expert fails", "first_sight_step": "never in sight"}
+"""What a metric without a value (n/a) means, printed in place of its unit."""
 _RENDER = typer.Option(None, "--render", help="Also draw the trajectory top-down to this PNG.")
 
 
@@ -34,7 +36,7 @@ def resolve_policy(name: str, seed: int | None = None):
 
 def rollout(
     house: Path = _HOUSE,
-    policy: str = typer.Option("expert", "--policy", help="Who acts: pretrained (the strongest shipped agent), pretrained-map, pretrained-scan, expert, explorer, map-explorer, random, a checkpoint (.pt) or module:attribute."),
+    policy: str = typer.Option("pretrained", "--policy", help="Who acts: pretrained (the strongest shipped agent), pretrained-map, pretrained-scan, expert, explorer, map-explorer, random, a checkpoint (.pt) or module:attribute."),
     target: str | None = typer.Option(None, "--target", help="Target object type (default: drawn among the solvable ones)."),
     seed: int = typer.Option(0, "--seed", callback=numbers.seed, help="Seed of the episode draw (and of the random policy)."),
     use_house_start: bool = typer.Option(False, "--use-house-start", help="Start at the house's metadata agent pose."),
@@ -70,15 +72,15 @@ def rollout(
     table.add_column("unit")
     for key, value in traj.metrics.model_dump().items():
         shown = "n/a" if value is None else f"{value:.3f}" if isinstance(value, float) else str(value)
-        table.add_row(key, shown, UNITS.get(key, ""))
+        unit = NOT_AVAILABLE.get(key, "") if value is None else UNITS.get(key, "")
+        table.add_row(key, shown, unit)
     console = Console()
     console.print(table)
     console.print(f"wrote the trajectory to [bold]{out}[/]")
     if render is not None:
-        from adaptenv.render.topdown import render_house
+        from adaptenv.render.topdown import render_house, save_render
 
-        render.parent.mkdir(parents=True, exist_ok=True)
-        render_house(house_model, trajectory=traj).save(render)
+        save_render(render_house(house_model, trajectory=traj), render)
         record_file(render, "rollout")
         console.print(f"wrote the top-down image to [bold]{render}[/]")
 

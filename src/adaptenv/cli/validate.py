@@ -27,14 +27,21 @@ def validate(
 ) -> None:
     """Check ProcTHOR house files; print every problem and exit 1 if there is any."""
     from adaptenv.scene.dataset import parse_dataset_spec
+    from adaptenv.scene.validate import dropped_children_line
 
-    checked = [problems for path in houses for problems in _house_problems(path)]
+    read = [item for path in houses for item in _house_problems(path)]
+    checked = [problems for _, problems in read]
+    parsed = [h for h, _ in read if h is not None]
     problems = [p for ps in checked for p in ps]
     bad_files = sum(bool(ps) for ps in checked)
     unit = "house" if any(parse_dataset_spec(path) for path in houses) else "file"
+    left_out = dropped_children_line(parsed, of=len(read) if len(read) > 1 else None)
     if as_json:
+        dropped = [d for h in parsed for d in h.dropped_children]
         doc = {"files": [str(p) for p in houses], "valid": not problems,
-               "problems": [{"file": p.file, "path": p.path, "message": p.message} for p in problems]}
+               "problems": [{"file": p.file, "path": p.path, "message": p.message} for p in problems],
+               "left_out": {"objects": len(dropped), "houses": sum(bool(h.dropped_children) for h in parsed),
+                            "asset_ids": sorted({a for _, a in dropped})}}
         typer.echo(json.dumps(doc, indent=1))
     else:
         for p in problems:
@@ -45,20 +52,24 @@ def validate(
                        f"{unit}{'s' if n != 1 else ''}")
         else:
             typer.echo(f"{n} {unit}{'s' if n != 1 else ''} valid")
+        if left_out:
+            typer.echo(left_out)
     if problems:
         raise typer.Exit(1)
 
 
-def _house_problems(path: Path) -> list[list]:
-    """The problems of each house a HOUSE argument names: one file, or every selected line of a dataset."""
+def _house_problems(path: Path) -> list[tuple]:
+    """(house or None, problems) of each house a HOUSE argument names: one file, or every selected line of a
+    dataset (the house is None where it could not be read, or, in a dataset, is invalid)."""
     from adaptenv.errors import HouseError
     from adaptenv.scene.dataset import dataset_houses, parse_dataset_spec
-    from adaptenv.scene.validate import validate_house_file
+    from adaptenv.scene.validate import read_and_validate
 
     dataset = parse_dataset_spec(path)
     if dataset is None:
-        return [validate_house_file(path)]
-    return [house.problems if isinstance(house, HouseError) else [] for _, house in dataset_houses(dataset)]
+        return [read_and_validate(path)]
+    return [(None, house.problems) if isinstance(house, HouseError) else (house, [])
+            for _, house in dataset_houses(dataset)]
 
 
 def bench_validate(

@@ -149,9 +149,26 @@ class LevelBufferState:
         return cls.from_dict(data, source)
 
 
+LEVEL_ID_MAX = 200
+"""The longest level id: a level is stored as ``<id>.json`` in its run folder, and file names stop at 255 bytes."""
+
+
+def level_id_problem(level_id: object) -> str | None:
+    """Why ``level_id`` is not a plain name of a level inside its run folder (a file name, no folder part), or None."""
+    if (isinstance(level_id, str) and level_id not in ("", ".", "..") and not set(level_id) & {"/", "\\", "\0"}
+            and len(level_id.encode("utf-8", "surrogatepass")) <= LEVEL_ID_MAX):
+        return None
+    return (f"level id {level_id!r} is not a plain name of a level inside the run folder (a file name such as "
+            f"house_00~t01a00, no folder part, at most {LEVEL_ID_MAX} bytes)")
+
+
 def state_problem(state: LevelBufferState) -> str | None:
-    """The first inconsistency of a state (unequal lengths, duplicate ids, bad numbers), or None."""
+    """The first inconsistency of a state (unequal lengths, duplicate ids, an id that is not a plain name, bad
+    numbers), or None."""
     n = len(state.level_ids)
+    for level_id in (*state.level_ids, *(p for p in state.parent_ids if p is not None)):
+        if (problem := level_id_problem(level_id)) is not None:
+            return problem
     for name in ("scores", "last_seen", "parent_ids"):
         if len(getattr(state, name)) != n:
             return f"{name} has {len(getattr(state, name))} entries but level_ids has {n}; the lists must align"

@@ -60,6 +60,7 @@ from adaptenv.curriculum.records import (
 )
 from adaptenv.curriculum.verdict import lever_lines, verdict_lines
 from adaptenv.errors import AdaptenvError, ConfigError, RunsFailed
+from adaptenv.files import atomic_path, open_append
 
 METRICS = ("success", "spl", "collisions")
 #: Figures of the summary table and its tests: the held-out metrics and the paper's Delta R
@@ -484,7 +485,7 @@ def _initial_figures(out: Path, folder: Path, specs: dict[str, str], episodes: i
     """
     cache = out / INITIAL_EVAL / f"seed_{seed}.json"
     cache.parent.mkdir(parents=True, exist_ok=True)
-    with open(cache.with_suffix(".lock"), "w") as lock:
+    with open_append(cache.with_suffix(".lock")) as lock:
         if fcntl is not None:
             fcntl.flock(lock, fcntl.LOCK_EX)
         initial = json.loads(cache.read_text(encoding="utf-8")) if cache.is_file() else {}
@@ -660,7 +661,8 @@ def _plots(out: Path, cfg: ExperimentConfig) -> None:
             ax.grid(alpha=0.3)
             ax.legend(fontsize=8)
             fig.tight_layout()
-            fig.savefig(out / "plots" / f"heldout_{set_name}_vs_{x}.png")
+            with atomic_path(out / "plots" / f"heldout_{set_name}_vs_{x}.png") as tmp:
+                fig.savefig(tmp)
             plt.close(fig)
 
 #: What :func:`pack_experiment` keeps of a finished run: enough to summarize it and to skip it on resume.
@@ -676,7 +678,7 @@ def pack_experiment(out: str | Path, dest: str | Path, cfg: ExperimentConfig | N
     here = str(out.resolve())
 
     def copy(src: Path, to: Path) -> None:
-        to.write_text(src.read_text(encoding="utf-8").replace(here, "OUT"), encoding="utf-8")
+        atomic_write_text(to, src.read_text(encoding="utf-8").replace(here, "OUT"))
 
     cfg = cfg or ExperimentConfig(**json.loads((out / "experiment.json").read_text(encoding="utf-8")))
     dest.mkdir(parents=True, exist_ok=True)

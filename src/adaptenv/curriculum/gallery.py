@@ -7,8 +7,9 @@ from pathlib import Path
 
 from adaptenv.curriculum.jobs import Generated
 from adaptenv.curriculum.records import GalleryItem, iteration_dir
+from adaptenv.files import atomic_write_text
 from adaptenv.render.compare import MOVED_COLOUR, render_before_after
-from adaptenv.render.topdown import render_house
+from adaptenv.render.topdown import render_house, save_render
 from adaptenv.scene.house import House, save_house
 from adaptenv.sim.trajectory import Trajectory
 
@@ -32,18 +33,18 @@ def gallery_item(run_dir: Path, t: int, name: str, parent: House, made: Generate
                        after_house_json=rel(save_house(made.house, d / "house_after.json")))
     if before is not None and made.after is not None:
         pair = render_before_after(parent, made.house, before, made.after, made.moved, size=640)
-        pair.before.save(d / "before.png")
-        pair.after.save(d / "after.png")
+        save_render(pair.before, d / "before.png")
+        save_render(pair.after, d / "after.png")
         item.before_trajectory_json = rel(before.save(d / "trajectory_before.json"))
         item.after_trajectory_json = rel(made.after.save(d / "trajectory_after.json"))
     else:
-        render_house(parent, grid=True, size=640, title="before").save(d / "before.png")
-        render_house(made.house, grid=True, size=640, highlight={oid: MOVED_COLOUR for oid in made.moved} or None,
-                     title="after (not rolled out)").save(d / "after.png")
+        save_render(render_house(parent, grid=True, size=640, title="before"), d / "before.png")
+        save_render(render_house(made.house, grid=True, size=640, highlight={oid: MOVED_COLOUR for oid in made.moved}
+                                 or None, title="after (not rolled out)"), d / "after.png")
     if made.analysis is not None:
-        (d / "analysis.json").write_text(made.analysis.model_dump_json(indent=1), encoding="utf-8")
+        atomic_write_text(d / "analysis.json", made.analysis.model_dump_json(indent=1))
         item.analysis_json = rel(d / "analysis.json")
         item.summary = made.analysis.outcome.summary
-    (d / "edits.json").write_text(json.dumps(made.edit_log, indent=1, default=str), encoding="utf-8")
+    atomic_write_text(d / "edits.json", json.dumps(made.edit_log, indent=1, default=str))
     item.edits_json = rel(d / "edits.json")
     return item

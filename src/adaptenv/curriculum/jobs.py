@@ -10,7 +10,8 @@ the same numbers.
 from __future__ import annotations
 
 import functools
-from collections.abc import Iterable
+from collections import Counter
+from collections.abc import Iterable, Sequence
 from dataclasses import asdict, dataclass, field
 from typing import TYPE_CHECKING, Any, Literal
 
@@ -24,7 +25,7 @@ from adaptenv.adapt.generators.random_perturbation import random_single_edits
 from adaptenv.adapt.llm import LLMConfig, make_backend
 from adaptenv.adapt.llm.accounting import scene_usage
 from adaptenv.adapt.llm.usage import Usage
-from adaptenv.adapt.step import adapt_scene, changed_objects
+from adaptenv.adapt.step import adapt_scene, changed_objects, edits_line, missed_edit_reasons
 from adaptenv.adapt.target import adapt_to_success, measure
 from adaptenv.agents.evaluate import EpisodeResult, Recorded, run_episodes, sample_episodes
 from adaptenv.agents.houses import HouseSet, load_house_set
@@ -228,6 +229,9 @@ class GenerateJob:
     """``failure-modes`` and ``llm``: G may open or shut interior doors (``LoopConfig.door_edits``)."""
     learned_scorer: str | None = None
     """``learned``: the scorer file (``LoopConfig.learned_scorer``); None: the shipped one."""
+    appearance: float = 0.0
+    """``random``: share of the edits that swap an asset or change a material instead of moving an object
+    (``LoopConfig.appearance_edits``; 0: moves only)."""
     target_success: float | None = None
     """When set: edit toward pi_t's success rate P on ``target_episodes`` fixed episodes
     (:func:`~adaptenv.adapt.target.adapt_to_success`, ``edit_steps`` the budget) instead of the most difficulty."""
@@ -276,7 +280,7 @@ def run_generate(job: GenerateJob) -> Generated:
     """Apply the job's generator to its parent scene."""
     rng = np.random.default_rng(list(job.seed))
     if job.kind == "random":
-        child, log = random_single_edits(job.house, job.edit_steps, rng)
+        child, log = random_single_edits(job.house, job.edit_steps, rng, appearance=job.appearance)
         moved = [e.object_id for e in log.edits if e.accepted and e.changed]
         return Generated(child, log.model_dump(mode="json"), len(moved), moved=moved)
     if job.target_success is not None:
@@ -344,6 +348,26 @@ def _run_targeted(job: GenerateJob) -> Generated:
                      regret_after=max(0.0, expert_after.success - res.after.success),
                      success_before=res.before.success, success_after=res.after.success,
                      rollout_steps=res.env_steps, before=res.trajectories_before[0])
+
+
+def generation_line(made: Sequence[Generated], requested: int) -> str:
+    """One line on what G made in an iteration's generation jobs (each asked for ``requested`` edits) and, where
+    fewer, why: :func:`~adaptenv.adapt.step.edits_line` over the jobs' logs and diagnoses."""
+    reasons: Counter[str] = Counter()
+    no_failure = [0, 0]
+    for m in made:
+        if m.edits < requested:
+            reasons += missed_edit_reasons(m.edit_log)
+        episodes = (m.edit_log.get("diagnosis") or {}).get("episodes")
+        if episodes and all(e.get("success") for e in episodes):
+            no_failure[0] += 1
+            no_failure[1] += len(episodes)
+        elif episodes is None and m.analysis is not None and m.analysis.outcome.success:
+            no_failure[0] += 1
+            no_failure[1] += 1
+    return edits_line(requested * len(made), sum(m.edits for m in made), reasons, scenes=len(made),
+                      refused=sum(not m.valid for m in made), no_failure=(no_failure[0], no_failure[1]),
+                      stopped=[m.stopped for m in made])
 
 
 def check_steps(generation: GenerationResult) -> int:

@@ -42,14 +42,24 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-import torch
 
 from adaptenv.adapt.llm.accounting import run_changes, scenes_usage
-from adaptenv.agents.checkpoint import load_checkpoint, load_tensors, save_checkpoint
+from adaptenv.agents.checkpoint import (
+    atomic_torch_save,
+    load_checkpoint,
+    load_tensors,
+    save_checkpoint,
+)
 from adaptenv.agents.config import FinetuneConfig
 from adaptenv.agents.evaluate import EpisodeResult, EvalReport, mean_se, summarize, write_report
 from adaptenv.agents.houses import load_house_set
-from adaptenv.agents.network import NavNet, NeuralPolicy, torch_threads
+from adaptenv.agents.network import (
+    NavNet,
+    NeuralPolicy,
+    resolve_precision,
+    same_arithmetic,
+    torch_threads,
+)
 from adaptenv.agents.ppo import learner_problem
 from adaptenv.agents.registry import resolve_policy, weights_record
 from adaptenv.agents.train import finetune
@@ -61,6 +71,7 @@ from adaptenv.curriculum.jobs import (
     Rollout,
     RolloutJob,
     eval_jobs,
+    generation_line,
     heldout_set,
     run_eval,
     run_rollout,
@@ -88,6 +99,8 @@ from adaptenv.curriculum.records import (
     write_iterations,
 )
 from adaptenv.errors import ConfigError
+from adaptenv.files import BOOKKEEPING
+from adaptenv.limits import STATE_BYTES
 from adaptenv.render.topdown import render_house
 
 #: The fix a corrupt state.json's errors suggest.
@@ -174,8 +187,10 @@ def _run_loop(cfg: LoopConfig, run_dir: str | Path, resume: bool, executor: Exec
     state, records, command = _open_run(cfg, run_dir, resume, command)
     skipped = skipped_houses([cfg.houses, *cfg.heldout.values()])
     weights = _pi0_weights(cfg, run_dir, fresh=state.iteration == 0 and not records)
+    precision = resolve_precision(cfg.finetune_precision, "--finetune-precision")
     atomic_write_text(run_dir / "run.json", RunInfo(method=cfg.method, seed=cfg.seed, config=asdict(cfg), command=command,
-                                                    skipped_houses=skipped, weights=weights).model_dump_json(indent=1))
+                                                    skipped_houses=skipped, weights=weights,
+                                                    finetune_precision=precision).model_dump_json(indent=1))
     store = SceneStore(run_dir / "scenes")
     ex = executor if executor is not None else InProcessExecutor()
     method = METHODS[cfg.method]()
@@ -224,6 +239,9 @@ def _run_loop(cfg: LoopConfig, run_dir: str | Path, resume: bool, executor: Exec
         new = method.make_scenes(it, rolled, rollouts)
         train_names = method.train_on(it, rolled, new)
         stages.lap("scenes")
+        made_line = generation_line([m for _, m in it.made], cfg.edit_steps) if it.made else ""
+        say(f"t={t}: {made_line or f'{cfg.method} makes no edits'} ({len(new)} new scene{'s' * (len(new) != 1)}, "
+            f"{stages.seconds['scenes']:.0f} s)")
         llm_usage = None
         if method.uses_llm:
             made = [m for _, m in it.made]
@@ -244,7 +262,7 @@ def _run_loop(cfg: LoopConfig, run_dir: str | Path, resume: bool, executor: Exec
         save_checkpoint(iteration_dir(run_dir, t) / "policy.pt", net,
                         {"iteration": t, "method": cfg.method, "end_threshold": pi_next.end_threshold})
         if tuned.learner is not None and cfg.finetune_keep_learner:
-            torch.save(tuned.learner, iteration_dir(run_dir, t) / LEARNER_FILE)
+            atomic_torch_save(tuned.learner, iteration_dir(run_dir, t) / LEARNER_FILE)
 
         # 4. held-out evaluation of pi_{t+1}
         say(f"t={t}: evaluating on the held-out sets")
@@ -257,10 +275,10 @@ def _run_loop(cfg: LoopConfig, run_dir: str | Path, resume: bool, executor: Exec
                                        edits=state.edits, train=train_metrics, heldout=heldout, gallery=it.gallery,
                                        wall_time_s=round(time.perf_counter() - start, 2),
                                        stage_seconds=stages.seconds, llm_usage=llm_usage))
-        (iteration_dir(run_dir, t) / "scenes.json").write_text(json.dumps(
+        atomic_write_text(iteration_dir(run_dir, t) / "scenes.json", json.dumps(
             {"rolled_out": rolled, "replayed": it.replayed, "trained_on": train_names,
-             "edits_this_iteration": state.edits - edits_before, "parents": it.parents}),
-            encoding="utf-8")
+             "edits_this_iteration": state.edits - edits_before, "parents": it.parents,
+             "edits_requested": cfg.edit_steps * len(it.made), "generation": made_line}))
         _checkpoint(run_dir, cfg, state, records)
     return records
 
@@ -328,23 +346,24 @@ def _moved_match_run(saved: dict[str, Any], cfg: LoopConfig) -> dict[str, str]:
     return {}
 
 
+def _same_precision(saved: dict[str, Any], cfg: LoopConfig) -> dict[str, str]:
+    """``finetune_precision`` as now when the saved one computes alike on this CPU (fp32 saved, auto meaning fp32)."""
+    old = saved.get("finetune_precision", LoopConfig.finetune_precision)
+    return {"finetune_precision": cfg.finetune_precision} if same_arithmetic(old, cfg.finetune_precision) else {}
+
+
 def _open_run(cfg: LoopConfig, run_dir: Path, resume: bool, command: str
               ) -> tuple[LoopState, list[IterationRecord], str]:
     """The state, records and command to continue from: a resumed run's, or a fresh run's in an empty folder."""
     state_path = run_dir / STATE
     if resume and state_path.is_file():
-        saved = read_json(state_path, "loop state (written by the loop)")
-        if not isinstance(saved, dict) or not isinstance(saved.get("config"), dict):
-            raise ConfigError(f"{state_path}: expected {{\"config\": ..., \"state\": ...}} as the loop writes it; "
-                              f"{STATE_FIX}")
+        saved, state = read_state(state_path)
         old = saved["config"]  # a field added to LoopConfig since the run started counts as its default
-        changed = run_changes({**asdict(LoopConfig()), **old, **_moved_match_run(old, cfg)}, asdict(cfg))
+        changed = run_changes({**asdict(LoopConfig()), **old, **_moved_match_run(old, cfg), **_same_precision(old, cfg)},
+                              asdict(cfg))
         if changed:
             raise ConfigError(f"{run_dir}: --resume with other settings than the interrupted run: {', '.join(map(printable, changed))}; "
                               "pass the same options (its run.json lists them) or a new output folder")
-        state = parse_config(LoopState, saved.get("state"), str(state_path), prefix="state", fix=STATE_FIX)
-        if state.buffer:
-            lb.LevelBufferState.from_dict(state.buffer, f"{state_path}: state.buffer")
         records = read_iterations(run_dir)[: state.iteration + 1]
         check_resume_files(cfg, run_dir, state, records)
         info = run_dir / "run.json"
@@ -354,11 +373,35 @@ def _open_run(cfg: LoopConfig, run_dir: Path, resume: bool, command: str
             except (OSError, ValueError) as exc:  # pydantic's ValidationError is a ValueError
                 raise ConfigError(f"{info}: not the run.json the loop wrote ({type(exc).__name__}); {STATE_FIX}") from None
         return state, records, command
-    if run_dir.exists() and any(run_dir.iterdir()) and not resume:
+    if run_dir.exists() and any(p.name not in BOOKKEEPING for p in run_dir.iterdir()) and not resume:
         raise ConfigError(f"{run_dir}: the output folder is not empty; pass --resume to continue it or "
                           "choose a new folder")
     run_dir.mkdir(parents=True, exist_ok=True)
     return LoopState(), [], command
+
+
+def read_state(path: Path) -> tuple[dict[str, Any], LoopState]:
+    """The saved document and the state of a run's ``state.json``, checked: its shape, its fields, and every level id
+    (pool, archive, buffer) a plain name inside the run folder; each failure one line naming the file and value."""
+    saved = read_json(path, "loop state (written by the loop)", limit=STATE_BYTES)
+    if not isinstance(saved, dict) or not isinstance(saved.get("config"), dict):
+        raise ConfigError(f"{path}: expected {{\"config\": ..., \"state\": ...}} as the loop writes it; {STATE_FIX}")
+    state = parse_config(LoopState, saved.get("state"), str(path), prefix="state", fix=STATE_FIX)
+    for where, ids in (("pool", state.pool), ("archive", state.archive)):
+        for level_id in ids:
+            if (problem := lb.level_id_problem(level_id)) is not None:
+                raise ConfigError(f"{path}: state.{where}: {problem}; {STATE_FIX}")
+    if state.buffer:
+        lb.LevelBufferState.from_dict(state.buffer, f"{path}: state.buffer")
+    return saved, state
+
+
+def check_run_files(run_dir: Path) -> None:
+    """Before any work on --resume: the run's state.json and iterations.jsonl name only the run's own levels and
+    files (see :func:`read_state`); one line naming the file and the value otherwise."""
+    if (run_dir / STATE).is_file():
+        read_state(run_dir / STATE)
+    read_iterations(run_dir)
 
 
 def _checkpoint(run_dir: Path, cfg: LoopConfig, state: LoopState, records: list[IterationRecord]) -> None:

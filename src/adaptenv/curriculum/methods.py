@@ -49,7 +49,9 @@ from adaptenv.curriculum.jobs import (
 from adaptenv.curriculum.records import GalleryItem, SceneStore, read_iterations
 from adaptenv.errors import ConfigError
 from adaptenv.limits import check_float, check_seed
+from adaptenv.scene.house import House
 from adaptenv.scene.procedural import generate_house, preset_spec, rearrange_house
+from adaptenv.scene.procedural.variations import vary_house
 
 
 @dataclass
@@ -57,9 +59,11 @@ class LoopConfig:
     """Settings of one closed-loop run (one method, one seed); saved as run.json."""
 
     method: str = "ours"
-    """One of none, random, dr, dr-matched, sfl, plr, accel, ours, ours-noselect, ours-randomscene, ours-nof, ours-dr, ours-learned, ours-llm."""
+    """One of none, random, dr, dr-matched, sfl, oracle, rearrange, swap, plr, accel, ours, ours-noselect,
+    ours-randomscene, ours-nof, ours-dr, ours-learned, ours-llm."""
     policy: str = "pretrained"
-    """Starting policy pi_0: pretrained or a checkpoint path (it must be a neural policy to fine-tune)."""
+    """Starting policy pi_0: pretrained, a checkpoint path (it must be a neural policy to fine-tune), or scratch /
+    scratch-shape: a fresh map-reading network (labels, or the recognising mode) drawn from the run's seed."""
     houses: str = "preset:pretrain-train"
     """Training scenes e_0: a folder of house JSON files, a dataset FILE.jsonl[.gz][:START:STOP] or preset:NAME."""
     heldout: dict[str, str] = field(default_factory=lambda: {"rearranged": "preset:pretrain-rearranged",
@@ -100,9 +104,10 @@ class LoopConfig:
     finetune_min_start: float = 0.0
     """Fine-tuning episodes start at least this geodesic distance (m) from the target where a house allows
     (0: uniform starts; the long suites use 6 m)."""
-    finetune_precision: str = "fp32"
-    """Arithmetic of fine-tuning's gradient steps: fp32, or bf16 autocast (on CPUs with AVX512_BF16 DAgger's steps
-    about 2.4x faster and PPO end to end 1.4x, slower elsewhere; docs/BENCHMARKS.md)."""
+    finetune_precision: str = "auto"
+    """Arithmetic of fine-tuning's gradient steps: auto (bf16 where the CPU computes it natively, else fp32; run.json
+    records which), fp32, or bf16 autocast (on CPUs with AVX512_BF16 DAgger's steps about 2.4x faster and PPO end
+    to end 1.4x; about 8x slower on AVX2-only CPUs; docs/BENCHMARKS.md)."""
     finetune_beta: float = FinetuneConfig.beta
     """Probability that the teacher's action is executed while fine-tuning (DAgger's beta, constant)."""
     finetune_max_steps: int = FinetuneConfig.max_episode_steps
@@ -120,6 +125,13 @@ class LoopConfig:
     finetune_keep_learner: bool = True
     """ppo: each iteration continues the last one's value head and Adam moments (one PPO run across the loop, as
     UED methods train); false starts every iteration with a fresh critic and a value warm-up."""
+    grounded: bool = False
+    """sfl, plr, accel and ours take their new levels from the training homes (round robin) after edit_steps random
+    edits each, instead of fresh procedural houses (the scarce-homes setting: only dr, dr-matched and oracle, the
+    declared upper bounds, draw fresh houses)."""
+    appearance_edits: bool = False
+    """Random edits (random, accel's children, grounded levels) may also swap an object's asset within its type and
+    split or give a room's floor or walls another material (half of them; adapt/appearance.py)."""
     replay_fraction: float = 0.5
     """Share of the fine-tuning scenes drawn from earlier scenes so the policy does not forget."""
     heldout_episodes: int = 100
@@ -273,6 +285,10 @@ class Stream(IntEnum):
     """``oracle``: seeds of its fresh houses (from the held-out suites' generator settings)."""
     REARRANGE = 9
     """``rearrange``: which training home is rearranged, and the rearrangement's seed."""
+    SWAP = 10
+    """``swap``: the seeds of the homes' variations (assets swapped, materials redrawn)."""
+    GROUNDED = 11
+    """``grounded``: the seeds of the random edits that make new levels from the homes."""
     GENERATE = 100
     """Scene generation; job k of the iteration uses ``[seed, t, GENERATE + k]``."""
 
@@ -411,7 +427,7 @@ class SFL(Method):
     name = "sfl"
 
     def scenes_to_roll_out(self, it: Iteration) -> list[str]:
-        return fresh_houses(it, it.cfg.sfl_candidates * it.cfg.scenes_per_iteration)
+        return new_levels(it, it.cfg.sfl_candidates * it.cfg.scenes_per_iteration)
 
     def make_scenes(self, it: Iteration, rolled: list[str], rollouts: list[Rollout]) -> list[str]:
         scores = np.array([level_score(ro, "learnability") for ro in rollouts])
@@ -431,7 +447,8 @@ class EditingMethod(Method):
         policy = needs_policy(self.generator)  # random edits ignore pi_t: no weights to pickle per job
         jobs = [GenerateJob(self.generator, it.store.house(name), name, it.cfg.edit_steps,
                             (it.cfg.seed, it.t, Stream.GENERATE + k), weights=it.weights if policy else None,
-                            rollout=ro if policy else None, llm=it.cfg.llm, **(target_fields(it.cfg) if policy else {}))
+                            rollout=ro if policy else None, llm=it.cfg.llm, **(target_fields(it.cfg) if policy else {}),
+                            appearance=0.0 if policy else appearance_share(it.cfg))
                 for k, (name, ro) in enumerate(zip(rolled, rollouts, strict=True))]
         new = []
         for k, (job, made) in enumerate(zip(jobs, it.executor.map(run_generate, jobs, desc="generation"), strict=True)):
@@ -462,17 +479,38 @@ class Rearrange(DomainRandomization):
     by ``rearrange_house`` (the generator of the ``rearranged`` suites, with new seeds), never the suites' houses."""
 
     name = "rearrange"
+    stream: ClassVar[Stream] = Stream.REARRANGE
+    tag: ClassVar[str] = "ra"
+    preset: ClassVar[str] = "pretrain-rearranged"
+    """The preset whose generator settings the children take."""
+
+    def child(self, house: House, seed: int) -> House:
+        """One new version of a home."""
+        return rearrange_house(house, seed, preset_spec(self.preset).config())
 
     def scenes_to_roll_out(self, it: Iteration) -> list[str]:
         pool, out = it.state.pool, []
         for k in range(it.cfg.scenes_per_iteration):
             n = it.state.generated
             home = pool[((it.t - 1) * it.cfg.scenes_per_iteration + k) % len(pool)]
-            house = rearrange_house(it.store.house(home), it.seed(Stream.REARRANGE, n) % 2**31,
-                                    preset_spec("pretrain-rearranged").config())
-            out.append(it.store.put(f"{home.split('~')[0]}~ra{n:04d}", house))
+            house = self.child(it.store.house(home), it.seed(self.stream, n) % 2**31)
+            out.append(it.store.put(f"{home.split('~')[0]}~{self.tag}{n:04d}", house))
             it.state.generated += 1
         return out
+
+
+class Swap(Rearrange):
+    """``swap``: the homes' own variations. Every iteration the training homes (round robin) with each object's asset
+    swapped for another of its type and split where one fits and the floor and wall materials drawn anew
+    (``vary_house``, the ``pretrain-swapped`` preset's settings, new seeds): what N homes give without new layouts."""
+
+    name = "swap"
+    stream = Stream.SWAP
+    tag = "sw"
+    preset = "pretrain-swapped"
+
+    def child(self, house: House, seed: int) -> House:
+        return vary_house(house, seed, preset_spec(self.preset).config())
 
 
 class RandomEdits(EditingMethod):
@@ -500,7 +538,7 @@ class PLR(Method):
     def scenes_to_roll_out(self, it: Iteration) -> list[str]:
         if seeds_buffer(it):
             return list(it.state.pool)  # seed the buffer with the original training scenes
-        return fresh_houses(it, it.cfg.scenes_per_iteration)
+        return new_levels(it, it.cfg.scenes_per_iteration)
 
     def update_buffer(self, it: Iteration, rolled: list[str], rollouts: list[Rollout]) -> None:
         for name, ro in zip(rolled, rollouts, strict=True):
@@ -529,13 +567,14 @@ class ACCEL(PLR):
         if seeds_buffer(it):
             return list(it.state.pool)
         if it.buffer.size == 0:
-            return fresh_houses(it, it.cfg.scenes_per_iteration)
+            return new_levels(it, it.cfg.scenes_per_iteration)
         idx = lb.sample_replay(it.buffer, it.buffer_cfg, it.rng(Stream.ACCEL_REPLAY), it.t,
                                k=it.cfg.scenes_per_iteration)
         it.replayed = [it.buffer.level_ids[i] for i in idx]
         it.buffer = lb.update_scores(it.buffer, list(idx), [it.buffer.scores[i] for i in idx], it.t)
         plans = lb.select_parents(it.buffer, idx, it.rng(Stream.ACCEL_PARENTS))
-        jobs = [GenerateJob("random", it.store.house(p.parent_id), p.parent_id, it.cfg.edit_steps, (p.seed,))
+        jobs = [GenerateJob("random", it.store.house(p.parent_id), p.parent_id, it.cfg.edit_steps, (p.seed,),
+                            appearance=appearance_share(it.cfg))
                 for p in plans]
         children = []
         for k, (plan, made) in enumerate(zip(plans, it.executor.map(run_generate, jobs, desc="ACCEL edits"),
@@ -546,7 +585,7 @@ class ACCEL(PLR):
             children.append(name)
             if len(it.gallery) < it.cfg.gallery:
                 it.gallery.append(gallery_item(it.run_dir, it.t, name, jobs[k].house, made, None))
-        return children + fresh_houses(it, it.cfg.scenes_per_iteration)
+        return children + new_levels(it, it.cfg.scenes_per_iteration)
 
 
 class Ours(Method):
@@ -569,7 +608,7 @@ class Ours(Method):
 
     def scenes_to_roll_out(self, it: Iteration) -> list[str]:
         seed = list(it.state.pool) if seeds_buffer(it) else []  # t=1: score every training scene once
-        return seed + fresh_houses(it, it.cfg.scenes_per_iteration)
+        return seed + new_levels(it, it.cfg.scenes_per_iteration)
 
     def update_buffer(self, it: Iteration, rolled: list[str], rollouts: list[Rollout]) -> None:
         for name, ro in zip(rolled, rollouts, strict=True):
@@ -728,9 +767,43 @@ def fresh_houses(it: Iteration, k: int, *, oracle: bool = False) -> list[str]:
     return out
 
 
+def new_levels(it: Iteration, k: int) -> list[str]:
+    """``k`` new levels of the UED loop (sfl, plr, accel, ours): fresh procedural houses, or with ``grounded`` the
+    training homes after random edits (:func:`grounded_levels`)."""
+    return grounded_levels(it, k) if it.cfg.grounded else fresh_houses(it, k)
+
+
+def grounded_levels(it: Iteration, k: int) -> list[str]:
+    """``k`` levels made from the training homes (round robin over the run): each home after ``edit_steps`` random
+    edits (with ``appearance_edits``, asset swaps and material changes among them), named ``HOME~gNNNN``."""
+    pool, homes = it.state.pool, []
+    for _ in range(k):
+        homes.append((pool[it.state.generated % len(pool)], it.state.generated))
+        it.state.generated += 1
+    jobs = [GenerateJob("random", it.store.house(home), home, it.cfg.edit_steps,
+                        (it.cfg.seed, it.t, int(Stream.GROUNDED), n), appearance=appearance_share(it.cfg))
+            for home, n in homes]
+    out = []
+    for (home, n), made in zip(homes, it.executor.map(run_generate, jobs, desc="levels from the homes"), strict=True):
+        it.state.edits += made.edits
+        name = it.store.put(f"{home.split('~')[0]}~g{n:04d}", made.house)
+        it.parents[name] = home
+        out.append(name)
+    return out
+
+
+APPEARANCE_SHARE = 0.5
+"""Share of random edits that are appearance edits with ``appearance_edits``."""
+
+
+def appearance_share(cfg: LoopConfig) -> float:
+    """The ``appearance`` of the run's random-edit jobs: APPEARANCE_SHARE with ``appearance_edits``, else 0."""
+    return APPEARANCE_SHARE if cfg.appearance_edits else 0.0
+
+
 #: Every method by name; add a method with one class and one line here.
 METHODS: dict[str, type[Method]] = {m.name: m for m in (NoNewScenes, RandomEdits, DomainRandomization, DRMatched,
-                                                        SFL, Oracle, Rearrange, PLR, ACCEL, Ours, OursNoSelect,
+                                                        SFL, Oracle, Rearrange, Swap, PLR, ACCEL, Ours, OursNoSelect,
                                                         OursRandomScene, OursNoF, OursDR, OursLearned, OursLLM)}
 #: The methods whose new scenes come from G's adaptation step (they take ``LoopConfig.target_success``).
 ADAPTING_METHODS: tuple[str, ...] = tuple(n for n, m in METHODS.items() if getattr(m, "generator", "random") != "random")

@@ -21,12 +21,13 @@ from __future__ import annotations
 
 import json
 import math
-from pathlib import Path
+from pathlib import Path, PurePosixPath, PureWindowsPath
 from typing import Any
 
 from pydantic import BaseModel, Field, ValidationError, field_validator
 
 from adaptenv.configfile import field_path
+from adaptenv.curriculum.buffer import level_id_problem
 from adaptenv.errors import ConfigError
 from adaptenv.files import atomic_write_text
 from adaptenv.scene.house import House, load_house, save_house
@@ -87,6 +88,24 @@ class GalleryItem(BaseModel):
     after_trajectory_json: str | None = None
     """pi_t's own episode in e_{t+1}, same start and target."""
 
+    @field_validator("scene")
+    @classmethod
+    def _plain_scene(cls, v: str) -> str:
+        """The scene is a level of this run: a plain name, never a path out of the run folder."""
+        if (problem := level_id_problem(v)) is not None:
+            raise ValueError(problem)
+        return v
+
+    @field_validator("before_png", "after_png", "analysis_json", "edits_json", "before_house_json",
+                     "after_house_json", "before_trajectory_json", "after_trajectory_json")
+    @classmethod
+    def _inside_run(cls, v: str | None) -> str | None:
+        """Each file is the run's own: a relative path inside the run folder."""
+        if v is not None and (PurePosixPath(v).is_absolute() or PureWindowsPath(v).anchor or "\0" in v
+                              or ".." in PurePosixPath(v.replace("\\", "/")).parts):
+            raise ValueError(f"path {v!r} is not a file inside the run folder (a relative path, no '..')")
+        return v
+
 
 class IterationRecord(BaseModel):
     """Figures of one finished iteration t (policy pi_t evaluated, e_{t+1} generated, pi_{t+1} trained)."""
@@ -129,6 +148,9 @@ class RunInfo(BaseModel):
     """Per house-set spec (training houses and held-out sets), the unusable houses left out of it."""
     weights: dict[str, str] | None = None
     """pi_0's weights: the ``--policy`` name, its file and sha256 (None for a run written before they were kept)."""
+    finetune_precision: str | None = None
+    """The arithmetic fine-tuning's gradient steps used on the machine that ran it (``auto`` resolved: fp32 or bf16;
+    None for a run written before it was kept)."""
 
 
 def read_iterations(run_dir: Path) -> list[IterationRecord]:
@@ -190,20 +212,26 @@ class SceneStore:
         self._houses: dict[str, House] = {}
         self._worlds: dict[str, NavWorld] = {}
 
+    def _file(self, name: str) -> Path:
+        """Scene ``name``'s house file, inside the store (ConfigError for a name that is not a plain one)."""
+        if (problem := level_id_problem(name)) is not None:
+            raise ConfigError(f"{self.root}: {problem}; restore the run's state, or run again in a new folder")
+        return self.root / f"{name}.json"
+
     def put(self, name: str, house: House, task_targets: tuple[str, ...] = ()) -> str:
         """Save ``house`` as scene ``name`` (and the target types its training episodes ask for, if any); returns the name."""
-        save_house(house, self.root / f"{name}.json")
+        path = self._file(name)
+        save_house(house, path)
         if task_targets:  # beside, not among, the house files (a scenes folder stays a valid --houses folder)
             (self.root / TASKS).mkdir(exist_ok=True)
-            (self.root / TASKS / f"{name}.json").write_text(json.dumps({"task_targets": list(task_targets)}),
-                                                            encoding="utf-8")
+            atomic_write_text(self.root / TASKS / f"{name}.json", json.dumps({"task_targets": list(task_targets)}))
         self._houses[name] = house
         self._worlds.pop(name, None)
         return name
 
     def house(self, name: str) -> House:
         if name not in self._houses:
-            self._houses[name] = load_house(self.root / f"{name}.json", validate=False)
+            self._houses[name] = load_house(self._file(name), validate=False)
         return self._houses[name]
 
     def world(self, name: str) -> NavWorld:

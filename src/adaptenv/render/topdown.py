@@ -25,6 +25,7 @@ import numpy as np
 from PIL import Image, ImageColor, ImageDraw
 
 from adaptenv.errors import AdaptenvError
+from adaptenv.files import atomic_path
 from adaptenv.render.labels import (
     Box,
     PlacedLabel,
@@ -733,9 +734,9 @@ def png_bytes(image: Image.Image) -> bytes:
 def save_render(image: Image.Image, path: str | Path) -> Path:
     """Write a render as PNG (or whatever the suffix names), creating parent folders."""
     p = Path(path)
-    p.parent.mkdir(parents=True, exist_ok=True)
     try:
-        image.save(p)
+        with atomic_path(p) as tmp:
+            image.save(tmp)
     except (ValueError, OSError) as exc:
         raise AdaptenvError(f"{p}: cannot write the image ({exc}); use a writable path ending in .png") from None
     return p

@@ -33,6 +33,7 @@ from adaptenv.curriculum.records import (
 )
 from adaptenv.curriculum.verdict import budget_line, lever_lines, verdict_lines
 from adaptenv.errors import AdaptenvError
+from adaptenv.files import atomic_path, atomic_write_text
 from adaptenv.render.compare import BeforeAfter, render_before_after
 from adaptenv.render.topdown import render_house
 from adaptenv.report.data import (
@@ -184,7 +185,8 @@ class Assets:
 
     def copy(self, src: Path, folder: str, name: str) -> Path:
         dest = self.reserve(folder, name)
-        shutil.copyfile(src, dest)
+        with atomic_path(dest) as tmp:
+            shutil.copyfile(src, tmp)
         return dest
 
     def reserve(self, folder: str, name: str) -> Path:
@@ -212,7 +214,8 @@ class Assets:
     def drawn(self, image, folder: str, name: str, alt: str) -> str:
         """Save a PIL image into the report and return its ``<img>``."""
         dest = self.reserve(folder, name)
-        image.save(dest)
+        with atomic_path(dest) as tmp:
+            image.save(tmp)
         return self.img_tag(dest, image.size, alt)
 
     def img_tag(self, dest: Path, size: tuple[int, int], alt: str) -> str:
@@ -597,7 +600,7 @@ def write_run_report(run: RunData, out: Path, *, back: tuple[str, str] | None = 
     if back is not None:
         nav.insert(0, (f"← {back[0]}", back[1]))
     index = out / INDEX
-    index.write_text(page(f"Run report: {run.label}", subtitle, nav, "\n".join(b for b in body if b)), encoding="utf-8")
+    atomic_write_text(index, page(f"Run report: {run.label}", subtitle, nav, "\n".join(b for b in body if b)))
     return index
 
 
@@ -791,29 +794,19 @@ def write_experiment_report(exp: ExperimentData, out: Path) -> Path:
     title = f"Experiment report: {exp.path.resolve().name}"
     subtitle = f"Experiment folder: {esc(exp.path)} · methods: {esc(', '.join(exp.methods))}"
     index = out / INDEX
-    index.write_text(page(title, subtitle, nav, "\n".join(b for b in body if b)), encoding="utf-8")
+    atomic_write_text(index, page(title, subtitle, nav, "\n".join(b for b in body if b)))
     return index
 
 
 # --------------------------------------------------------------------------- entry point
 
-def is_report_folder(out: Path) -> bool:
-    """Whether ``out`` holds a report adaptenv wrote (its index.html names the generator)."""
-    index = out / INDEX
-    return index.is_file() and f'content="{GENERATOR}"' in index.read_text(encoding="utf-8", errors="replace")[:2000]
-
-
 def _prepare_out(out: Path, source: Path) -> None:
-    """Create the output folder; clear the sub-folders of an earlier report there (never anything else)."""
+    """Create the output folder (``adaptenv report`` removes its own earlier report first, and nothing else)."""
     if out.resolve() == source.resolve():
         raise AdaptenvError(f"{out}: the report cannot be written into the folder it reads; "
                             "pass another -o folder (default: <folder>/report)")
     if out.exists() and not out.is_dir():
         raise AdaptenvError(f"{out}: exists and is not a folder; pass a folder to -o")
-    if is_report_folder(out):
-        for name in _OWNED:
-            if (out / name).is_dir():
-                shutil.rmtree(out / name)
     out.mkdir(parents=True, exist_ok=True)
 
 

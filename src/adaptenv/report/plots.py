@@ -10,6 +10,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
+from adaptenv.files import atomic_path
 from adaptenv.report.data import RunData, Stat, curve
 
 DPI = 100
@@ -73,8 +74,8 @@ def _figure(lines_by_metric: dict[str, Sequence[Line]], title: str, path: Path) 
     fig.legend(list(handles.values()), list(handles), loc="upper right", ncols=min(len(handles), 4), fontsize=8,
                frameon=False)
     fig.subplots_adjust(left=0.075, right=0.985, bottom=0.09, top=0.9, wspace=0.06, hspace=0.16)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, format="png", metadata={"Software": None})
+    with atomic_path(path) as tmp:
+        fig.savefig(tmp, format="png", metadata={"Software": None})
     return path
 
 

@@ -29,6 +29,7 @@ from pydantic import BaseModel, ConfigDict, Field
 
 from adaptenv.configfile import parse_config, printable, read_json
 from adaptenv.errors import ConfigError
+from adaptenv.limits import ASSET_TABLE_BYTES
 
 ROOM_TYPES = ("Kitchen", "LivingRoom", "Bedroom", "Bathroom")
 _ROOM_KEY = {"Kitchen": "inKitchens", "LivingRoom": "inLivingRooms", "Bedroom": "inBedrooms",
@@ -257,7 +258,7 @@ class UserAsset(BaseModel):
 def read_asset_table(path: str | Path, known_types: frozenset[str] | None = None) -> dict[str, AssetInfo]:
     """Parse a user asset table (see the module docstring); ConfigError names the file, asset and field."""
     p = Path(path)
-    doc = read_json(p, "asset table (see docs/scene.md)", source=f"--assets {p}")
+    doc = read_json(p, "asset table (see docs/scene.md)", source=f"--assets {p}", limit=ASSET_TABLE_BYTES)
     table = doc.get("assets", doc) if isinstance(doc, dict) else None
     if not isinstance(table, dict) or not table:
         raise ConfigError(f"--assets {p}: expected a JSON object {{\"assets\": {{ASSET_ID: {{\"type\": ..., "

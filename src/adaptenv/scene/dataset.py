@@ -16,16 +16,20 @@ line, for the caller to report or skip like an invalid house file.
 from __future__ import annotations
 
 import gzip
+import io
 import json
 import logging
 import re
 import zlib
 from collections.abc import Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
 from typing import IO, Any
 
 from adaptenv.errors import ConfigError, HouseError
+from adaptenv.files import FileRefused, loads_json, not_regular, open_regular, too_large
+from adaptenv.limits import DATASET_LINE_BYTES
 from adaptenv.scene.house import House, load_house, parse_house
 from adaptenv.scene.validate import dropped_children_line, validate_read_house
 
@@ -80,31 +84,48 @@ def house_name(index: int) -> str:
 
 
 def line_label(path: Path, index: int) -> str:
-    """How errors name the line of index ``index`` (1-based, as editors count)."""
-    return f"{path} line {index + 1}"
+    """How errors name the line of index ``index``: 1-based, as editors count, with the 0-based index that slices
+    (FILE.jsonl.gz:START:STOP) and house names (house-000002) use, e.g. ``train.jsonl line 3 (index 2)``."""
+    return f"{path} line {index + 1} (index {index})"
 
 
-def _open_text(path: Path) -> IO[str]:
-    """The file as UTF-8 text, decompressed on the fly when it is gzip (by its magic bytes, not its name)."""
-    with open(path, "rb") as f:
-        gzipped = f.read(2) == b"\x1f\x8b"
-    return gzip.open(path, "rt", encoding="utf-8") if gzipped else open(path, encoding="utf-8")  # noqa: SIM115
+@contextmanager
+def _open_text(path: Path) -> Iterator[IO[str]]:
+    """The regular file ``path`` as UTF-8 text, decompressed on the fly when it is gzip (by its magic bytes, not its
+    name); opened without blocking, so a FIFO or a device is refused (FileRefused), never waited on or read."""
+    with open_regular(path, "dataset") as raw:
+        gzipped = raw.read(2) == b"\x1f\x8b"
+        raw.seek(0)
+        with io.TextIOWrapper(gzip.GzipFile(fileobj=raw) if gzipped else raw, encoding="utf-8") as text:
+            yield text
+
+
+def _lines(f: IO[str], path: Path) -> Iterator[str]:
+    """The lines of ``f``, each at most :data:`~adaptenv.limits.DATASET_LINE_BYTES` long (FileRefused otherwise)."""
+    index = 0
+    while line := f.readline(DATASET_LINE_BYTES + 1):
+        if len(line) > DATASET_LINE_BYTES:
+            raise FileRefused(line_label(path, index), f"the line is {too_large(None, DATASET_LINE_BYTES, 'dataset line')}")
+        index += 1
+        yield line
 
 
 def dataset_lines(ds: DatasetSlice) -> Iterator[tuple[int, str]]:
     """(line index, text) of every non-blank line the slice selects, read lazily; stops at the slice's end."""
-    if not ds.path.is_file():
+    if not ds.path.exists():
         raise ConfigError(f"{ds.spec}: no such dataset file; pass a .jsonl or .jsonl.gz file of houses, one per line")
     total, found = 0, 0
     try:
         with _open_text(ds.path) as f:
-            for index, line in enumerate(f):
+            for index, line in enumerate(_lines(f, ds.path)):
                 total = index + 1
                 if index >= ds.start and (index - ds.start) % ds.step == 0 and line.strip():
                     found += 1
                     yield index, line
                 if ds.stop is not None and total >= ds.stop:
                     break
+    except FileRefused:
+        raise
     except (OSError, EOFError, UnicodeDecodeError, zlib.error) as exc:
         raise ConfigError(f"{line_label(ds.path, total)}: cannot read the dataset there ({exc}); the file must be "
                           "UTF-8 JSON lines, gzip-compressed or not, and complete") from None
@@ -121,10 +142,13 @@ def dataset_documents(ds: DatasetSlice) -> Iterator[tuple[int, dict[str, Any]]]:
     """(line index, parsed JSON object) of the selected lines; ConfigError names a line that is not one."""
     for index, line in dataset_lines(ds):
         try:
-            doc = json.loads(line)
+            doc = loads_json(line)
         except json.JSONDecodeError as exc:
             raise ConfigError(f"{line_label(ds.path, index)}: not valid JSON ({exc.msg} at column {exc.colno}); "
                               "a house dataset holds one house JSON object per line") from None
+        except ValueError as exc:  # nested too deeply, or an integer of more than 4300 digits
+            raise ConfigError(f"{line_label(ds.path, index)}: refused ({str(exc).split(';')[0]}); a house dataset "
+                              "holds one house JSON object per line") from None
         if not isinstance(doc, dict):
             raise ConfigError(f"{line_label(ds.path, index)}: a JSON {type(doc).__name__}, not a house object; a "
                               "house dataset holds one house JSON object per line")
@@ -162,7 +186,8 @@ def load_one_house(spec: str | Path, *, validate: bool = True, catalog: Any = No
     if ds is None:
         path = Path(spec)
         if not path.is_file():
-            why = "is a folder, not a" if path.is_dir() else "no such"
+            kind = not_regular(path.stat().st_mode) if path.exists() else None
+            why = "is a folder, not a" if path.is_dir() else f"is {kind}, not a" if kind else "no such"
             raise ConfigError(f"{spec}: {why} {what} file; pass a house JSON file or one line of a dataset, "
                               "e.g. FILE.jsonl.gz:2:3")
         name, house = path.stem, load_house(path, validate=validate, catalog=catalog, skip_unknown=skip_unknown)

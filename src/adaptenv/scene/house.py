@@ -11,6 +11,7 @@ from pathlib import Path
 from typing import Any
 
 from adaptenv.errors import HouseError
+from adaptenv.files import atomic_write_text
 from adaptenv.scene.model import (
     AGENT_POSE_KINDS,
     MAX_ANGLE,
@@ -66,8 +67,7 @@ def load_house(path: str | Path, *, validate: bool = True, catalog: Any = None,
 def save_house(house: House, path: str | Path) -> Path:
     """Write a house as JSON (unknown keys preserved); creates parent folders. Returns the path."""
     p = Path(path)
-    p.parent.mkdir(parents=True, exist_ok=True)
-    p.write_text(json.dumps(house.to_dict(), indent=1), encoding="utf-8")
+    atomic_write_text(p, json.dumps(house.to_dict(), indent=1))
     return p
 
 

@@ -20,6 +20,8 @@ import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, PrivateAttr, ValidationError
 
 from adaptenv.errors import HouseError, Problem
+from adaptenv.files import FileRefused, JSONTooDeep, loads_json, read_bytes
+from adaptenv.limits import HOUSE_BYTES
 
 SCHEMA_VERSION = "1.0.0"
 AGENT_POSE_KINDS = ("default", "arm", "locobot", "stretch")
@@ -352,20 +354,22 @@ def read_house_document(path: str | Path) -> Any:
                                   "to --houses (FILE.jsonl.gz:0:100 picks lines) or split it into files with "
                                   "`adaptenv houses export`", str(p))])
     try:
-        text = p.read_text(encoding="utf-8")
+        text = read_bytes(p, HOUSE_BYTES, "house").decode("utf-8")
     except FileNotFoundError:
         raise HouseError([Problem("$", "the file does not exist; check the path", str(p))]) from None
+    except FileRefused as exc:
+        raise HouseError([Problem("$", f"the file {exc.reason}", str(p))]) from None
     except (OSError, UnicodeDecodeError) as exc:
         raise HouseError([Problem("$", f"the file cannot be read ({exc}); check it is a UTF-8 JSON file "
                                   "(a gzip dataset of houses, one per line, must be named .jsonl.gz)", str(p))]) from None
     try:
-        return json.loads(text)
+        return loads_json(text)
     except json.JSONDecodeError as exc:
         raise HouseError([Problem("$", f"the file is not valid JSON ({exc.msg} at line {exc.lineno}, "
                                   f"column {exc.colno}); fix the syntax", str(p))]) from None
+    except JSONTooDeep as exc:
+        raise HouseError([Problem("$", f"the file is refused: {exc}; "
+                                  "write a ProcTHOR house JSON file", str(p))]) from None
     except ValueError as exc:  # an integer of more than 4300 digits
         raise HouseError([Problem("$", f"the file is not valid JSON ({str(exc).split(';')[0]}); "
                                   "fix the number", str(p))]) from None
-    except RecursionError:
-        raise HouseError([Problem("$", "the file nests JSON arrays or objects too deeply to read; "
-                                  "write a ProcTHOR house JSON file", str(p))]) from None

@@ -22,7 +22,6 @@ is read as a file of one asset.
 
 from __future__ import annotations
 
-import gzip
 import json
 import math
 import re
@@ -33,6 +32,8 @@ from pathlib import Path
 from typing import Any, Literal
 
 from adaptenv.errors import ConfigError
+from adaptenv.files import FileRefused, atomic_write_text, gunzip, loads_json, read_bytes
+from adaptenv.limits import ANNOTATIONS_BYTES
 from adaptenv.scene.assets import load_catalog
 
 #: Catalog type of an asset whose annotation names no catalog type: a generic floor decoration,
@@ -183,11 +184,14 @@ def read_annotations(path: str | Path) -> dict[str, dict[str, Any]]:
     fix = ("pass objathor's annotations.json.gz (python -m objathor.dataset.download_annotations "
            "--version 2023_07_28), see docs/scene.md")
     try:
-        raw = p.read_bytes()
-        doc = json.loads((gzip.decompress(raw) if raw[:2] == b"\x1f\x8b" else raw).decode("utf-8"))
+        raw = read_bytes(p, ANNOTATIONS_BYTES, "annotation file")
+        doc = loads_json((gunzip(raw, ANNOTATIONS_BYTES, "annotation file", p) if raw[:2] == b"\x1f\x8b"
+                          else raw).decode("utf-8"))
     except FileNotFoundError:
         raise ConfigError(f"{p}: no such annotation file; {fix}") from None
-    except (OSError, EOFError, zlib.error, UnicodeDecodeError, json.JSONDecodeError) as exc:
+    except FileRefused:
+        raise
+    except (OSError, EOFError, zlib.error, UnicodeDecodeError, ValueError) as exc:  # ValueError: bad or deep JSON
         raise ConfigError(f"{p}: cannot read it as JSON or gzipped JSON ({exc}); {fix}") from None
     if isinstance(doc, dict) and isinstance(doc.get("uid"), str) and not isinstance(doc.get(doc["uid"]), dict):
         doc = {doc["uid"]: doc}  # one asset's own annotation file
@@ -235,6 +239,5 @@ def objathor_table(path: str | Path, out: str | Path, *, unmapped: Unmapped = "k
         raise ConfigError(f"{path}: no annotation has both a usable size and a catalog type; nothing to write "
                           "(pass --unmapped keep to keep untyped assets)")
     o = Path(out)
-    o.parent.mkdir(parents=True, exist_ok=True)
-    o.write_text(json.dumps(table.to_json(Path(path).name), indent=1), encoding="utf-8")
+    atomic_write_text(o, json.dumps(table.to_json(Path(path).name), indent=1))
     return table

@@ -121,12 +121,18 @@ def validate_read_house(house: House, file: str | None = None, catalog: AssetCat
 
 def validate_house_file(path: str | Path) -> list[Problem]:
     """Every problem of a house file, including unreadable, non-JSON and structurally invalid ones."""
+    return read_and_validate(path)[1]
+
+
+def read_and_validate(path: str | Path) -> tuple[House | None, list[Problem]]:
+    """A house file as read (None when it cannot be parsed; its ``dropped_children`` say what
+    ``--skip-unknown-assets`` left out) and every problem of it (:func:`validate_house_file`)."""
     try:
         doc = read_house_document(path)
         house = parse_house(doc, str(path))
     except HouseError as err:
-        return list(err.problems)
-    return validate_read_house(house, file=str(path))
+        return None, list(err.problems)
+    return house, validate_read_house(house, file=str(path))
 
 
 def _distinct_vertices(points: list[tuple[float, float]]) -> list[tuple[float, float]]:

@@ -24,7 +24,6 @@ recorded poses), so success can differ from AI2-THOR's own judgement.
 
 from __future__ import annotations
 
-import gzip
 import json
 import math
 import zlib
@@ -38,11 +37,13 @@ import numpy as np
 import shapely
 
 from adaptenv.errors import AdaptenvError
+from adaptenv.files import FileRefused, gunzip, loads_json, read_bytes
+from adaptenv.limits import AI2THOR_LOG_BYTES
 from adaptenv.scene.objathor import type_for_name
 from adaptenv.sim.metrics import episode_metrics
 from adaptenv.sim.rollout import record_sight, target_fields
 from adaptenv.sim.spec import ROTATE_LARGE, ROTATE_SMALL, TARGET_TYPES
-from adaptenv.sim.trajectory import Pose, Step, Trajectory, metres
+from adaptenv.sim.trajectory import Pose, Step, Trajectory, metres, pose_jumps, step_jump
 from adaptenv.sim.world import NavWorld
 
 _NAMES = {
@@ -91,10 +92,12 @@ def read_ai2thor_log(path: str | Path) -> AI2ThorLog:
     p = Path(path)
     fix = "log one JSON object per line as docs/simulator.md shows"
     try:
-        raw = p.read_bytes()
-        text = (gzip.decompress(raw) if raw[:2] == b"\x1f\x8b" else raw).decode("utf-8")
+        raw = read_bytes(p, AI2THOR_LOG_BYTES, "AI2-THOR log")
+        text = (gunzip(raw, AI2THOR_LOG_BYTES, "AI2-THOR log", p) if raw[:2] == b"\x1f\x8b" else raw).decode("utf-8")
     except FileNotFoundError:
         raise AdaptenvError(f"{p}: no such AI2-THOR log; check the path") from None
+    except FileRefused:
+        raise
     except (OSError, EOFError, zlib.error, UnicodeDecodeError) as exc:
         raise AdaptenvError(f"{p}: cannot read it as text or gzipped text ({exc}); {fix}") from None
     rows: list[tuple[int, dict[str, Any]]] = []
@@ -102,9 +105,11 @@ def read_ai2thor_log(path: str | Path) -> AI2ThorLog:
         if not line.strip():
             continue
         try:
-            row = json.loads(line)
+            row = loads_json(line)
         except json.JSONDecodeError as exc:
             raise AdaptenvError(f"{p}: line {n} is not JSON ({exc.msg}); {fix}") from None
+        except ValueError as exc:  # nested too deeply, or an integer of more than 4300 digits
+            raise AdaptenvError(f"{p}: line {n} is refused ({str(exc).split(';')[0]}); {fix}") from None
         if not isinstance(row, dict):
             raise AdaptenvError(f"{p}: line {n} is not a JSON object; {fix}")
         rows.append((n, row))
@@ -213,6 +218,9 @@ def trajectory_from_ai2thor(records: Sequence[dict[str, Any]], world: NavWorld, 
         if steps and steps[-1].action == "end":
             raise AdaptenvError(f"{where}: an event after the episode's end action; log one episode per file")
         action = records[k].get("action")
+        if (why := step_jump(poses[k - 1], poses[k])) is not None:
+            raise AdaptenvError(f"{where}: {why}; log every step of one episode (AI2-THOR with gridSize 0.2 and "
+                                "rotateStepDegrees 30, as SPOC runs it)")
         code = action_code(action, poses[k - 1], poses[k], where)
         if code is None:
             dropped[action["action"] if isinstance(action, dict) else action] += 1
@@ -228,6 +236,8 @@ def trajectory_from_ai2thor(records: Sequence[dict[str, Any]], world: NavWorld, 
                             "0 facing +z, 90 facing +x)")
     traj = Trajectory(house=house or world.name, target_type=target, **target_fields(world, target),
                       start=poses[0], steps=steps, final_pose=poses[-1], policy=policy, seed=seed)
+    if (why := pose_jumps(traj)) is not None:  # a move whose lastActionSuccess its poses contradict
+        raise AdaptenvError(f"{source}: {why}; log lastActionSuccess as AI2-THOR reports it")
     traj.metrics = episode_metrics(world, traj)
     return Conversion(traj, dropped)
 

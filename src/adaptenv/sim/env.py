@@ -26,6 +26,13 @@ from adaptenv.scene.house import House, load_house
 from adaptenv.scene.procedural import generate_houses
 from adaptenv.sim import task
 from adaptenv.sim.egomap import CROP, MAP_CHANNELS, EgoMap, unpack
+from adaptenv.sim.perception import (
+    CLASS_OBJECT,
+    N_SHAPE,
+    SHAPE_MAX,
+    check_perception,
+    sensor_classes,
+)
 from adaptenv.sim.spec import ACTIONS, MAX_STEPS, N_ACTIONS, N_RAYS, TARGET_TYPES, n_classes
 from adaptenv.sim.trajectory import Pose, Step, Trajectory
 from adaptenv.sim.vector import BatchSim, EpisodeSampler
@@ -43,19 +50,40 @@ BUILTIN_HOUSES = 8
 """Size of the built-in procedural house set used when an env is built without houses."""
 
 
-def observation_space(map: bool = False) -> spaces.Dict:
-    """The single-agent observation space of ``spec``; with ``map``, also the unpacked egocentric map crop."""
+def observation_space(map: bool = False, perception: str = "labels") -> spaces.Dict:
+    """The single-agent observation space of ``spec``; with ``map``, also the unpacked egocentric map crop; with
+    ``perception="shape"``, object classes folded into one and the rays' shape features (``sim.perception``)."""
     k = n_classes()
+    shape = check_perception(perception, "perception") == "shape"
     parts = {
         "depth": spaces.Box(0.0, 1.0, (N_RAYS,), np.float32),
-        "semantic": spaces.MultiDiscrete(np.full(N_RAYS, k, dtype=np.int64)),
+        "semantic": spaces.MultiDiscrete(np.full(N_RAYS, CLASS_OBJECT + 1 if shape else k, dtype=np.int64)),
         "target": spaces.Discrete(k),
         "prev_action": spaces.Discrete(N_ACTIONS + 1),
         "collided": spaces.Discrete(2),
     }
     if map:
         parts["map"] = spaces.Box(0, 1, (MAP_CHANNELS, CROP, CROP), np.uint8)
+    if shape:
+        parts["shape"] = spaces.Box(0.0, SHAPE_MAX, (N_RAYS, N_SHAPE), np.float32)
     return spaces.Dict(parts)
+
+
+def sensed(obs: dict[str, Any], perception: str, emap: EgoMap | None, first: np.ndarray | None) -> dict[str, Any]:
+    """A batched observation as ``perception`` reports it, the map (when ``emap``) marked from it and added.
+
+    Under ``shape`` the object classes fold into ``CLASS_OBJECT`` before the map is marked (so it holds no
+    target cells) and the map's target channels stay zero."""
+    if perception == "shape":
+        obs = {**obs, "semantic": sensor_classes(obs["semantic"])}
+    if emap is not None:
+        if first is not None:
+            emap.update(obs, first)
+        crop = map_observation(emap)
+        if perception == "shape":
+            crop[:, [2, 6]] = 0
+        obs["map"] = crop
+    return obs
 
 
 def map_observation(emap: EgoMap) -> np.ndarray:
@@ -132,6 +160,9 @@ class NavEnv(gymnasium.Env):
             above the simulator, so the simulator never imports it).
         map: add the key ``"map"``: the egocentric crops of an :class:`~adaptenv.sim.egomap.EgoMap` the
             env builds from the agent's own observations (uint8 (MAP_CHANNELS, CROP, CROP), 0/1).
+        perception: ``"labels"`` (each ray's semantic class) or ``"shape"``, the recognising mode: every object
+            reads as one class and the key ``"shape"`` (float32 (N_RAYS, 3)) gives the height and footprint sides
+            of what each ray hits (:mod:`adaptenv.sim.perception`).
 
     Example::
 
@@ -144,7 +175,7 @@ class NavEnv(gymnasium.Env):
 
     def __init__(self, houses: Houses | None = None, target_types: Sequence[str] | None = None,
                  max_steps: int = MAX_STEPS, render_mode: str | None = None, builtin_seed: int = 0,
-                 renderer: FrameRenderer | None = None, map: bool = False) -> None:
+                 renderer: FrameRenderer | None = None, map: bool = False, perception: str = "labels") -> None:
         if render_mode not in (None, "rgb_array"):
             raise ConfigError(f"render_mode: expected None or 'rgb_array', got {render_mode!r}")
         if render_mode is not None and renderer is None:
@@ -152,7 +183,8 @@ class NavEnv(gymnasium.Env):
                               "gymnasium.make('adaptenv/ObjectNav-v0', render_mode='rgb_array') or pass "
                               "renderer=adaptenv.render.topdown.env_frame")
         self.renderer = renderer
-        self.observation_space = observation_space(map=map)
+        self.perception = check_perception(perception, "perception")
+        self.observation_space = observation_space(map=map, perception=perception)
         self.action_space = spaces.Discrete(N_ACTIONS)
         self.emap = EgoMap(1) if map else None
         """The map memory behind the ``map`` key (None without the option)."""
@@ -175,8 +207,11 @@ class NavEnv(gymnasium.Env):
         if k is None:
             return self._adhoc[3]
         if k not in self._sims:
-            self._sims[k] = (BatchSim([world], max_steps=self.max_steps), EpisodeSampler([world], self.target_types))
+            self._sims[k] = (self._batch_sim([world]), EpisodeSampler([world], self.target_types))
         return self._sims[k]
+
+    def _batch_sim(self, worlds: list) -> BatchSim:
+        return BatchSim(worlds, max_steps=self.max_steps, shapes=self.perception == "shape")
 
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None):
         """Start an episode; ``options`` may fix ``house``, ``target_type`` and ``start`` (x, z, yaw).
@@ -194,7 +229,7 @@ class NavEnv(gymnasium.Env):
             # A NavWorld given again reuses its sim; a House or path is recompiled (it may have been edited).
             if self._adhoc is None or self._adhoc[0] is not item or self._adhoc[2] is not None:
                 world, house = _to_world(item, name="house")
-                sim = (BatchSim([world], max_steps=self.max_steps), EpisodeSampler([world], self.target_types))
+                sim = (self._batch_sim([world]), EpisodeSampler([world], self.target_types))
                 self._adhoc = (item, world, house, sim)
             world, house = self._adhoc[1], self._adhoc[2]
         else:
@@ -233,13 +268,10 @@ class NavEnv(gymnasium.Env):
 
     def _obs(self, first: bool, mark: bool = True) -> dict[str, Any]:
         """The observation; with the map option, ``mark`` updates the map from it first (``first``: a fresh map)."""
-        sim = self._sim
-        obs = {"depth": sim._depth[0].copy(), "semantic": sim._classes[0].copy(), "target": np.int64(sim.target[0]),
-               "prev_action": np.int64(sim.prev_action[0]), "collided": np.int64(not sim.moved[0])}
-        if self.emap is not None:
-            if mark:
-                self.emap.update({k: np.asarray(v)[None] for k, v in obs.items()}, np.array([first]))
-            obs["map"] = map_observation(self.emap)[0]
+        batch = sensed(self._sim.observe(), self.perception, self.emap, np.array([first]) if mark else None)
+        obs = {k: v[0] for k, v in batch.items()}
+        for k in ("target", "prev_action", "collided"):
+            obs[k] = np.int64(obs[k])
         return obs
 
     def _info(self, terminated: bool) -> dict[str, Any]:
@@ -290,7 +322,8 @@ class NavVectorEnv(VectorEnv):
 
     def __init__(self, num_envs: int = 8, houses: Houses | None = None,
                  target_types: Sequence[str] | None = None, max_steps: int = MAX_STEPS,
-                 builtin_seed: int = 0, render_mode: str | None = None, map: bool = False) -> None:
+                 builtin_seed: int = 0, render_mode: str | None = None, map: bool = False,
+                 perception: str = "labels") -> None:
         if num_envs < 1:
             raise ConfigError(f"num_envs: expected a positive count, got {num_envs}")
         self.num_envs = int(num_envs)
@@ -298,7 +331,8 @@ class NavVectorEnv(VectorEnv):
         self.render_mode = render_mode
         self.target_types = tuple(target_types) if target_types is not None else None
         self._houses = _HouseSet(houses, builtin_seed)
-        self.single_observation_space = observation_space(map=map)
+        self.perception = check_perception(perception, "perception")
+        self.single_observation_space = observation_space(map=map, perception=perception)
         self.emap = EgoMap(self.num_envs) if map else None
         """The slots' map memory behind the ``map`` key (None without the option)."""
         self.single_action_space = spaces.Discrete(N_ACTIONS)
@@ -321,7 +355,7 @@ class NavVectorEnv(VectorEnv):
             self._rng = np.random.default_rng(seed)
         if self._sim is None:
             worlds = [self._houses.get(k)[0] for k in range(len(self._houses))]
-            self._sim = BatchSim(worlds, max_steps=self.max_steps)
+            self._sim = BatchSim(worlds, max_steps=self.max_steps, shapes=self.perception == "shape")
             self._sampler = EpisodeSampler(worlds, self.target_types)
         eps, envs = self._episodes(self.num_envs)
         obs, info = self._sim.reset(eps, envs)
@@ -344,12 +378,9 @@ class NavVectorEnv(VectorEnv):
         return self._with_map(obs, first), reward, terminated, truncated, info
 
     def _with_map(self, obs: dict[str, np.ndarray], first: np.ndarray) -> dict[str, np.ndarray]:
-        """``obs`` with the ``map`` key after marking the slots' maps (``first``: new episodes), if the option is on."""
-        if self.emap is None:
-            return obs
-        self.emap.update(obs, first)
-        obs["map"] = map_observation(self.emap)
-        return obs
+        """``obs`` as the env's perception reports it, with the ``map`` key after marking the slots' maps (``first``:
+        new episodes), if the option is on."""
+        return sensed(obs, self.perception, self.emap, first)
 
     def close_extras(self, **kwargs) -> None:
         self._sim = None

@@ -95,3 +95,41 @@ def episode_metrics(world: NavWorld, trajectory: Trajectory, *, expert_length: i
         expert_episode_length=expert_length,
         solvable=solvable,
     )
+
+
+CHECKED_FIGURES = ("success", "spl", "sel", "episode_length", "path_length", "collisions", "first_sight_step",
+                   "final_geodesic", "optimal_path_length", "rooms_visited", "min_clearance", "solvable")
+"""The stored figures :func:`recompute_metrics` compares with its own."""
+
+
+def _figure(value: object) -> str:
+    """A figure as a message shows it: floats to two decimals, None as none, booleans lower case."""
+    if isinstance(value, bool):
+        return str(value).lower()
+    if isinstance(value, float):
+        return f"{value:.2f}" if abs(value) < 1e6 else f"{value:.3g}"
+    return "none" if value is None else str(value)
+
+
+def _same(a: object, b: object) -> bool:
+    if isinstance(a, float) and isinstance(b, float):
+        return math.isclose(a, b, rel_tol=1e-6, abs_tol=1e-4)
+    return a == b
+
+
+def recompute_metrics(world: NavWorld, trajectory: Trajectory) -> tuple[EpisodeMetrics, list[str]]:
+    """The episode's metrics recomputed from its poses in ``world``, and each stored figure that differs from them
+    (``stored spl 5.00 differs from recomputed 0.00``). A stored expert length is kept when it is possible (no
+    shorter than :func:`expert_length_bound`), since only a rerun of the expert could check it."""
+    fresh = episode_metrics(world, trajectory)
+    stored = trajectory.metrics
+    expert = stored.expert_episode_length if stored is not None else None
+    if expert is not None and fresh.optimal_path_length is not None and expert >= expert_length_bound(
+            fresh.optimal_path_length):
+        fresh = fresh.model_copy(update={"expert_episode_length": expert,
+                                         "sel": sel(fresh.success, expert, fresh.episode_length)})
+    if stored is None:
+        return fresh, []
+    differs = [f"stored {name} {_figure(getattr(stored, name))} differs from recomputed {_figure(getattr(fresh, name))}"
+               for name in CHECKED_FIGURES if not _same(getattr(stored, name), getattr(fresh, name))]
+    return fresh, differs

@@ -1,20 +1,32 @@
 """The record an episode leaves behind: poses, actions, outcomes, and what was visible at each step.
 
 Trajectories serialize to JSON and back (``Trajectory.save`` / ``Trajectory.load``); the renderer
-draws them and the analysis step F reads them.
+draws them and the analysis step F reads them. A loaded trajectory is evidence, not a verdict: its poses must
+follow one another by at most one action (:func:`pose_jumps`), and its stored metrics are recomputed from the
+poses and the house (:func:`adaptenv.sim.metrics.recompute_metrics`) before anything reads them.
 """
 
 from __future__ import annotations
 
-import json
 import math
 from collections.abc import Iterator
 from pathlib import Path
 
+import numpy as np
 from pydantic import BaseModel, Field
 
 from adaptenv.errors import AdaptenvError
-from adaptenv.sim.spec import ACTIONS
+from adaptenv.files import FileRefused, atomic_write_text, loads_json, read_bytes
+from adaptenv.limits import TRAJECTORY_BYTES
+from adaptenv.sim.spec import ACTIONS, MOVE_STEP, ROTATE_LARGE
+
+JUMP_SLACK = 0.06
+"""How much farther (m) than one move (``MOVE_STEP``) a recorded pose may lie from the one before: float noise, and
+AI2-THOR's default 0.25 m moves with their noise."""
+TURN_SLACK = 1.0
+"""How much more (degrees) than one turn (``ROTATE_LARGE``) a recorded yaw may differ from the one before."""
+MOVE_SLACK = 0.01
+"""A move whose position changed less than this (m) went nowhere; one marked blocked may not move farther."""
 
 
 class Pose(BaseModel):
@@ -87,8 +99,7 @@ class Trajectory(BaseModel):
 
     def save(self, path: str | Path) -> Path:
         p = Path(path)
-        p.parent.mkdir(parents=True, exist_ok=True)
-        p.write_text(self.model_dump_json(indent=1), encoding="utf-8")
+        atomic_write_text(p, self.model_dump_json(indent=1))
         return p
 
     @classmethod
@@ -96,9 +107,11 @@ class Trajectory(BaseModel):
         """Read a trajectory JSON file; a malformed file raises one clear AdaptenvError."""
         p = Path(path)
         try:
-            traj = cls.model_validate(json.loads(p.read_text(encoding="utf-8")))
+            traj = cls.model_validate(loads_json(read_bytes(p, TRAJECTORY_BYTES, "trajectory")))
         except FileNotFoundError:
             raise AdaptenvError(f"{p}: no such trajectory file; check the path") from None
+        except FileRefused:
+            raise
         except OSError as exc:
             raise AdaptenvError(f"{p}: the trajectory file cannot be read ({exc.strerror}); check the path") from None
         except (ValueError, RecursionError) as exc:  # not JSON, not a trajectory, nested too deeply
@@ -124,7 +137,7 @@ class Trajectory(BaseModel):
         for i, step in enumerate(self.steps):
             if step.action not in ACTIONS:
                 return f"steps[{i}].action: unknown action {step.action!r} (actions are {', '.join(ACTIONS)})"
-        return None
+        return pose_jumps(self)
 
     def _numbers(self) -> Iterator[tuple[str, float | None]]:
         """Every number of the record, with its JSON path."""
@@ -145,3 +158,39 @@ class Trajectory(BaseModel):
 def metres(v: float) -> str:
     """A coordinate for a message: to the centimetre, or three digits when it is huge (never 300 digits)."""
     return f"{v:.2f}" if abs(v) < 1e6 else f"{v:.3g}"
+
+
+def step_jump(before: Pose, after: Pose) -> str | None:
+    """Why ``after`` cannot follow ``before`` by one action (farther than one move, turned more than one turn), or
+    None."""
+    dist = math.hypot(after.x - before.x, after.z - before.z)
+    turn = abs((after.yaw - before.yaw + 180.0) % 360.0 - 180.0)
+    if dist > MOVE_STEP + JUMP_SLACK:
+        return f"the agent jumps {metres(dist)} m from the pose before, farther than one move ({MOVE_STEP:g} m)"
+    if turn > ROTATE_LARGE + TURN_SLACK:
+        return f"the agent turns {turn:.0f} degrees from the pose before, more than one turn ({ROTATE_LARGE:g} degrees)"
+    return None
+
+
+def pose_jumps(traj: Trajectory) -> str | None:
+    """Where ``traj``'s poses do not follow one another by one action, or None: a pose farther than one move
+    (``MOVE_STEP`` + ``JUMP_SLACK``) or turned more than one turn (``ROTATE_LARGE`` + ``TURN_SLACK``) from the pose
+    before it, or a move whose ``moved`` flag its poses contradict."""
+    poses = [traj.start, *(s.pose for s in traj.steps)] + ([traj.final_pose] if traj.final_pose is not None else [])
+    names = ["steps[0].pose", *(f"steps[{i}].pose" for i in range(1, len(traj.steps))), "final_pose"]
+    xyz = np.array([(p.x, p.z, p.yaw) for p in poses], dtype=np.float64)
+    dist = np.hypot(np.diff(xyz[:, 0]), np.diff(xyz[:, 1]))
+    turn = np.abs((np.diff(xyz[:, 2]) + 180.0) % 360.0 - 180.0)
+    bad = np.flatnonzero((dist > MOVE_STEP + JUMP_SLACK) | (turn > ROTATE_LARGE + TURN_SLACK))
+    if bad.size:
+        k = int(bad[0])
+        return f"{names[k]}: {step_jump(poses[k], poses[k + 1])}"
+    for i, step in enumerate(traj.steps):  # step i goes from poses[i + 1] to poses[i + 2]
+        if step.action not in ("m", "b") or i + 1 >= len(dist):
+            continue
+        went = float(dist[i + 1])
+        if step.moved and went < MOVE_SLACK:
+            return f"steps[{i}].moved: the move is marked as made (true) but the agent stayed where it was"
+        if not step.moved and went >= MOVE_SLACK:
+            return f"steps[{i}].moved: the move is marked blocked (false) but the agent moved {metres(went)} m"
+    return None

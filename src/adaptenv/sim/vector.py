@@ -20,6 +20,7 @@ import numpy as np
 from adaptenv.errors import AdaptenvError
 from adaptenv.sim import geodesic, metrics, physics, scan, task
 from adaptenv.sim.geodesic import CHUNK_BITS, NOT_NAVIGABLE
+from adaptenv.sim.perception import PackedShapes, ray_shapes
 from adaptenv.sim.physics import _MOVE_DELTA, _YAW_DELTA, PackedGrids, _move_one
 from adaptenv.sim.scan import RAY_COS, RAY_SIN, _scan_one, pack_runs
 from adaptenv.sim.spec import (
@@ -230,8 +231,9 @@ class BatchSim:
     """
 
     def __init__(self, worlds: Sequence, *, max_steps: int = MAX_STEPS, radius: float = AGENT_RADIUS,
-                 max_range: float = MAX_RANGE, threads: int | None = None, parallel: bool | None = None) -> None:
-        """``threads``: 1 runs the serial kernel, n >= 2 the multi-threaded one on n numba threads, None
+                 max_range: float = MAX_RANGE, threads: int | None = None, parallel: bool | None = None,
+                 shapes: bool = False) -> None:
+        """``shapes`` adds the recognising mode's ``shape`` key to every observation (``perception``). ``threads``: 1 runs the serial kernel, n >= 2 the multi-threaded one on n numba threads, None
         chooses per call (:meth:`threads_for`). ``parallel`` is the older spelling: False is
         ``threads=1``, True the multi-threaded kernel on numba's current thread count."""
         if not worlds:
@@ -243,6 +245,9 @@ class BatchSim:
         self.grids = PackedGrids.from_worlds(self.worlds)
         self.runs = pack_runs(self.worlds)
         """The scan's free rectangles (``scan.pack_runs``), aligned with ``grids``."""
+        self.shapes = PackedShapes.from_worlds(self.worlds) if shapes else None
+        """Cell labels and object shapes behind the ``shape`` observation (``perception``), aligned with ``grids``;
+        None when the observation has no ``shape`` key."""
         self.max_steps = int(max_steps)
         self.radius = float(radius)
         self.max_range = float(max_range)
@@ -439,9 +444,15 @@ class BatchSim:
     # -- views ---------------------------------------------------------------------------------
 
     def observe(self) -> dict[str, np.ndarray]:
-        """The current observation of every agent (fresh arrays, leading batch dimension)."""
-        return {"depth": self._depth.copy(), "semantic": self._classes.copy(), "target": self.target.copy(),
-                "prev_action": self.prev_action.copy(), "collided": (~self.moved).astype(np.int64)}
+        """The current observation of every agent (fresh arrays, leading batch dimension): the labelled scan and,
+        under ``shape`` (with ``shapes=True``) what the recognising mode perceives of the objects hit
+        (``perception.ray_shapes``)."""
+        obs = {"depth": self._depth.copy(), "semantic": self._classes.copy(), "target": self.target.copy(),
+               "prev_action": self.prev_action.copy(), "collided": (~self.moved).astype(np.int64)}
+        if self.shapes is not None:
+            obs["shape"] = ray_shapes(self.shapes, self.grids, self.env, self.x, self.z, self.yaw, self._depth,
+                                      self.max_range)
+        return obs
 
     def info(self, ended: np.ndarray | None = None) -> dict[str, np.ndarray]:
         """Per-agent diagnostics: success, SPL (NaN except where ``ended``), collisions, geodesic
@@ -464,6 +475,8 @@ class BatchSim:
         their world's cache."""
         held = {id(a) for w in self.worlds for a in (w.grid.clearance, *w.cached_arrays())}
         arrays = [self.grids.clearance, self.runs.ids, self.runs.table, self._rank, self._start, *self._fields]
+        if self.shapes is not None:
+            arrays += [self.shapes.labels, self.shapes.table]
         return int(sum(a.nbytes for a in arrays if id(a) not in held and id(a.base) not in held))
 
 

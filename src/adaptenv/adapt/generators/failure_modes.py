@@ -54,8 +54,10 @@ from adaptenv.adapt.generators.builtin import POOL, BuiltinGenerator, Candidate,
 from adaptenv.adapt.objectives import (
     CLEARANCE_CAP,
     MAX_VISIBILITY_POINTS,
+    OBJECTIVE_KINDS,
     ObjectiveValues,
     RouteSpec,
+    gain,
     route_points,
     shortest_route,
     visibility_fraction,
@@ -260,8 +262,12 @@ class FailureModeGenerator(BuiltinGenerator):
                                                      if c.realism is not None else 0.0)
             ranked = sorted(tried, key=lambda c: -c.score)
             ranked = [c for c in ranked if c.mode_value - before > self.tolerance]
+            fallback = None
+            if not ranked:  # the family's objective cannot be made harder here: make the house harder the built-in way
+                fallback, ranked = self._builtin_fallback(tried, values, realism)
             if not ranked:
-                record.reason = f"no valid candidate made the {family} objective harder"
+                record.reason = (f"no valid candidate made the {family} objective or any built-in objective "
+                                 "(route length, passage width, target visibility, clutter) harder")
                 record.verified, record.verification = False, "objective"
                 result.steps.append(record)
                 continue
@@ -269,8 +275,14 @@ class FailureModeGenerator(BuiltinGenerator):
                 ranked = self._failure_rank(ranked, family, world, context, record)
             chosen = ranked[0]
             record.verification, record.verified = "objective", True
-            record.reason = f"{family} objective {before:.3f} -> {chosen.mode_value:.3f}"
-            intent = INTENTS.get(chosen.kind, INTENTS["generic"])
+            if fallback is None:
+                record.reason = f"{family} objective {before:.3f} -> {chosen.mode_value:.3f}"
+            else:
+                kind = fallback[id(chosen)]
+                record.suggestion_kind = kind
+                record.reason = (f"no valid candidate made the {family} objective harder; the built-in G's {kind} "
+                                 f"objective instead ({values.value(kind):.3f} -> {chosen.values.value(kind):.3f})")
+            intent = INTENTS.get(chosen.kind, INTENTS["generic"]) if fallback is None else f"built-in {fallback[id(chosen)]}"
             if chosen.openness is not None:
                 edit = v.set_door(chosen.object_id, chosen.openness, source=self.name, intent=f"{family}: {intent}")
             else:
@@ -281,11 +293,27 @@ class FailureModeGenerator(BuiltinGenerator):
                 record.status, record.reason = "rejected", "; ".join(edit.problems)
                 result.steps.append(record)
                 continue
-            record.gain = chosen.mode_value - before
+            record.gain = chosen.mode_value - before if fallback is None else gain(fallback[id(chosen)], values, chosen.values)
             record.policy_score_after = chosen.policy_score
             world, values, realism = self._applied(v, chosen, edit, record, result, context, step)
         result.house, result.world = v.house, world
         return result
+
+    def _builtin_fallback(self, tried: list[Candidate], values: ObjectiveValues, realism: float | None
+                          ) -> tuple[dict[int, str], list[Candidate]]:
+        """The candidates that make one of the built-in G's objectives harder, best first (its largest gain plus the
+        realism change), and which objective each serves: what a step does when its family's objective cannot move
+        (F found no failure, or nothing serves the family here), so a strong agent's scene still gets harder."""
+        best: dict[int, str] = {}
+        kept = []
+        for c in tried:
+            kind, g = max(((k, gain(k, values, c.values)) for k in OBJECTIVE_KINDS), key=lambda kg: kg[1])
+            if g > self.tolerance:
+                best[id(c)] = kind
+                c.score = g + (self.realism_weight * (c.realism - realism)
+                               if c.realism is not None and realism is not None else 0.0)
+                kept.append(c)
+        return best, sorted(kept, key=lambda c: -c.score)
 
     # ----------------------------------------------------------------------------- verification with pi_t
     def _failure_rank(self, ranked: list[Candidate], family: str, world: NavWorld, context: GenerationContext,

@@ -8,7 +8,9 @@ of :mod:`adaptenv.adapt.plausibility` and with the targets movable: it is the ba
 are measured against. ``steps`` is not used: one pass over all movable objects is one perturbation.
 
 :func:`random_single_edits` makes ``k`` accepted random single-object edits (each validated),
-the analogue of ACCEL's k random level edits (random too: no plausibility rules, targets movable).
+the analogue of ACCEL's k random level edits (random too: no plausibility rules, targets movable); with
+``appearance`` > 0 that share of them are appearance edits instead (an asset swapped within its type and split,
+or a room's floor or walls given another material: :mod:`adaptenv.adapt.appearance`).
 """
 
 from __future__ import annotations
@@ -16,6 +18,7 @@ from __future__ import annotations
 import numpy as np
 
 from adaptenv.adapt.analysis import Analysis
+from adaptenv.adapt.appearance import random_appearance_edit
 from adaptenv.adapt.edits import Edit, EditLog
 from adaptenv.adapt.generators.base import (
     GenerationContext,
@@ -73,21 +76,28 @@ class RandomPerturbation:
 
 
 def random_single_edits(house: House, k: int, rng: np.random.Generator, *, episode_targets: list[str] | None = None,
-                        start: Start | None = None, max_units: float = 30.0, max_tries: int = 20) -> tuple[House, EditLog]:
+                        start: Start | None = None, max_units: float = 30.0, max_tries: int = 20,
+                        appearance: float = 0.0) -> tuple[House, EditLog]:
     """``k`` accepted random single-object edits (each validated; up to ``max_tries`` proposals per edit).
 
-    Returns the edited copy and the log of every proposal (rejected ones marked). Fewer than ``k``
-    edits are made only when ``max_tries`` proposals in a row are rejected.
+    Each proposal is, with probability ``appearance``, an appearance edit (asset swap or material change) instead
+    of a move (0, the default, draws exactly the moves it always did). Returns the edited copy and the log of
+    every proposal (rejected ones marked). Fewer than ``k`` edits are made only when ``max_tries`` proposals in a
+    row are rejected.
     """
     v = EditValidator(house, episode_targets=episode_targets, start=start, plausibility=False, move_targets=True)
     ids = _movable(v)
-    if not ids:
+    if not ids and not appearance:
         return v.house, v.log
     for _ in range(k):
         for _ in range(max_tries):
-            dx, dy, yaw = random_move(rng, max_units, rotate_p=0.5)
-            edit: Edit = v.try_edit(ids[int(rng.integers(len(ids)))], dx, dy, yaw, source="random-single",
-                                    intent="ACCEL-style random edit")
-            if edit.accepted and edit.changed:
+            edit: Edit | None
+            if appearance and (not ids or rng.random() < appearance):
+                edit = random_appearance_edit(v, rng, source="random-single", intent="random appearance edit")
+            else:
+                dx, dy, yaw = random_move(rng, max_units, rotate_p=0.5)
+                edit = v.try_edit(ids[int(rng.integers(len(ids)))], dx, dy, yaw, source="random-single",
+                                  intent="ACCEL-style random edit")
+            if edit is not None and edit.accepted and edit.changed:
                 break
     return v.house, v.log

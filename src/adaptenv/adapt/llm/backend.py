@@ -19,6 +19,7 @@ import json
 import logging
 import math
 import re
+import sys
 import time
 from collections.abc import Callable, Iterator, Sequence
 from contextlib import AbstractContextManager, contextmanager
@@ -152,6 +153,11 @@ def _strip_fences(text: str) -> str:
     return match.group(1) if match else text.strip()
 
 
+def _to_stderr(line: str) -> None:
+    """Say ``line`` on stderr (where a command's progress goes; its output stays clean)."""
+    print(line, file=sys.stderr, flush=True)
+
+
 def _retry_after_s(headers: Any) -> float | None:
     """Seconds from a numeric ``retry-after-ms`` / ``retry-after`` header, if any."""
     for name, scale in (("retry-after-ms", 1000.0), ("retry-after", 1.0)):
@@ -174,9 +180,12 @@ class _OpenAIBackendBase:
     api = ""
 
     def __init__(self, config: LLMConfig, *, http_client: httpx2.Client | None = None,
-                 sleep: Callable[[float], None] = time.sleep, rng: np.random.Generator | None = None):
-        """Build the SDK client (openai imported here); ``http_client``/``sleep``/``rng`` are for tests."""
+                 sleep: Callable[[float], None] = time.sleep, rng: np.random.Generator | None = None,
+                 notify: Callable[[str], None] | None = None):
+        """Build the SDK client (openai imported here); ``http_client``/``sleep``/``rng`` are for tests, ``notify``
+        takes the line said when an attempt failed and another begins (default: printed on stderr)."""
         self.config = config
+        self._notify = notify or _to_stderr
         self.base_url = config.resolved_base_url()
         self._api_key = resolve_api_key(config)
         self._openai = import_openai()
@@ -249,8 +258,8 @@ class _OpenAIBackendBase:
                 last, retry_after = verdict
                 if attempt + 1 < attempts:
                     delay = self._backoff(attempt, retry_after)
-                    log.info("LLM request failed (%s); retry %d/%d in %.2f s", last, attempt + 1,
-                             attempts - 1, delay)
+                    self._notify(f"LLM: attempt {attempt + 1} of {attempts} at {self.base_url} failed ({last}); "
+                                 f"attempt {attempt + 2} in {delay:.1f} s")
                     self._sleep(delay)
                 continue
             return self._json_body(raw), attempt

@@ -111,6 +111,18 @@ def generate_houses(n: int, seed: int, cfg: GenerationConfig | None = None, cata
     return out
 
 
+def kept_guarantees(house: House, cfg: GenerationConfig, catalog: AssetCatalog
+                    ) -> tuple[frozenset[frozenset[int]], tuple[str, ...]]:
+    """What a child of ``house`` must keep for :func:`house_problems`: the object pairs that already overlap (allowed
+    to) and the target types reachable from the start."""
+    nav = Navigation.of(house, catalog, cfg.agent_radius)
+    allowed = frozenset(frozenset((i, j)) for i, j, _ in overlapping_pairs(nav.geometry))
+    pose = house.agent_pose()
+    start = nav.component_at(pose[0], pose[1]) if pose is not None else None
+    required = tuple(sorted(reachable_target_types(nav, start, cfg.target_reach))) if start else ()
+    return allowed, required
+
+
 def rearrange_house(house: House, seed: int, cfg: GenerationConfig | None = None,
                     catalog: AssetCatalog | None = None) -> House:
     """The same house with its movable furniture placed anew (the "rearranged" variant).
@@ -128,13 +140,7 @@ def rearrange_house(house: House, seed: int, cfg: GenerationConfig | None = None
     catalog = catalog or load_catalog()
     seed = _check_seed(seed)
     pose = house.agent_pose()
-    required: tuple[str, ...] = ()
-    nav = Navigation.of(house, catalog, cfg.agent_radius)
-    allowed = frozenset(frozenset((i, j)) for i, j, _ in overlapping_pairs(nav.geometry))
-    if pose is not None:
-        start = nav.component_at(pose[0], pose[1])
-        if start:
-            required = tuple(sorted(reachable_target_types(nav, start, cfg.target_reach)))
+    allowed, required = kept_guarantees(house, cfg, catalog)
     priority = tuple(dict.fromkeys([t for types in cfg.priority_types.values() for t in types] + list(TARGET_TYPES)))
     last = "no attempt was made"
     for attempt in range(cfg.max_attempts):

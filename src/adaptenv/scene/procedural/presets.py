@@ -11,6 +11,7 @@ from adaptenv.scene.assets import AssetCatalog, load_catalog
 from adaptenv.scene.house import House
 from adaptenv.scene.procedural.config import GenerationConfig
 from adaptenv.scene.procedural.generate import child_seeds, generate_house, rearrange_house
+from adaptenv.scene.procedural.variations import vary_house
 
 
 @dataclass(frozen=True)
@@ -25,8 +26,10 @@ class PresetSpec:
     """Inclusive range of room counts."""
     rearrange_of: str | None = None
     """When set, the houses are ``rearrange_house`` of this preset's houses instead of new ones."""
+    vary_of: str | None = None
+    """When set, the houses are ``vary_house`` of this preset's houses (other assets, other materials)."""
     copies: int = 1
-    """Rearranged presets: rearrangements of each base house (house ``c * n_base + i`` is copy c of house i)."""
+    """Rearranged and varied presets: children of each base house (house ``c * n_base + i`` is copy c of house i)."""
     split: str = "train"
     """ProcTHOR asset split the furniture comes from."""
     description: str = ""
@@ -70,6 +73,31 @@ PRESETS: dict[str, PresetSpec] = {
         description="cluttered 3-6 room validation houses (suite-clutter's settings)"),
     "validation-closed": PresetSpec(30, 5701, room_range=(6, 9), overrides=(("closed_door_prob", 0.4),),
         description="6-9 room validation houses with shut interior doors (suite-closed's settings)"),
+    # Held-out houses furnished with assets no training preset uses (ProcTHOR's test split), its validation
+    # twin (the val split) and the tail suite's 200 houses of the training distribution (agents/suites.py).
+    "suite-unseen-assets": PresetSpec(40, 5801, split="test",
+        description="2-6 room houses furnished with ProcTHOR's test-split assets (shapes no training house has)"),
+    "validation-unseen-assets": PresetSpec(40, 5901, split="val",
+        description="2-6 room validation houses furnished with ProcTHOR's val-split assets"),
+    "suite-tail": PresetSpec(200, 5951, description="200 unseen houses of the training distribution (the tail suite)"),
+    # The scarce-homes setting (docs/curriculum.md): N seed homes and what each training arm makes of them.
+    # pretrain-train's first 6 houses are scarce-6's (house i of a preset uses the i-th child seed of its root).
+    "scarce-6": PresetSpec(6, 1000, description="the first 6 pretrain-train houses: the scarce-homes set with N = 6"),
+    "pretrain-swapped": PresetSpec(24, 7001, vary_of="pretrain-train", copies=10,
+        description="ten variations of each pretrain-train house: other train-split assets, other materials"),
+    "scarce-6-swapped": PresetSpec(6, 7001, vary_of="scarce-6", copies=10,
+        description="ten variations of each scarce-6 house: other train-split assets, other materials"),
+    "pretrain-rearranged10": PresetSpec(24, 7101, rearrange_of="pretrain-train", copies=10,
+        description="ten training rearrangements of each pretrain-train house (seeds no suite uses)"),
+    "scarce-6-rearranged": PresetSpec(6, 7101, rearrange_of="scarce-6", copies=10,
+        description="ten training rearrangements of each scarce-6 house (seeds no suite uses)"),
+    "fresh-240": PresetSpec(240, 7201, description="240 fresh houses of the training distribution (10 N for N = 24)"),
+    "fresh-60": PresetSpec(60, 7201, description="the first 60 fresh-240 houses (10 N for N = 6)"),
+    "oracle-large": PresetSpec(80, 7301, room_range=(7, 10),
+        description="7-10 room houses with suite-large's settings and new seeds (the oracle arm's share for far)"),
+    "oracle-unseen": PresetSpec(80, 7401, description="houses of long-unseen's distribution, new seeds (oracle)"),
+    "oracle-test-assets": PresetSpec(80, 7501, split="test",
+        description="houses with suite-unseen-assets' settings and new seeds (the oracle arm's share)"),
 }
 
 
@@ -89,12 +117,13 @@ def generate_preset(name: str, catalog: AssetCatalog | None = None,
     """
     spec = preset_spec(name)
     catalog = catalog or load_catalog()
-    if spec.rearrange_of is not None:
-        base = generate_preset(spec.rearrange_of, catalog)
+    if spec.rearrange_of is not None or spec.vary_of is not None:
+        base = generate_preset(spec.rearrange_of or spec.vary_of, catalog)
+        child = rearrange_house if spec.rearrange_of is not None else vary_house
         seeds = child_seeds(spec.seed, len(base) * spec.copies)
         out = []
         for i, s in enumerate(seeds):
-            out.append((f"{name}_{i:04d}", rearrange_house(base[i % len(base)][1], s, spec.config(), catalog)))
+            out.append((f"{name}_{i:04d}", child(base[i % len(base)][1], s, spec.config(), catalog)))
             if on_house is not None:
                 on_house(i, len(seeds))
         return out
