@@ -21,6 +21,19 @@ def house_file(tmp_path_factory):
     return save_house(generate_house(5, GenerationConfig(n_rooms=4)), tmp_path_factory.mktemp("h") / "h.json")
 
 
+def plausible_object(house_file, rotation: float) -> str:
+    """The first movable object that 2 units left and 1 up, turned to ``rotation``, breaks no plausibility rule (the
+    scripted LLM's move; one a person would not believe is refused and re-asked)."""
+    from adaptenv.adapt.generators import movable_ids
+    from adaptenv.adapt.validation import EditValidator
+    from adaptenv.scene.house import load_house
+
+    house = load_house(house_file)
+    v = EditValidator(house)
+    return next(o for o in movable_ids(house) if (p := v.propose(o, -2.0, 1.0, rotation)).result.changed
+                and not [q for q in p.problems if q.kind == "implausible"])
+
+
 @pytest.fixture(scope="module")
 def adapted(house_file, tmp_path_factory):
     out = tmp_path_factory.mktemp("out")
@@ -97,7 +110,8 @@ def test_adapt_with_llm_generator_against_a_local_server(house_file, tmp_path, m
         spec.loader.exec_module(sys.modules[name])
     srv = sys.modules[name]
     monkeypatch.delenv("OPENAI_API_KEY", raising=False)
-    oid = movable_ids(load_house(house_file))[0]
+    oid = plausible_object(house_file, 0.0)
+    assert oid in movable_ids(load_house(house_file))
     move = {"object_id": oid, "x_direction": "left", "x_units": 2, "y_direction": "up", "y_units": 1, "rotation": 0}
     replies = {srv.CHAT_PATH: [(200, srv.chat_tool_reply("propose_move_instruction", move)),
                                (200, srv.chat_tool_reply("verify_move", {"matches_intent": True, "reason": "ok",
@@ -135,9 +149,9 @@ F_ANSWER = {"outcome": {"success": True, "failure_mode": None, "summary": "reach
             "suggestions": [{"kind": "narrow_passage", "description": "tighter", "addresses": [], "priority": 0.9}]}
 
 
-def _responses_answer(srv):
-    """Answer any Responses API request of F or G (first allowed object moved, left then back right, so that
-    every move stays plausible; verification says yes)."""
+def _responses_answer(srv, plausible: str = ""):
+    """Answer any Responses API request of F or G (``plausible``, else the first allowed object, moved left then back
+    right, so that every move stays plausible; verification says yes)."""
     moves = []
 
     def reply(body):
@@ -145,7 +159,8 @@ def _responses_answer(srv):
         if not tools:
             return 200, srv.responses_text_reply(json.dumps(F_ANSWER), input_tokens=1200, output_tokens=150)
         if tools[0]["name"] == "propose_move_instruction":
-            oid = tools[0]["parameters"]["properties"]["object_id"]["enum"][0]
+            oid = plausible if plausible in (ids := tools[0]["parameters"]["properties"]["object_id"]["enum"]) \
+                else ids[0]
             moves.append(oid)
             back = len(moves) % 2 == 0
             return 200, srv.responses_tool_reply("propose_move_instruction", {
@@ -174,7 +189,7 @@ def test_adapt_llm_counts_every_call_records_the_model_and_never_writes_the_key(
     """F and G on the Responses API of a custom server (--api responses --base-url): 7 calls made, 7 counted."""
     srv = _server_module()
     loopback.setenv("ADAPTENV_LLM_API_KEY", KEY)
-    with srv.ScriptedLLMServer({srv.RESPONSES_PATH: [_responses_answer(srv)] * 20}, max_requests=20,
+    with srv.ScriptedLLMServer({srv.RESPONSES_PATH: [_responses_answer(srv, plausible_object(house_file, 90.0))] * 20}, max_requests=20,
                                timeout_s=120) as server:
         result = runner.invoke(app, ["adapt", str(house_file), "--generator", "llm", "--analyzer", "llm",
                                      "--api", "responses", "--base-url", server.url, "--model", "m", "--steps", "3",
@@ -201,7 +216,7 @@ def test_openai_base_url_is_honoured_and_the_cache_replays_offline(house_file, t
     """OPENAI_BASE_URL + OPENAI_API_KEY as the SDK reads them; a second run from --llm-cache makes no request."""
     srv = _server_module()
     cache = tmp_path / "cache"
-    with srv.ScriptedLLMServer({srv.RESPONSES_PATH: [_responses_answer(srv)] * 10}, max_requests=10,
+    with srv.ScriptedLLMServer({srv.RESPONSES_PATH: [_responses_answer(srv, plausible_object(house_file, 90.0))] * 10}, max_requests=10,
                                timeout_s=120) as server:
         loopback.setenv("OPENAI_BASE_URL", server.url)
         loopback.setenv("OPENAI_API_KEY", KEY)

@@ -34,7 +34,7 @@ from tests.sim import helpers as H
 @pytest.fixture(scope="module")
 def scene():
     """A procedural 5-room house, an episode of at least 2.5 m, the expert (pi), its rollout and analysis."""
-    house, world, ep, traj, analysis = procedural_scene(3, 5, [0, 1])
+    house, world, ep, traj, analysis = procedural_scene(0, 5, [0, 1])
     return house, world, ep, ExpertPolicy(), traj, analysis
 
 
@@ -222,7 +222,7 @@ def test_builtin_rollout_checks_score_each_scene_as_one_run_at_a_time():
     from adaptenv.agents.registry import load_pretrained
     from adaptenv.agents.rollout import checking_episodes, mean_spl, run_policy
 
-    house, world, ep, traj, analysis = procedural_scene(0, 4, [0, 7])  # one where plausible moves verify
+    house, world, ep, traj, analysis = procedural_scene(0, 5, [0, 7])  # one where plausible moves verify
     policy = load_pretrained("pretrained-scan")  # stochastic motions, seeded per episode
     ctx = GenerationContext(episode=ep, trajectory=traj, policy=policy, render=False, rollout_episodes=3)
     res = BuiltinGenerator(max_candidates=8).generate(house, analysis, steps=2, context=ctx,

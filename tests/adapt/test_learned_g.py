@@ -429,7 +429,12 @@ def test_collect_refuses_held_out_houses(tmp_path):
 
 
 def test_collect_command_takes_the_share_of_random_moves(tmp_path):
-    args = ["gdata", "collect", "--houses", "preset:tiny", "--limit", "1", "--tasks", "1", "--candidates", "4",
+    from adaptenv.scene.house import save_house
+    from adaptenv.scene.procedural.presets import generate_preset
+
+    # tiny_0001: the built-in G has 4 route moves a person believes there (random moves fill what it lacks)
+    house = save_house(generate_preset("tiny")[1][1], tmp_path / "tiny_0001.json")
+    args = ["gdata", "collect", "--houses", str(house), "--limit", "1", "--tasks", "1", "--candidates", "4",
             "--episodes", "0", "--policy", "expert", "-o", str(tmp_path / "route")]
     result = runner.invoke(app, [*args, "--random-share", "0"])
     assert result.exit_code == 0, result.output

@@ -41,7 +41,8 @@ def _moved(house, object_id: str, x: float, z: float, yaw: float | None = None):
 
 
 def _rules(original, adapted) -> set[str]:
-    return {v.rule for v in audit(original, adapted).violations}
+    """The hand-written rules broken (the learned ``unlike_reference`` is tested in test_placement_model.py)."""
+    return {v.rule for v in audit(original, adapted).violations} - {"unlike_reference"}
 
 
 def test_the_untouched_home_and_a_slide_along_the_wall_break_nothing(home, real_house):
@@ -91,7 +92,8 @@ def test_audit_command(home, tmp_path):
     a, b = save_house(home, tmp_path / "a.json"), save_house(_moved(home, "Plunger|5", 3.0, 4.0), tmp_path / "b.json")
     bad = runner.invoke(app, ["audit", str(a), str(b)])
     assert bad.exit_code == 1 and "open_floor: Plunger|5" in bad.output
-    assert "1 moved object(s), 1 violation(s)" in bad.output
+    assert "unlike_reference: Plunger|5 (Plunger) isolation 0.85 m, above the reference's central 98%" in bad.output
+    assert "1 moved object(s), 2 violation(s)" in bad.output
     ok = runner.invoke(app, ["audit", str(a), str(a)])
     assert ok.exit_code == 0 and "0 violation(s)" in ok.output
 
@@ -305,7 +307,7 @@ def test_the_first_broken_rule_decides_as_the_full_check_does(real_house):
     rng = np.random.default_rng(3)
     found = []
     for f in geometry.floor_objects:
-        for dx, dz, turn in zip(*rng.uniform(-1.5, 1.5, (2, 6)), rng.choice([0.0, 90.0, 33.0], 6), strict=True):
+        for dx, dz, turn in zip(*rng.uniform(-0.5, 0.5, (2, 6)), rng.choice([0.0, 90.0, 33.0], 6), strict=True):
             fp = replace(f, center=(f.center[0] + dx, f.center[1] + dz), yaw=(f.yaw + turn) % 360.0)
             found.append(check_move(ref, fp, current))
             assert breaks_rules(ref, fp, current) == bool(found[-1])

@@ -22,7 +22,8 @@ def _moved(house: House, object_id: str, x: float, z: float, yaw: float | None =
 
 
 def _rules(original: House, adapted: House) -> set[str]:
-    return {v.rule for v in audit(original, adapted).violations}
+    """The hand-written rules broken (the learned ``unlike_reference`` is tested in test_placement_model.py)."""
+    return {v.rule for v in audit(original, adapted).violations} - {"unlike_reference"}
 
 
 def _refused_by(house: House, object_id: str, dx: float, dz: float, yaw: float | None, start) -> set[str]:
@@ -31,7 +32,7 @@ def _refused_by(house: House, object_id: str, dx: float, dz: float, yaw: float |
     upm = v.ctx.grid.units_per_meter
     p = v.propose(object_id, dx * upm, dz * upm, yaw)
     assert p.result.changed and p.result.stop_reason == "reached", p.result
-    return {m.message.split("(")[1].split(")")[0] for m in p.problems if m.kind == "implausible"}
+    return {m.message.split("(")[1].split(")")[0] for m in p.problems if m.kind == "implausible"} - {"unlike_reference"}
 
 
 def _object(n: int, asset_id: str, x: float, z: float, yaw: float) -> HouseObject:
@@ -99,8 +100,8 @@ def dining() -> House:
 
 def test_chairs_left_behind_by_their_table(dining):
     turned = audit(dining, _moved(dining, "DiningTable|0", 3.0, 2.5, yaw=90.0))  # the chairs now at its corners
-    assert {(v.rule, v.others) for v in turned.violations} == {("group_left_behind", ("Chair|1",)),
-                                                              ("group_left_behind", ("Chair|2",))}
+    assert {(v.rule, v.others) for v in turned.violations if v.rule != "unlike_reference"} == {
+        ("group_left_behind", ("Chair|1",)), ("group_left_behind", ("Chair|2",))}
     assert _rules(dining, _moved(dining, "DiningTable|0", 3.0, 2.95)) == {"group_left_behind"}
     assert _rules(dining, _moved(dining, "DiningTable|0", 3.0, 2.5, yaw=180.0)) == set()  # looks the same
     assert _rules(dining, _moved(dining, "DiningTable|0", 3.0, 2.7)) == set()  # 0.2 m

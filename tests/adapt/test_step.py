@@ -120,7 +120,9 @@ def test_a_jobs_env_steps_count_every_step_pi_t_takes_for_g(house):
     made = run_generate(GenerateJob("failure-modes", house, "h", 1, (0,), weights=weights, diagnose_episodes=2))
     diagnosis = sum(e["steps"] for key in ("diagnosis", "diagnosis_after") for e in made.edit_log[key]["episodes"])
     checks = [s["check_steps"] for s in made.edit_log["steps"]]
-    assert sum(checks) > 0 and made.rollout_steps == diagnosis + sum(checks)
+    # with the placement model the failure-mode G finds no move in this house a person would believe, so it may
+    # check none; the budget still counts the diagnosis and whatever it checked
+    assert made.rollout_steps == diagnosis + sum(checks)
 
 
 @pytest.mark.slow

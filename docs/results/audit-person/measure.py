@@ -8,7 +8,9 @@ Two steps, so that the adaptation can run on any revision and the audit with the
     python measure.py audit OUT TAG...  # audit OUT/TAG/ with the rules of the code on PYTHONPATH; prints a table
     python measure.py cost OUT TAG...   # the search's counts per step (drawn, passing the dry run, policy-checked)
 
-``adapt`` appends to OUT/TAG/rows.jsonl, so several G can be run into one TAG one after another.
+``adapt`` appends to OUT/TAG/rows.jsonl, so several G can be run into one TAG one after another. With
+``MEASURE_ONLY=validation-00,real-seed0`` in the environment it adapts only the runs named (each keeps its seeds: a
+subset's rows are those of the full run).
 
 Houses: the first ``HOUSES`` houses of ``preset:validation`` (procedural) and the real-format ProcTHOR house of
 tests/data on ``REAL_SEEDS`` episode seeds. Per house: an episode the policy solves (10 draws at most), then
@@ -18,6 +20,7 @@ tests/data on ``REAL_SEEDS`` episode seeds. Per house: an episode the policy sol
 from __future__ import annotations
 
 import json
+import os
 import sys
 from collections import Counter
 from pathlib import Path
@@ -57,7 +60,10 @@ def adapt(out: Path, tag: str, policy: str = POLICY, generators: tuple[str, ...]
     folder.mkdir(parents=True, exist_ok=True)
     agent, analyzer = resolve_policy(policy, seed=SEED), BuiltinAnalyzer()
     with open(folder / "rows.jsonl", "a") as rows:
+        only = {j for j in os.environ.get("MEASURE_ONLY", "").split(",") if j}
         for n, (name, house) in enumerate(jobs()):
+            if only and name not in only:
+                continue
             world = compile_world(house, name)
             found = find_solved_episode(world, agent, np.random.default_rng([SEED, n]), tries=10)
             if found is None:

@@ -46,19 +46,25 @@ object against the house before editing (only what the move made worse counts):
 
 from __future__ import annotations
 
-import json
 import math
 from collections import Counter
 from collections.abc import Iterator, Mapping
 from dataclasses import dataclass, field
-from functools import cache
-from importlib import resources
 
 import numba
 import numpy as np
 import shapely
 
 from adaptenv.adapt.doorways import APPROACH_DEPTH, ApproachZone, approach_zones, covered_width
+from adaptenv.adapt.placement_model import (
+    HouseLayout,
+    PlacementModel,
+    default_model,
+    group_pairs,
+    object_features,
+    placement_class,
+    unlike,
+)
 from adaptenv.adapt.realism import FREE_STANDING
 from adaptenv.errors import AdaptenvError
 from adaptenv.scene.assets import AssetCatalog, load_catalog
@@ -73,7 +79,9 @@ from adaptenv.scene.graph import (
 from adaptenv.scene.house import House
 
 RULES = ("edge_off_wall", "door_approach", "group_split", "open_floor", "facing_broken", "wall_overhang",
-         "in_opening", "group_left_behind", "blocks_window")
+         "in_opening", "group_left_behind", "blocks_window", "unlike_reference")
+__all__ = ["RULES", "PlausibilityAudit", "PlausibilityReference", "Violation", "audit", "breaks_rules", "check_move",
+           "edge_only", "group_pairs"]
 #: Depth (m) of a doorway's clearance zone on each side. ProcTHOR keeps the door's swing (its width, about
 #: 0.65-1.0 m) plus 0.35 m free on the side a door opens to; edits do not know that side, so both get 1 m.
 DOOR_CLEARANCE = 1.0
@@ -118,20 +126,11 @@ class Violation:
     message: str
     others: tuple[str, ...] = ()
     """The partner, door or wall-side object ids involved."""
+    feature: str = ""
+    """The placement model's feature (``unlike_reference`` only)."""
 
     def __str__(self) -> str:
         return f"{self.rule}: {self.message}"
-
-
-@cache
-def group_pairs() -> tuple[tuple[str, str, str], ...]:
-    """(anchor type, member type, group name) of ProcTHOR's floor asset groups (members placed ``nextTo``)."""
-    doc = json.loads(resources.files("adaptenv.scene").joinpath("data/asset_groups.json").read_text("utf-8"))
-    out: dict[tuple[str, str], str] = {}
-    for p in doc["pairs"]:
-        if p["relation"] == "nextTo":
-            out.setdefault((p["anchor"], p["member"]), p["group"].rstrip("-0123456789"))
-    return tuple((a, m, g) for (a, m), g in out.items())
 
 
 def edge_only(catalog: AssetCatalog, object_type: str) -> bool:
@@ -424,11 +423,20 @@ class PlausibilityReference:
     windows: tuple[WindowZone, ...] = ()
     window_cover: dict[tuple[str, str], float] = field(default_factory=dict)
     """(window id, object id) -> width (m) of the window the object covered, where positive."""
+    model: PlacementModel | None = None
+    """The placement model the ``unlike_reference`` rule reads (None: that rule is off)."""
+    layout: HouseLayout | None = field(default=None, repr=False)
+    features: dict[str, dict[str, float]] = field(default_factory=dict, repr=False)
+    """Object id -> its placement-model features where it stood."""
+    classes: dict[str, str] = field(default_factory=dict)
+    """Object type -> its placement class (:func:`~adaptenv.adapt.placement_model.placement_class`)."""
 
     @classmethod
-    def of(cls, house: House, catalog: AssetCatalog | None = None,
-           geometry: SceneGeometry | None = None) -> PlausibilityReference:
+    def of(cls, house: House, catalog: AssetCatalog | None = None, geometry: SceneGeometry | None = None,
+           model: PlacementModel | None = None) -> PlausibilityReference:
+        """``model``: the placement model of ``unlike_reference`` (the shipped procedural reference when None)."""
         catalog = catalog or load_catalog()
+        model = model or default_model()
         geometry = geometry or SceneGeometry.from_house(house, catalog)
         floor = [f for f in geometry.floor_objects]
         walls = _Walls.of(geometry)
@@ -456,12 +464,16 @@ class PlausibilityReference:
         windows = tuple(window_zones(house, geometry))
         cover = {(w.zone.door_id, f.object_id): _window_cover(w, f) for w in windows for f in floor}
         overhang = {f.object_id: walls.overhang(f) for f in floor}
+        layout = HouseLayout.of(geometry)
+        by_id = {f.object_id: f for f in floor}
+        features = {f.object_id: object_features(layout, f, by_id) for f in floor if f.movable}
+        classes = {f.object_type: placement_class(catalog, f.object_type) for f in floor}
         return cls({f.object_id: (f.center, f.yaw) for f in floor}, {f.object_id: f.object_type for f in floor},
                    anchored, small, tuple(groups), tuple(facing), zones,
                    {k: v for k, v in areas.items() if v > 0.0}, walls,
                    {k: v for k, v in overhang.items() if v > 0.0}, openings,
                    {k: v for k, v in opening_area.items() if v > 0.0}, windows,
-                   {k: v for k, v in cover.items() if v > 0.0})
+                   {k: v for k, v in cover.items() if v > 0.0}, model, layout, features, classes)
 
     def moved(self, fp: Footprint) -> bool:
         """Whether a footprint stands elsewhere (or turned) compared with the original house."""
@@ -508,6 +520,7 @@ def _violations(ref: PlausibilityReference, fp: Footprint, current: Mapping[str,
         if oid in (a, b) and a in now and b in now and _faces(now[a], now[b]) < FACING_AFTER:
             yield Violation("facing_broken", oid, f"{a} no longer faces {b}", (b if oid == a else a,))
     yield from _person_rules(ref, fp, now)
+    yield from _learned_rules(ref, fp, now)
     floor = None
     for k in sorted({oid} | {s for s in ref.small if s in now and s != oid and ref.moved(now[s])}):
         if k not in ref.small:
@@ -559,6 +572,25 @@ def _person_rules(ref: PlausibilityReference, fp: Footprint, now: Mapping[str, F
                             (w.zone.door_id,))
 
 
+def _learned_rules(ref: PlausibilityReference, fp: Footprint, now: Mapping[str, Footprint]) -> Iterator[Violation]:
+    """``unlike_reference``: a feature of the moved object, or of another moved object of its room (old or new) that
+    the move changes (its anchor, its nearest neighbour), outside the placement model's central 98% and further
+    out than where it stood."""
+    if ref.model is None or ref.layout is None:
+        return
+    oid = fp.object_id
+    rooms = {ref.layout.room_at(*fp.center)}
+    if oid in ref.poses:
+        rooms.add(ref.layout.room_at(*ref.poses[oid][0]))
+    for k in [oid, *sorted(k for k in ref.features if k != oid and k in now and ref.moved(now[k]))]:
+        f = now[k]
+        if k != oid and ref.layout.room_at(*f.center) not in rooms:
+            continue
+        for u in unlike(ref.model, ref.classes.get(f.object_type, "edge"), f.object_type,
+                        object_features(ref.layout, f, now), ref.features.get(k)):
+            yield Violation("unlike_reference", k, u.message(k, f.object_type), feature=u.feature)
+
+
 @dataclass
 class PlausibilityAudit:
     """The violations of an adapted house against its original, per moved object."""
@@ -576,10 +608,12 @@ class PlausibilityAudit:
         return len(self.violations)
 
 
-def audit(original: House, adapted: House, *, catalog: AssetCatalog | None = None) -> PlausibilityAudit:
-    """Check every floor object of ``adapted`` that moved against ``original`` (the house before editing)."""
+def audit(original: House, adapted: House, *, catalog: AssetCatalog | None = None,
+          model: PlacementModel | None = None) -> PlausibilityAudit:
+    """Check every floor object of ``adapted`` that moved against ``original`` (the house before editing);
+    ``model``: the placement model of ``unlike_reference`` (the shipped procedural reference when None)."""
     catalog = catalog or load_catalog()
-    ref = PlausibilityReference.of(original, catalog)
+    ref = PlausibilityReference.of(original, catalog, model=model)
     geometry = SceneGeometry.from_house(adapted, catalog)
     now = {f.object_id: f for f in geometry.floor_objects}
     missing = sorted(set(ref.poses) - set(now))
@@ -587,11 +621,11 @@ def audit(original: House, adapted: House, *, catalog: AssetCatalog | None = Non
         raise AdaptenvError(f"the adapted house has no floor object {missing[0]!r} of the original; audit a house "
                             "against the one it was adapted from")
     moved = [oid for oid, f in now.items() if ref.moved(f)]
-    seen: set[tuple[str, str, tuple[str, ...]]] = set()
+    seen: set[tuple[str, str, tuple[str, ...], str]] = set()
     violations = []
     for oid in moved:
         for v in check_move(ref, now[oid], now):
-            key = (v.rule, v.object_id, v.others)
+            key = (v.rule, v.object_id, v.others, v.feature)
             if key not in seen and v.object_id in moved:
                 seen.add(key)
                 violations.append(v)

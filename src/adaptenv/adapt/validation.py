@@ -57,6 +57,7 @@ from adaptenv.adapt.placement import (
     allowed_overlap,
     place_units,
 )
+from adaptenv.adapt.placement_model import PlacementModel
 from adaptenv.adapt.plausibility import PlausibilityReference, check_move
 from adaptenv.errors import AdaptenvError
 from adaptenv.scene.assets import AssetCatalog, load_catalog
@@ -616,13 +617,14 @@ class EditValidator:
     def __init__(self, house: House, *, episode_targets: list[str] | None = None, start: Start | None = None,
                  original: House | None = None, step: float = DEFAULT_STEP, catalog: AssetCatalog | None = None,
                  copy: bool = True, plausibility: bool = True, move_targets: bool = False,
-                 world: NavWorld | None = None):
+                 world: NavWorld | None = None, placement_model: PlacementModel | None = None):
         """``plausibility``: check the moved object against :mod:`adaptenv.adapt.plausibility` (off only for the
         random baselines); ``move_targets``: let objects of ``episode_targets``' types move (edits that relocate
         the target opt in); ``world``: the compiled world of ``house``, used instead of compiling it again when it
-        fits (:func:`world_fits`)."""
+        fits (:func:`world_fits`); ``placement_model``: the reference of the ``unlike_reference`` rule (the shipped
+        one when None)."""
         self._settings = dict(episode_targets=episode_targets, step=step, catalog=catalog, plausibility=plausibility,
-                              move_targets=move_targets)
+                              move_targets=move_targets, placement_model=placement_model)
         self.catalog = catalog or load_catalog()
         self.house = house.model_copy(deep=True) if copy else house
         self.step = step
@@ -655,7 +657,8 @@ class EditValidator:
         base = SceneGeometry.from_house(original, self.catalog) if original is not None else self.geometry
         self.approach_before = {z.door_id: covered_width(z, [f.polygon for f in base.floor_objects])
                                 for z in approach_zones(base)}
-        self.plausible = PlausibilityReference.of(original or self.house, self.catalog, base) if plausibility else None
+        self.plausible = PlausibilityReference.of(original or self.house, self.catalog, base, placement_model) \
+            if plausibility else None
         self.fixed_types = frozenset() if move_targets else frozenset(episode_targets or ())
         self.need_targets = need.targets if episode_targets is None else set(episode_targets) & need.targets
         self.tall = np.array([f.occludes for f in self.geometry.floor_objects], dtype=bool)

@@ -593,16 +593,23 @@ def audit(
                                          "e.g. FILE.jsonl.gz:2:3."),
     adapted: Path = typer.Argument(..., metavar="ADAPTED.json", show_default=False,
                                    help="The same house after editing (e.g. OUT/house.json of `adaptenv adapt`)."),
+    reference: Path | None = typer.Option(None, "--reference", metavar="FILE",
+                                          help="Placement reference of the unlike_reference rule: houses to learn "
+                                               "from (FILE.jsonl.gz, one house a line) or a reference JSON "
+                                               "(tools/build_placement_reference.py); default: the shipped one, "
+                                               "learned from procedural houses."),
     as_json: bool = JSON_OPTION,
 ) -> None:
     """Plausibility audit: every moved object checked against the original (docs/adapt.md); exit 1 on a violation."""
+    from adaptenv.adapt.placement_model import load_model
     from adaptenv.adapt.plausibility import audit as run_audit
     from adaptenv.adapt.step import house_types
     from adaptenv.scene.assets import object_label
 
+    model = load_model(reference) if reference is not None else None
     _, before = load_house_argument(original, "original house")
     _, after = load_house_argument(adapted, "adapted house")
-    report = run_audit(before, after)
+    report = run_audit(before, after, model=model)
     types = house_types(before, after)
     if as_json:
         typer.echo(json.dumps({"moved": report.moved, "moved_types": [types.get(o) for o in report.moved],
@@ -610,7 +617,7 @@ def audit(
                                "violations": [{"rule": v.rule, "object": v.object_id,
                                                "object_type": types.get(v.object_id), "others": list(v.others),
                                                "other_types": [types.get(o) for o in v.others],
-                                               "message": v.message} for v in report.violations]}, indent=1))
+                                               "feature": v.feature or None, "message": v.message} for v in report.violations]}, indent=1))
     else:
         for v in report.violations:
             unnamed = [o for o in dict.fromkeys((v.object_id, *v.others))

@@ -16,6 +16,7 @@ from pydantic import BaseModel, Field
 from adaptenv.adapt.edits import Edit, EditLog
 from adaptenv.adapt.llm.usage import Prices, Usage
 from adaptenv.adapt.placement import PlacementContext
+from adaptenv.adapt.placement_model import PlacementModel
 from adaptenv.render.topdown import png_bytes, render_house, save_render
 from adaptenv.scene.assets import object_types
 
@@ -100,6 +101,9 @@ class GenerationContext:
     world: NavWorld | None = None
     """The compiled world of the house being edited, when the caller has it (``compile_world(house)``): generators
     start from it instead of compiling the house again."""
+    placement_model: PlacementModel | None = None
+    """The reference of the plausibility rule ``unlike_reference`` (:mod:`adaptenv.adapt.placement_model`): None
+    for the shipped one; ``PlacementModel({})`` has no range, so that rule refuses nothing."""
 
 
 @dataclass

@@ -137,13 +137,15 @@ def fit_rules(v: EditValidator, current: dict[str, Footprint], oid: str, d: np.n
     """The longest of the displacement ``d`` (m) and its three quarters, half and quarter whose end pose (turned to
     ``rotation``) breaks no plausibility rule, with the other objects where ``current`` has them; None when none does
     (only ``d`` itself is tried for a turn in place or with ``shrink`` off). The dry run still decides: placement
-    may stop short of the end."""
+    may stop short of the end. The end pose checked is the one a candidate asks for, the displacement rounded to a
+    tenth of a grid unit (a rule's threshold can lie between the two)."""
     if v.plausible is None:
         return d
-    i = v.ctx.index[oid]
+    i, upm = v.ctx.index[oid], v.ctx.grid.units_per_meter
     c, yaw = v.ctx.centers[i], float(v.ctx.yaws[i]) if rotation is None else float(rotation)
     for f in (1.0, 0.75, 0.5, 0.25) if shrink and np.any(d) else (1.0,):
-        if not breaks_rules(v.plausible, v.footprint_at(i, c + d * f, yaw), current):
+        asked = np.round(np.asarray(d, dtype=float) * f * upm, 1) / upm
+        if not breaks_rules(v.plausible, v.footprint_at(i, c + asked, yaw), current):
             return d * f
     return None
 
@@ -280,7 +282,7 @@ class BuiltinGenerator:
         ep = context.episode
         route = RouteSpec.from_episode(ep.target_type, ep.start, context.trajectory)
         v = EditValidator(house, episode_targets=[ep.target_type], start=ep.start[:2], move_targets=self.move_targets,
-                          world=context.world)
+                          world=context.world, placement_model=context.placement_model)
         world = context.world if world_fits(context.world, v.geometry) else compile_world(v.house, "candidate")
         values = measure(world, route)
         result = GenerationResult(house=v.house, steps=[], edit_log=v.log, generator=self.name,

@@ -280,7 +280,8 @@ class LearnedGenerator:
                  rng: np.random.Generator) -> GenerationResult:
         ep = context.episode
         route = RouteSpec.from_episode(ep.target_type, ep.start, context.trajectory)
-        v = EditValidator(house, episode_targets=[ep.target_type], start=ep.start[:2], world=context.world)
+        v = EditValidator(house, episode_targets=[ep.target_type], start=ep.start[:2], world=context.world,
+                          placement_model=context.placement_model)
         result = GenerationResult(house=v.house, steps=[], edit_log=v.log, generator=self.name)
         want = self.checks if self.checks and context.policy is not None else max(1, self.objectives)
         suggestions = sorted(analysis.suggestions, key=lambda s: -s.priority)

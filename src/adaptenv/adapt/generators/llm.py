@@ -255,7 +255,8 @@ class LLMGenerator:
                  rng: np.random.Generator) -> GenerationResult:
         ep = context.episode
         targets, start = [ep.target_type], ep.start[:2]
-        v = EditValidator(house, episode_targets=targets, start=start, move_targets=self.allow_target_moves)
+        v = EditValidator(house, episode_targets=targets, start=start, move_targets=self.allow_target_moves,
+                          placement_model=context.placement_model)
         edit_log = EditLog()
         route = RouteSpec.from_episode(ep.target_type, ep.start, context.trajectory)
         values = measure(compile_world(v.house, "llm"), route)
@@ -313,7 +314,7 @@ class LLMGenerator:
             edit_log.edits[k] = edit_log.edits[k].model_copy(update={"undone": True})
             state["v"] = EditValidator(snapshot, episode_targets=[context.episode.target_type],
                                        start=context.episode.start[:2], original=original,
-                                       move_targets=self.allow_target_moves)
+                                       move_targets=self.allow_target_moves, placement_model=context.placement_model)
             state["log_at"] = None
             return True
 
