@@ -30,7 +30,7 @@ demo: $(STAMP)
 
 test: $(DEV_STAMP)
 	$(BIN)/ruff check src tests tools
-	$(BIN)/pytest -n 2 -q
+	$(BIN)/pytest -n 2 --dist loadgroup -q --durations=30
 	$(BIN)/python tools/check_houses.py preset:tiny tests/data --episodes 10 --check
 
 bench: $(STAMP)

@@ -131,9 +131,11 @@ def test_exploration_bonus_counts_newly_seen_cells_only(tiny_set, with_observer)
 def test_value_warmup_leaves_the_policy_untouched(tmp_path):
     init = NavNet(NetConfig(hidden=32, feature_dim=32))
     before = {k: v.clone() for k, v in init.state_dict().items()}
-    result = train_ppo(tiny_ppo(tmp_path, output="", run_dir="", value_warmup_iters=2, frames=1024), init_net=init)
+    # no final evaluation: only the weights are compared
+    result = train_ppo(tiny_ppo(tmp_path, output="", run_dir="", value_warmup_iters=2, frames=1024,
+                                final_eval_episodes=0), init_net=init)
     assert all(torch.equal(v, result.net.state_dict()[k]) for k, v in before.items())
-    moved = train_ppo(tiny_ppo(tmp_path, output="", run_dir="", frames=1024), init_net=init)
+    moved = train_ppo(tiny_ppo(tmp_path, output="", run_dir="", frames=1024, final_eval_episodes=0), init_net=init)
     assert any(not torch.equal(v, moved.net.state_dict()[k]) for k, v in before.items())
 
 
@@ -253,7 +255,9 @@ def test_a_frozen_encoder_keeps_its_weights_and_collects_as_the_full_update_does
 @pytest.mark.slow
 @pytest.mark.parametrize("bc_teacher", ["expert", "explorer"])
 def test_tiny_ppo_run_writes_checkpoint_card_and_metrics(tmp_path, bc_teacher):
-    result = train_ppo(tiny_ppo(tmp_path, bc_coef=0.5, bc_teacher=bc_teacher, calibrate_episodes=4), command="test")
+    # no final evaluation (test_ppo_fine_tunes_a_map_reading_network_with_anchor_and_bonus runs one)
+    result = train_ppo(tiny_ppo(tmp_path, bc_coef=0.5, bc_teacher=bc_teacher, calibrate_episodes=4,
+                                final_eval_episodes=0), command="test")
     card = json.loads((tmp_path / "ppo.json").read_text())
     assert card["algo"] == "ppo" and card["frames"] == 1024 and card["command"] == "test"
     assert card["end_threshold"] == card["end_threshold_calibration"]["threshold"]

@@ -5,13 +5,20 @@ from __future__ import annotations
 import pytest
 
 from adaptenv.agents.evaluate import sample_episodes
-from adaptenv.agents.houses import compile_houses, load_house_set
-from adaptenv.agents.suites import SUITES, EpisodeFloor, SuiteWorlds, episodes_hash, expert_steps
+from adaptenv.agents.houses import load_house_set, usable_houses
+from adaptenv.agents.suites import (
+    SUITES,
+    EpisodeFloor,
+    SuiteSpec,
+    SuiteWorlds,
+    episodes_hash,
+    expert_steps,
+)
 from adaptenv.errors import ConfigError
-from adaptenv.scene.procedural import PRESETS
-from adaptenv.scene.procedural.generate import child_seeds, generate_house
+from adaptenv.scene.procedural.presets import generate_preset
 from adaptenv.sim.geodesic import geodesic_distance
 
+PINNED_EPISODES = 20
 #: First 20 episodes (seed 0) of every suite, by suite version. A changed hash means the suite's
 #: houses or episode rule changed: bump its version in agents/suites.py and record the new hash.
 PINNED = {
@@ -94,21 +101,36 @@ def test_unknown_suite_names_the_known_ones():
         load_house_set("suite:nope")
 
 
-def _first_houses(spec, n):
-    """The first ``n`` houses of a suite without a floor (its first n episodes use only those): the 200-house
-    tail suite is not generated whole for a hash. House i of a preset comes from its root seed's i-th child."""
-    preset = PRESETS[spec.houses.removeprefix("preset:")]
-    return compile_houses([generate_house(s, preset.config()) for s in child_seeds(preset.seed, n)])
+def _first_worlds(spec, n: int) -> SuiteWorlds:
+    """The suite's worlds made of only the first ``n`` houses of its preset (house i of a preset never depends on
+    how many are made): the 240-house rearranged suites are not generated whole for a hash."""
+    pairs = generate_preset(spec.houses.removeprefix("preset:"), count=n)
+    _, worlds, _ = usable_houses([h for _, h in pairs], [name for name, _ in pairs])
+    return SuiteWorlds(worlds, spec.floor)
 
 
 @pytest.mark.slow
 @pytest.mark.parametrize("name", sorted(SUITES))
 def test_suite_episodes_are_pinned(name):
     spec = SUITES[name]
-    worlds = _first_houses(spec, 20) if not spec.floor.active else load_house_set(f"suite:{name}").worlds
-    eps = sample_episodes(worlds, 20, 0)
+    worlds = _first_worlds(spec, PINNED_EPISODES + 4)  # long-train's episode 19 skips houses 19 and 20
+    eps = sample_episodes(worlds, PINNED_EPISODES, 0)
+    # a floor skips a house without a far enough start for the next one; none wrapped around to house 0, so
+    # the whole suite picks the same houses
+    assert all(e >= k for k, (e, _) in enumerate(eps))
     assert all(_geodesic(worlds[e], ep) >= spec.floor.min_geodesic - 0.05 for e, ep in eps)
     assert episodes_hash(eps) == PINNED[(name, spec.version)]
+
+
+def test_a_suite_is_its_presets_houses_with_its_floor(monkeypatch):
+    """What test_suite_episodes_are_pinned relies on: load_house_set of a suite is its preset's houses, first ones
+    first, carrying the suite's floor."""
+    spec = SuiteSpec("preset:tiny", EpisodeFloor(min_geodesic=1.5), "1")
+    monkeypatch.setitem(SUITES, "tiny-floored", spec)
+    whole = load_house_set("suite:tiny-floored").worlds
+    assert whole.floor == spec.floor
+    assert sample_episodes(whole, 6, 0) == sample_episodes(_first_worlds(spec, 3), 6, 0)
+    assert [w.name for w in _first_worlds(spec, 2)] == [w.name for w in whole[:2]]
 
 
 def test_cli_evaluate_applies_a_start_distance_floor(tmp_path):

@@ -4,7 +4,13 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import pytest
+
 from adaptenv.curriculum.loop import LoopConfig
+
+SHARES_RUNS = pytest.mark.xdist_group("shared-loop-runs")
+"""On the tests that read a run another test also reads (conftest.py's ``loop_run``): ``make test`` runs them in
+one worker (``--dist loadgroup``), so each shared run is made once, not once per worker."""
 
 
 def tiny_config(policy: Path, method: str, **kw) -> LoopConfig:

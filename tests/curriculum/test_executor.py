@@ -28,6 +28,7 @@ from adaptenv.curriculum.executor import (
     split,
 )
 from adaptenv.errors import ConfigError
+from tests.curriculum.loops import SHARES_RUNS
 
 HAVE_RAY = importlib.util.find_spec("ray") is not None
 NO_RAY = "ray is not installed (pip install 'adaptenv[ray]'); the Ray executor tests need it"
@@ -210,6 +211,7 @@ def test_a_dead_worker_is_reported_and_the_pool_restarts():
 
 
 @pytest.mark.slow
+@SHARES_RUNS
 @pytest.mark.skipif(not HAVE_RAY, reason=NO_RAY)
 def test_a_loop_on_ray_gives_the_in_process_records(ray_executor, tiny_policy, loop_run, tmp_path):
     from adaptenv.curriculum.loop import run_loop

@@ -26,6 +26,7 @@ from adaptenv.scene.procedural import (
     rearrange_house,
 )
 from adaptenv.scene.procedural.checks import Navigation, footprint_problems, reachable_target_types
+from adaptenv.scene.procedural.generate import child_seeds
 from adaptenv.scene.procedural.structure import grow_floor_plan, trace_room
 from adaptenv.scene.validate import validate_house
 from adaptenv.sim.spec import AGENT_RADIUS, TARGET_TYPES
@@ -221,6 +222,18 @@ def test_tiny_preset_generates_its_houses():
     lo, hi = PRESETS["tiny"].room_range
     assert all(lo <= len(h.rooms) <= hi for _, h in named)
     assert [_dumps(h) for _, h in named] == [_dumps(h) for _, h in generate_preset("tiny")]
+    assert [(n, _dumps(h)) for n, h in generate_preset("tiny", count=2)] == [(n, _dumps(h)) for n, h in named[:2]]
+
+
+def test_the_first_houses_of_a_rearranged_preset_are_those_of_the_whole_one():
+    """House ``c * n_base + i`` is copy c of base house i, with the whole preset's seed of that house."""
+    spec, catalog = PRESETS["scarce-6-rearranged"], load_catalog()
+    homes = generate_preset("scarce-6", catalog, count=2)
+    named = generate_preset("scarce-6-rearranged", catalog, count=7)
+    seeds = child_seeds(spec.seed, 6 * spec.copies)
+    assert [n for n, _ in named] == [f"scarce-6-rearranged_{i:04d}" for i in range(7)]
+    for i in (0, 6):  # copy 0 and copy 1 of house 0
+        assert _dumps(named[i][1]) == _dumps(rearrange_house(homes[0][1], seeds[i], spec.config(), catalog))
 
 
 def test_unknown_preset_is_a_config_error():

@@ -109,28 +109,39 @@ def preset_spec(name: str) -> PresetSpec:
         raise ConfigError(f"preset: unknown preset {name!r}; use one of {', '.join(PRESETS)}") from None
 
 
+def preset_size(name: str) -> int:
+    """How many houses the preset holds (a rearranged or varied preset: its base's count times its copies)."""
+    spec = preset_spec(name)
+    base = spec.rearrange_of or spec.vary_of
+    return spec.n_houses if base is None else preset_size(base) * spec.copies
+
+
 def generate_preset(name: str, catalog: AssetCatalog | None = None,
-                    on_house: Callable[[int, int], None] | None = None) -> list[tuple[str, House]]:
+                    on_house: Callable[[int, int], None] | None = None, *,
+                    count: int | None = None) -> list[tuple[str, House]]:
     """The preset's houses as (name, house) pairs, e.g. ``("pretrain-train_0003", house)``.
 
-    ``on_house(i, total)`` is called after each house (for progress bars).
+    ``on_house(i, total)`` is called after each house (for progress bars). ``count`` makes only the first
+    ``count`` houses, the same as the whole preset's first ones (house i never depends on how many are made).
     """
     spec = preset_spec(name)
     catalog = catalog or load_catalog()
+    total = preset_size(name) if count is None else min(count, preset_size(name))
     if spec.rearrange_of is not None or spec.vary_of is not None:
-        base = generate_preset(spec.rearrange_of or spec.vary_of, catalog)
+        n_base = preset_size(spec.rearrange_of or spec.vary_of)
+        base = generate_preset(spec.rearrange_of or spec.vary_of, catalog, count=min(total, n_base))
         child = rearrange_house if spec.rearrange_of is not None else vary_house
-        seeds = child_seeds(spec.seed, len(base) * spec.copies)
+        seeds = child_seeds(spec.seed, n_base * spec.copies)[:total]
         out = []
         for i, s in enumerate(seeds):
-            out.append((f"{name}_{i:04d}", child(base[i % len(base)][1], s, spec.config(), catalog)))
+            out.append((f"{name}_{i:04d}", child(base[i % n_base][1], s, spec.config(), catalog)))
             if on_house is not None:
                 on_house(i, len(seeds))
         return out
     cfg = spec.config()
     out = []
-    for i, s in enumerate(child_seeds(spec.seed, spec.n_houses)):
+    for i, s in enumerate(child_seeds(spec.seed, spec.n_houses)[:total]):
         out.append((f"{name}_{i:04d}", generate_house(s, cfg, catalog)))
         if on_house is not None:
-            on_house(i, spec.n_houses)
+            on_house(i, total)
     return out
