@@ -548,8 +548,8 @@ def finetune(net: NavNet, worlds: Sequence[NavWorld], cfg: FinetuneConfig, seed:
     probability ``beta`` throughout, labels from ``cfg.teacher``, ``rollout_steps``-step blocks that are also the training
     sequences, a dataset holding the whole run. ``algo='ppo'``: :func:`adaptenv.agents.ppo.train_ppo`
     on the simulator's reward (plus ``explore_bonus``, anchored by ``kl_coef``) to ``max_episode_steps``,
-    with PPOConfig's defaults for the rest (128-step rollouts, 32-step sequences; value warm-up at most a
-    quarter of the iterations) on one torch thread, so results do not depend on the core count.
+    with PPOConfig's defaults for the rest (128-step rollouts, 32-step sequences; value warm-up on a quarter
+    of the iterations, at least one and at most four) on one torch thread, so results do not depend on the core count.
     Nothing is written to disk.
     """
     if cfg.algo not in ("dagger", "ppo"):
@@ -561,7 +561,8 @@ def finetune(net: NavNet, worlds: Sequence[NavWorld], cfg: FinetuneConfig, seed:
     evals = cfg.final_eval_episodes or len(worlds)
     if cfg.algo == "ppo":
         iterations = -(-cfg.frames // (cfg.num_envs * PPOConfig.rollout_steps))
-        warmup = 0 if learner is not None else min(PPOConfig.value_warmup_iters, iterations // 4)
+        # a fresh critic never moves the policy: at least its first PPO iteration trains the value head alone
+        warmup = 0 if learner is not None else min(PPOConfig.value_warmup_iters, max(1, iterations // 4))
         pc = PPOConfig(houses="(in memory)", value_warmup_iters=warmup,
                        frames=cfg.frames, init="", output="", seed=seed, num_envs=cfg.num_envs,
                        learning_rate=cfg.learning_rate, end_threshold=cfg.end_threshold,
