@@ -17,7 +17,12 @@ from adaptenv.curriculum.experiment import (
     run_dir,
     write_summary,
 )
-from adaptenv.curriculum.records import HELDOUT_DIR, iteration_dir, read_iterations, write_iterations
+from adaptenv.curriculum.records import (
+    HELDOUT_DIR,
+    iteration_dir,
+    read_iterations,
+    write_iterations,
+)
 from adaptenv.curriculum.verdict import initial_lines, verdict_lines
 from adaptenv.report import build_report
 from tests.report.run_folders import SETS, write_fake_run

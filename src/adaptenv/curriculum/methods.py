@@ -53,7 +53,6 @@ from adaptenv.scene.house import House
 from adaptenv.scene.procedural import generate_house, preset_spec, rearrange_house
 from adaptenv.scene.procedural.variations import vary_house
 
-
 PPO_ONLY = ("finetune_kl_coef", "finetune_explore_bonus", "finetune_freeze_encoder", "finetune_bc_coef")
 """LoopConfig fields that only anchored PPO reads (DAgger takes them at their defaults or 0)."""
 
