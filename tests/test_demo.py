@@ -51,6 +51,10 @@ def test_demo_compares_the_loop_with_dr_and_imports_none_of_the_dev_extras(tmp_p
 
     verdict = next(line for line in printed if line.startswith("Verdict: ours - dr held-out success = "))
     assert "paired over the 50 held-out episodes" in verdict  # 25 per house, 1 house, 2 sets
+    against = [line for line in printed if line.startswith("Against t=0: ")]  # each method against pi_0
+    assert [line.split(" - pi_0")[0] for line in against] == ["Against t=0: dr", "Against t=0: ours"]
+    assert all("over the same 50 episodes" in line and ("within noise of pi_0" in line or "beyond noise" in line)
+               for line in against)
     steps = {m: records[-1]["env_steps"] for m, records in runs.items()}
     budget = next(line for line in printed if line.startswith("Environment steps: "))
     assert f"ours {steps['ours']:,}" in budget and f"dr {steps['dr']:,}" in budget
