@@ -54,7 +54,7 @@ FAILURE_POINTS = {
     "verification": [move(), FAIL],
     "move after a rejected verification": [move(), verify(False), FAIL],
     "verification of a revised move": [move(), verify(False, REVISED), FAIL],
-    "second step's verification": [move(), verify(True), move(oid="Desk|1", xu=3.0), FAIL],
+    "second step's verification": [move(), verify(True), move(oid="Desk|1", xd="left", xu=6.0), FAIL],  # to its wall
 }
 
 
