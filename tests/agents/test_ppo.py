@@ -21,7 +21,7 @@ from adaptenv.agents.ppo import (
     sample_actions,
     train_ppo,
 )
-from adaptenv.agents.train import finetune
+from adaptenv.agents.train import finetune, ppo_rollout_steps
 from adaptenv.errors import ConfigError
 from adaptenv.sim.egomap import MAP_CHANNELS
 from adaptenv.sim.spec import ACTIONS, END
@@ -323,3 +323,17 @@ def test_periodic_evaluation_is_paired_and_starts_at_the_warm_start(tmp_path, mo
     assert rows[0]["iteration"] == 0 and rows[0]["frames"] == 0 and "eval/success" in rows[0]
     assert len(seen) == 5 and all(episodes == seen[0][0] for episodes, _ in seen)
     assert any(not torch.equal(a, b) for a, b in zip(seen[0][1], seen[-1][1], strict=True))  # moved
+
+
+def test_ppo_rollouts_shrink_to_a_budget_under_one_full_rollout():
+    assert ppo_rollout_steps(344064, 64) == 128 and ppo_rollout_steps(8192, 64) == 128
+    assert ppo_rollout_steps(512, 16) == 32 and ppo_rollout_steps(1024, 16) == 64
+    assert ppo_rollout_steps(100, 2) == 64  # 2 envs x one 32-step sequence cannot split into 4 minibatches
+
+
+@pytest.mark.slow
+def test_ppo_fine_tuning_spends_a_small_budget_not_a_full_rollout(tiny_set):
+    net = NavNet(NetConfig(hidden=32, feature_dim=32))
+    cfg = FinetuneConfig(algo="ppo", frames=512, num_envs=16, max_episode_steps=100, final_eval_episodes=1)
+    card = finetune(net, tiny_set.worlds, cfg, seed=0).card
+    assert card["frames"] == 512 and card["config"]["rollout_steps"] == 32

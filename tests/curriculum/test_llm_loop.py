@@ -47,6 +47,7 @@ def server(monkeypatch):
 
 def llm_loop(policy: Path, server, **llm) -> dict:
     return dict(method="ours-llm", policy=str(policy), houses="preset:tiny", heldout={"tiny": "preset:tiny"},
+                finetune_algo="dagger", finetune_max_steps=300, finetune_min_start=0.0,
                 iterations=2, scenes_per_iteration=2, edit_steps=1, finetune_frames=256, finetune_envs=8,
                 heldout_episodes=1, gallery=1, diagnose_episodes=1,
                 llm={"provider": "openai-compatible", "base_url": server.url if server else "", "model": "vlm",

@@ -539,6 +539,14 @@ def _train(cfg: TrainConfig, worlds: Sequence[NavWorld] | None, init_net: NavNet
     return TrainResult(net, card, logger.rows)
 
 
+def ppo_rollout_steps(frames: int, num_envs: int) -> int:
+    """PPO's rollout length for a ``frames`` budget: 128 steps, or fewer (a multiple of the 32-step sequence, still
+    splitting into the minibatches) when one 128-step rollout of ``num_envs`` agents would overspend the budget."""
+    seq, full = PPOConfig.chunk_len, PPOConfig.rollout_steps
+    fits = max(seq, min(full, frames // max(num_envs, 1) // seq * seq))
+    return next((t for t in range(fits, full, seq) if num_envs * (t // seq) % PPOConfig.num_minibatches == 0), full)
+
+
 def finetune(net: NavNet, worlds: Sequence[NavWorld], cfg: FinetuneConfig, seed: int,
              learner: dict[str, Any] | None = None) -> TrainResult:
     """Fine-tune a copy of ``net`` (a NavNet) on ``worlds`` (NavWorlds) as ``cfg`` says; returns the new net, its
@@ -548,8 +556,9 @@ def finetune(net: NavNet, worlds: Sequence[NavWorld], cfg: FinetuneConfig, seed:
     probability ``beta`` throughout, labels from ``cfg.teacher``, ``rollout_steps``-step blocks that are also the training
     sequences, a dataset holding the whole run. ``algo='ppo'``: :func:`adaptenv.agents.ppo.train_ppo`
     on the simulator's reward (plus ``explore_bonus``, anchored by ``kl_coef``) to ``max_episode_steps``,
-    with PPOConfig's defaults for the rest (128-step rollouts, 32-step sequences; value warm-up on a quarter
-    of the iterations, at least one and at most four) on one torch thread, so results do not depend on the core count.
+    with PPOConfig's defaults for the rest (128-step rollouts, or :func:`ppo_rollout_steps` when the budget is under
+    one; 32-step sequences; value warm-up on a quarter of the iterations, at least one and at most four) on one torch
+    thread, so results do not depend on the core count.
     Nothing is written to disk.
     """
     if cfg.algo not in ("dagger", "ppo"):
@@ -560,10 +569,11 @@ def finetune(net: NavNet, worlds: Sequence[NavWorld], cfg: FinetuneConfig, seed:
                           "them unset with algo='dagger'")
     evals = cfg.final_eval_episodes or len(worlds)
     if cfg.algo == "ppo":
-        iterations = -(-cfg.frames // (cfg.num_envs * PPOConfig.rollout_steps))
+        rollout = ppo_rollout_steps(cfg.frames, cfg.num_envs)
+        iterations = -(-cfg.frames // (cfg.num_envs * rollout))
         # a fresh critic never moves the policy: at least its first PPO iteration trains the value head alone
         warmup = 0 if learner is not None else min(PPOConfig.value_warmup_iters, max(1, iterations // 4))
-        pc = PPOConfig(houses="(in memory)", value_warmup_iters=warmup,
+        pc = PPOConfig(houses="(in memory)", value_warmup_iters=warmup, rollout_steps=rollout,
                        frames=cfg.frames, init="", output="", seed=seed, num_envs=cfg.num_envs,
                        learning_rate=cfg.learning_rate, end_threshold=cfg.end_threshold,
                        calibrate_episodes=cfg.calibrate_episodes, eval_every=0, final_eval_episodes=evals,
