@@ -164,23 +164,28 @@ def test_resumed_run_is_about_as_fast_as_a_fresh_one(tmp_path):
 
 @pytest.mark.slow
 def test_bench_train_measures_the_recipe_it_is_given(capsys):
+    from adaptenv.agents.config import TrainConfig
+    from adaptenv.agents.network import NavNet, NetConfig, count_parameters
     from adaptenv.bench.train import run
 
     quick = {"envs": 8, "steps": 4, "houses": "preset:tiny", "iterations": 0, "grad_rounds": 1, "grad_repeats": 1}
-    small = run(as_json=True, **quick, recipe={"hidden": 32, "feature_dim": 32, "conv_channels": 8, "updates_per_iter": 4})
-    default = run(as_json=True, **quick)
-    assert small["recipe"]["hidden"] == 32 and small["parameters"] < default["parameters"] / 4
-    assert small["replay_ratio"] == default["replay_ratio"] / 2 == 1.0
+    small_net = {"hidden": 32, "feature_dim": 32, "conv_channels": 8}
+    small = run(as_json=True, **quick, recipe={**small_net, "updates_per_iter": 4})
+    assert small["recipe"]["hidden"] == 32
+    assert small["parameters"] < count_parameters(NavNet(NetConfig.of(TrainConfig()))) / 4
+    default_ratio = TrainConfig().updates_per_iter * TrainConfig().batch_chunks * TrainConfig().chunk_len / (
+        TrainConfig().num_envs * TrainConfig().rollout_steps)
+    assert small["replay_ratio"] == default_ratio / 2 == 1.0
     # both precisions are timed in every run; the headline figure is the recipe's own
-    assert default["auto_precision"] in ("fp32", "bf16")  # the default, auto, is what this CPU computes natively
-    assert default["gradient_frames_per_s"] == default[f"gradient_frames_per_s_{default['auto_precision']}"]
-    assert default["gradient_bf16_speedup"] == pytest.approx(
-        default["gradient_frames_per_s_bf16"] / default["gradient_frames_per_s_fp32"])
-    bf16 = run(as_json=True, **quick, recipe={"precision": "bf16"})
+    assert small["auto_precision"] in ("fp32", "bf16")  # the default, auto, is what this CPU computes natively
+    assert small["gradient_frames_per_s"] == small[f"gradient_frames_per_s_{small['auto_precision']}"]
+    assert small["gradient_bf16_speedup"] == pytest.approx(
+        small["gradient_frames_per_s_bf16"] / small["gradient_frames_per_s_fp32"])
+    bf16 = run(as_json=True, **quick, recipe={**small_net, "precision": "bf16"})
     assert bf16["gradient_frames_per_s"] == bf16["gradient_frames_per_s_bf16"]
     assert '"benchmark": "imitation-learning throughput"' in capsys.readouterr().out
-    run(**quick)  # the table says what auto picks here
-    assert f"precision auto picks {default['auto_precision']} here" in capsys.readouterr().out
+    run(**quick, recipe=small_net)  # the table says what auto picks here
+    assert f"precision auto picks {small['auto_precision']} here" in capsys.readouterr().out
 
 
 def test_serial_training_uses_every_available_core_and_the_learner_thread_one(tmp_path, monkeypatch):
