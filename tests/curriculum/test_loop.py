@@ -164,14 +164,15 @@ def test_the_loop_fine_tunes_by_anchored_ppo(tiny_policy, tmp_path, monkeypatch)
 
     monkeypatch.setattr(ppo, "train_ppo", spy)
     monkeypatch.setattr(train, "train_ppo", spy)  # the loop fine-tunes through agents.train
-    # one PPO iteration (16 agents x 128 steps): too few for a value warm-up, so it updates the policy
-    cfg = tiny_config(tiny_policy, "dr", iterations=1, finetune_algo="ppo", finetune_frames=16 * 128,
+    # a budget under one full rollout: one PPO iteration of 16 agents x 32 steps (the fresh critic's warm-up)
+    cfg = tiny_config(tiny_policy, "dr", iterations=1, finetune_algo="ppo", finetune_frames=16 * 32,
                       finetune_kl_coef=0.3, finetune_explore_bonus=0.002, finetune_max_steps=600,
                       finetune_freeze_encoder=True)
     records = run_loop(cfg, tmp_path / "ppo")
     assert records[1].grad_updates > 0 and records[1].env_steps >= cfg.finetune_frames
     [card] = cards
     assert card["algo"] == "ppo" and card["torch_threads"] == 1
+    assert card["frames"] == cfg.finetune_frames and card["config"]["rollout_steps"] == 32
     assert {k: card["config"][k] for k in ("kl_coef", "explore_bonus", "max_episode_steps", "freeze_encoder")} == \
         {"kl_coef": 0.3, "explore_bonus": 0.002, "max_episode_steps": 600, "freeze_encoder": True}
 
@@ -192,7 +193,7 @@ def test_ppo_fine_tuning_continues_its_critic_across_iterations(tiny_policy, tmp
 
     monkeypatch.setattr(ppo, "train_ppo", spy)
     monkeypatch.setattr(train, "train_ppo", spy)  # the loop fine-tunes through agents.train
-    cfg = tiny_config(tiny_policy, "dr", iterations=2, finetune_algo="ppo", finetune_frames=4 * 16 * 128,
+    cfg = tiny_config(tiny_policy, "dr", iterations=2, finetune_algo="ppo", finetune_frames=2 * 16 * 128,
                       finetune_kl_coef=0.3, finetune_keep_learner=keep)
     run_loop(cfg, tmp_path / "r")
     saved = [tmp_path / "r" / f"iter_{t:04d}" / LEARNER_FILE for t in (1, 2)]
