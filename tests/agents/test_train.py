@@ -172,9 +172,9 @@ def test_bench_train_measures_the_recipe_it_is_given(capsys):
     small_net = {"hidden": 32, "feature_dim": 32, "conv_channels": 8}
     small = run(as_json=True, **quick, recipe={**small_net, "updates_per_iter": 4})
     assert small["recipe"]["hidden"] == 32
-    assert small["parameters"] < count_parameters(NavNet(NetConfig.of(TrainConfig()))) / 4
-    default_ratio = TrainConfig().updates_per_iter * TrainConfig().batch_chunks * TrainConfig().chunk_len / (
-        TrainConfig().num_envs * TrainConfig().rollout_steps)
+    d = TrainConfig()
+    assert small["parameters"] < count_parameters(NavNet(NetConfig.of(d))) / 4
+    default_ratio = d.updates_per_iter * d.batch_chunks * d.chunk_len / (d.num_envs * d.rollout_steps)
     assert small["replay_ratio"] == default_ratio / 2 == 1.0
     # both precisions are timed in every run; the headline figure is the recipe's own
     assert small["auto_precision"] in ("fp32", "bf16")  # the default, auto, is what this CPU computes natively
